@@ -1,0 +1,1 @@
+"""Calibration: rigid-body fit, tip pivot calibration, force tare and matrix, clock alignment."""

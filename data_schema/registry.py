@@ -1,0 +1,13 @@
+"""Every schema the pipeline knows, by name, so a file's `schema` attribute finds its check."""
+
+from __future__ import annotations
+
+from data_schema.hdf5 import H5Schema
+from data_schema.states import STATES
+
+SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES,)}
+
+
+def schema_for(name: str) -> H5Schema | None:
+    """The layout registered under ``name`` (a file's ``schema`` attribute), if any."""
+    return SCHEMAS.get(name)

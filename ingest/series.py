@@ -1,0 +1,115 @@
+"""The time-series containers every reader returns and every later step passes along.
+
+All arrays are SI: positions in metres, time as int64 nanoseconds on the recording device's own
+clock (0 at its first sample unless the file says otherwise). Missing samples are NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import BadInput
+
+
+def check_time(time_ns: np.ndarray, source: str | Path) -> None:
+    """Time must be finite and strictly increasing; otherwise the file is bad input."""
+    t = np.asarray(time_ns)
+    if t.ndim != 1:
+        raise BadInput(source, f"time must be one-dimensional, got shape {t.shape}")
+    if t.size > 1:
+        steps = np.diff(t)
+        bad = np.flatnonzero(steps <= 0)
+        if bad.size:
+            i = int(bad[0]) + 1
+            raise BadInput(source, f"time is not increasing at sample {i}", where=f"frame {i}")
+
+
+@dataclass
+class MarkerSeries:
+    """3D marker trajectories: ``positions[t, m] = (x, y, z)`` in metres, NaN where missing."""
+
+    source: str
+    time_ns: np.ndarray            # (T,) int64
+    labels: list[str]              # (M,)
+    positions: np.ndarray          # (T, M, 3) float64, metres
+    rate_hz: float
+    residuals: np.ndarray | None = None   # (T, M) float64 metres, NaN where missing
+    events: list[tuple[str, int]] = field(default_factory=list)  # (label, time_ns)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(self.time_ns.shape[0])
+
+    def missing_samples(self) -> int:
+        """Number of (frame, marker) samples with no position."""
+        return int(np.isnan(self.positions).any(axis=2).sum())
+
+    def select(self, names: list[str]) -> np.ndarray:
+        """Positions of the named markers, ``(T, len(names), 3)``; a missing name is bad input."""
+        index = {n: i for i, n in enumerate(self.labels)}
+        absent = [n for n in names if n not in index]
+        if absent:
+            raise BadInput(self.source, f"marker(s) not in file: {', '.join(absent)}")
+        return self.positions[:, [index[n] for n in names]]
+
+
+@dataclass
+class BodySeries:
+    """6DOF rigid bodies: position (m), rotation matrix (body to lab), residual; NaN when lost."""
+
+    source: str
+    time_ns: np.ndarray            # (T,) int64
+    bodies: list[str]              # (B,)
+    positions: np.ndarray          # (T, B, 3) float64, metres
+    rotations: np.ndarray          # (T, B, 3, 3) float64
+    residuals: np.ndarray          # (T, B) float64 metres; NaN when lost
+    rate_hz: float
+    events: list[tuple[str, int]] = field(default_factory=list)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(self.time_ns.shape[0])
+
+    def missing_samples(self) -> int:
+        """Number of (frame, body) samples where the body was lost."""
+        return int(np.isnan(self.positions).any(axis=2).sum())
+
+
+@dataclass
+class ForceSeries:
+    """A force-sensor log: raw channels (gauge volts or calibrated wrench) on the logger's clock."""
+
+    source: str
+    time_ns: np.ndarray            # (T,) int64
+    channels: list[str]            # (C,) names as in the file
+    values: np.ndarray             # (T, C) float64
+    units: list[str]               # (C,) e.g. "V", "N", "N*m"
+    kind: str                      # "gauge" (volts) or "wrench" (Fx, Fy, Fz, Tx, Ty, Tz)
+    rate_hz: float
+    trigger: np.ndarray | None = None     # (T,) float64 sync/trigger channel when logged
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(self.time_ns.shape[0])
+
+
+@dataclass
+class AtiCalibration:
+    """An ATI calibration: ``wrench = matrix @ (volts - bias)``, forces in N, torques in N*m."""
+
+    source: str
+    serial: str
+    body_style: str
+    calibration: str               # e.g. "SI-12-0.12"
+    matrix: np.ndarray             # (6, 6) float64, rows Fx, Fy, Fz, Tx, Ty, Tz, SI units
+    max_load: np.ndarray           # (6,) rated range in SI (N, N*m)
+    force_units: str               # as the file states them
+    torque_units: str
+    meta: dict[str, Any] = field(default_factory=dict)

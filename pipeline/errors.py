@@ -1,0 +1,26 @@
+"""The one exception for bad input: the CLI prints its line and exits with status 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class BadInput(Exception):
+    """An input file (or parameter) is wrong in a way the user must fix.
+
+    The message names the file and, where it applies, the line or frame, so that the CLI can
+    print it as one line: ``path:line 12: what is wrong``.
+    """
+
+    def __init__(self, path: str | Path | None, what: str, where: str | None = None) -> None:
+        self.path = None if path is None else str(path)
+        self.what = what
+        self.where = where
+        super().__init__(self.line())
+
+    def line(self) -> str:
+        """The one-line message shown to the user."""
+        head = self.path or "input"
+        if self.where:
+            head = f"{head}:{self.where}"
+        return f"{head}: {self.what}"

@@ -1,0 +1,32 @@
+"""Progress bars for long work that stay silent with ``--quiet`` (and when not on a terminal)."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
+
+import click
+
+T = TypeVar("T")
+
+_QUIET = False
+
+
+def set_quiet(quiet: bool) -> None:
+    """Switch every progress bar of this process off (``--quiet``)."""
+    global _QUIET
+    _QUIET = quiet
+
+
+@contextlib.contextmanager
+def progress(items: Iterable[T], label: str, length: int | None = None) -> Iterator[Iterable[T]]:
+    """A click progress bar (counts, rate, ETA) over ``items``, on stderr, unless quiet."""
+    if _QUIET:
+        yield items
+        return
+    with click.progressbar(
+        items, length=length, label=label, file=click.get_text_stream("stderr"),
+        show_pos=True, show_eta=True,
+    ) as bar:
+        yield bar

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Install everything the tests need on a fresh machine, lint, and run the test suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m pip install -q -e ".[test]"
+python3 -m ruff check .
+python3 -m pytest -q -m "not slow" "$@"

@@ -1,0 +1,1 @@
+"""The conditional graph neural network (cGNN): model, data loading, training and evaluation."""
