@@ -113,3 +113,22 @@ class AtiCalibration:
     force_units: str               # as the file states them
     torque_units: str
     meta: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class RawSession:
+    """Everything ``pipeline ingest`` stores in its MCAP file and ``read_raw_mcap`` gives back.
+
+    Each stream stays on its own device clock; nothing is synchronised or calibrated yet.
+    """
+
+    name: str
+    markers: MarkerSeries                    # the trial's 3D export (phantom + indenter markers)
+    force: ForceSeries                       # raw force log (gauge volts or wrench)
+    phantom_markers: list[str]               # the 25 surface markers, in session.toml order
+    indenter_markers: list[str]              # the indenter cluster (4), in session.toml order
+    calibration: AtiCalibration | None = None   # required when force.kind == "gauge"
+    bodies: BodySeries | None = None         # QTM 6D export of the indenter, when present
+    pivot: MarkerSeries | None = None        # pivot-calibration recording, when present
+    trigger_event: str | None = None         # EVENT label of mocap sync pulses, when used
+    provenance: dict[str, Any] = field(default_factory=dict)
