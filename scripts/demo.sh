@@ -1,0 +1,6 @@
+#!/usr/bin/env bash
+# Install the pipeline on a fresh machine and run the main job: every stage on a synthetic session.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m pip install -q -e .
+pipeline demo --out "${1:-out/demo}"

@@ -1,0 +1,127 @@
+"""The pieces every stage stands on: atomic outputs, bad-input lines, schemas, session.toml, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import click
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from data_schema import Dataset, H5Schema, validate_h5
+from data_schema.session import read_session
+from pipeline.atomic import atomic_output, atomic_outputs
+from pipeline.cli import COMMANDS, cli
+from pipeline.errors import BadInput
+from pipeline.provenance import make_provenance, sha256_file
+
+
+def test_atomic_output_renames_only_on_success(tmp_path):
+    out = tmp_path / "sub" / "a.h5"
+    with atomic_output(out) as tmp:
+        tmp.write_text("done")
+        assert not out.exists()
+    assert out.read_text() == "done"
+    with pytest.raises(RuntimeError), atomic_outputs(tmp_path / "b", None, tmp_path / "c") as tmps:
+        assert tmps[1] is None
+        tmps[0].write_text("half")
+        tmps[2].write_text("half")
+        raise RuntimeError("crash")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+
+
+def test_bad_input_line_names_file_and_place():
+    e = BadInput("x/trial.tsv", "time is not increasing", where="line 12")
+    assert str(e) == "x/trial.tsv:line 12: time is not increasing"
+
+
+def test_provenance_hashes_inputs(tmp_path):
+    f = tmp_path / "in.txt"
+    f.write_bytes(b"abc")
+    p = make_provenance("test", {"k": 1, "path": tmp_path}, [f], "s", "1.0")
+    assert p["inputs"][str(f)] == sha256_file(f)
+    assert p["inputs"][str(f)].startswith("ba7816bf")  # sha256("abc")
+    json.dumps(p)
+
+
+SCHEMA = H5Schema(
+    name="test.schema", version="1.2",
+    datasets=(
+        Dataset("a/x", "f4", ("S", 3), "m"),
+        Dataset("a/y", "i4", ("S",)),
+        Dataset("p/*/t", "i8", ("T",), "ns"),
+        Dataset("p/*/v", "f8", ("T", 2), "N"),
+    ),
+)
+
+
+def _write(path, s=4, t_sizes=(5, 7), bad=None):
+    with h5py.File(path, "w") as f:
+        f.attrs["schema"], f.attrs["schema_version"] = "test.schema", "1.0"
+        f.attrs["provenance"] = "{}"
+        f.create_dataset("a/x", data=np.zeros((s, 3), "f4")).attrs["units"] = "m"
+        f.create_dataset("a/y", data=np.zeros(s + (bad == "shape"), "i4"))
+        for i, t in enumerate(t_sizes):
+            f.create_dataset(f"p/{i}/t", data=np.zeros(t, "i8")).attrs["units"] = "ns"
+            v = f.create_dataset(f"p/{i}/v", data=np.zeros((t, 2), "f8"))
+            v.attrs["units"] = "mm" if bad == "units" else "N"
+        if bad == "attr":
+            del f.attrs["provenance"]
+
+
+@pytest.mark.parametrize("bad, words", [("shape", "S=5"), ("units", "units"),
+                                        ("attr", "provenance")])
+def test_validator_finds_departures(tmp_path, bad, words):
+    good = tmp_path / "good.h5"
+    _write(good)
+    validate_h5(good, SCHEMA)  # named sizes bind per press: T=5 and T=7 are both fine
+    broken = tmp_path / "bad.h5"
+    _write(broken, bad=bad)
+    with pytest.raises(BadInput, match=words):
+        validate_h5(broken, SCHEMA)
+
+
+def _session(tmp_path, **over):
+    for name in ("t.tsv", "f.csv", "s.cal"):
+        (tmp_path / name).write_text("x")
+    text = {
+        "mocap": 'file = "t.tsv"\nphantom_markers = ["P1", "P2"]\nindenter_markers = ["I1"]',
+        "force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"',
+    }
+    text.update(over)
+    (tmp_path / "session.toml").write_text(
+        "".join(f"[{k}]\n{v}\n" for k, v in text.items() if v is not None))
+    return tmp_path
+
+
+def test_session_toml_parses(tmp_path):
+    s = read_session(_session(tmp_path))
+    assert s.mocap.phantom_markers == ["P1", "P2"]
+    assert s.force.units == ["V"] * 6 and s.force.time_unit == "s"
+
+
+@pytest.mark.parametrize("over, words", [
+    ({"mocap": 'file = "none.tsv"\nphantom_markers = ["P"]\nindenter_markers = ["I"]'},
+     "no such file"),
+    ({"mocap": 'file = "t.tsv"\nphantom_markers = ["P", "P"]\nindenter_markers = ["I"]'},
+     "duplicate"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]'}, "calibration"),
+    ({"force": None}, r"\[force\]"),
+])
+def test_session_toml_errors(tmp_path, over, words):
+    with pytest.raises(BadInput, match=words):
+        read_session(_session(tmp_path, **over))
+
+
+def test_every_command_has_help_that_says_what_it_reads_and_writes():
+    runner = CliRunner()
+    names = cli.list_commands(click.Context(cli))
+    assert names, "no command registered"
+    for name in names:
+        r = runner.invoke(cli, [name, "--help"])
+        assert r.exit_code == 0, (name, r.output)
+        text = r.output.lower()
+        assert "read" in text and "writ" in text, (name, r.output)
+    assert set(names) <= set(COMMANDS)
