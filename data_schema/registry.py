@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from data_schema.hdf5 import H5Schema
+from data_schema.raw_mcap import RAW_MCAP, McapLayout
 from data_schema.states import STATES
+from data_schema.synced import SYNCED
 
-SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES,)}
+SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES, SYNCED)}
+MCAP_SCHEMAS: dict[str, McapLayout] = {RAW_MCAP.name: RAW_MCAP}   # validate: raw_mcap module
 
 
 def schema_for(name: str) -> H5Schema | None:

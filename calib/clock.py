@@ -1,0 +1,290 @@
+"""Clock alignment of the force logger to the mocap system: offset and drift.
+
+Convention: an event at mocap time ``t_m`` (s) is stamped by the logger at
+``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``.
+
+Two estimators, both ending in a straight-line fit of local offsets ``t_f - t_m`` against
+``t_m`` whose intercept is the offset and whose slope is the drift, with their standard errors:
+
+* trigger: rising edges of the logged TTL channel, located to sub-sample precision by linear
+  interpolation at the half-amplitude crossing, matched to the mocap's trigger EVENT times;
+* data: per press, the lag that best explains the tip depth as a smooth function of the force
+  magnitude (a profile least-squares cross-correlation that is insensitive to the nonlinear
+  force-depth law), scanned coarse to fine and refined to sub-sample by a parabola through the
+  cost minimum; the whole-session lag that seeds it comes from an FFT cross-correlation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import BadInput
+
+
+@dataclass
+class ClockFit:
+    """A logger-vs-mocap clock model with its uncertainty."""
+
+    offset_s: float
+    drift_ppm: float
+    offset_sd_s: float
+    drift_sd_ppm: float
+    rms_s: float          # RMS residual of the local offsets about the line
+    n: int                # number of local offsets (pulses or presses) used
+    method: str           # "trigger", "data" or "none"
+
+    def to_logger(self, t_mocap_s: np.ndarray) -> np.ndarray:
+        """Logger time (s) of mocap times (s)."""
+        return self.offset_s + (1.0 + self.drift_ppm * 1e-6) * np.asarray(t_mocap_s, float)
+
+    def to_mocap(self, t_logger_s: np.ndarray) -> np.ndarray:
+        """Mocap time (s) of logger times (s)."""
+        return (np.asarray(t_logger_s, float) - self.offset_s) / (1.0 + self.drift_ppm * 1e-6)
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        return asdict(self)
+
+
+IDENTITY = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "none")
+
+
+def fit_offsets(
+    t_mocap_s: np.ndarray, offsets_s: np.ndarray, method: str, sd_s: np.ndarray | None = None
+) -> ClockFit:
+    """Straight line through local offsets ``t_f - t_m`` at mocap times ``t_m``.
+
+    Weighted by ``1 / sd_s**2`` when given. Standard errors come from the weighted normal
+    matrix, inflated by the residual scatter when that is larger than the weights claim. One
+    offset alone gives zero drift with an infinite drift uncertainty.
+    """
+    x = np.asarray(t_mocap_s, float)
+    y = np.asarray(offsets_s, float)
+    n = len(x)
+    if n == 0:
+        raise ValueError("no offsets to fit")
+    w = np.ones(n) if sd_s is None else 1.0 / np.maximum(np.asarray(sd_s, float), 1e-12) ** 2
+    if n == 1:
+        sd = float(np.sqrt(1.0 / w[0])) if sd_s is not None else float("inf")
+        return ClockFit(float(y[0]), 0.0, sd, float("inf"), 0.0, 1, method)
+    a = np.stack([np.ones(n), x], axis=1)
+    normal = a.T @ (a * w[:, None])
+    coef = np.linalg.solve(normal, a.T @ (w * y))
+    resid = y - a @ coef
+    rms = float(np.sqrt(np.mean(resid**2)))
+    cov = np.linalg.inv(normal)
+    if n > 2:
+        chi2 = float(np.sum(w * resid**2) / (n - 2))
+        cov = cov * (chi2 if sd_s is None else max(chi2, 1.0))
+    elif sd_s is None:
+        cov = cov * np.inf
+    return ClockFit(
+        offset_s=float(coef[0]), drift_ppm=float(coef[1] * 1e6),
+        offset_sd_s=float(np.sqrt(cov[0, 0])), drift_sd_ppm=float(np.sqrt(cov[1, 1]) * 1e6),
+        rms_s=rms, n=n, method=method,
+    )
+
+
+# --- trigger --------------------------------------------------------------------------------
+
+
+def rising_edges(time_s: np.ndarray, signal: np.ndarray, threshold: float | None = None
+                 ) -> np.ndarray:
+    """Times (s) where ``signal`` rises through ``threshold`` (default: half-way between its
+    lowest and highest values), linearly interpolated between the two samples around the
+    crossing."""
+    t = np.asarray(time_s, float)
+    x = np.asarray(signal, float)
+    ok = np.isfinite(x)
+    if ok.sum() < 2:
+        return np.empty(0)
+    lo, hi = np.min(x[ok]), np.max(x[ok])
+    if threshold is None:
+        if hi - lo <= 0:
+            return np.empty(0)
+        threshold = 0.5 * (lo + hi)
+    below = np.where(ok, x < threshold, True)
+    i = np.flatnonzero(below[:-1] & ~below[1:] & ok[:-1] & ok[1:])
+    frac = (threshold - x[i]) / (x[i + 1] - x[i])
+    return t[i] + frac * (t[i + 1] - t[i])
+
+
+def match_trigger(
+    edges_logger_s: np.ndarray,
+    events_mocap_s: np.ndarray,
+    source: str | Path | None = None,
+    prior: ClockFit | None = None,
+    max_drift_ppm: float = 200.0,
+    min_pulses: int = 3,
+) -> ClockFit:
+    """Clock from trigger pulses seen by both systems (logger edges, mocap EVENT times).
+
+    Every (edge, event) pair proposes an offset; the proposal that explains the most pairs
+    within a tolerance (the drift ``max_drift_ppm`` can build up over the session) wins, and it
+    must explain at least half the pulses of the shorter list (a few missing on either side
+    are fine; unrelated trains are refused). A periodic train makes
+    proposals a period apart tie; ``prior`` (a data-driven estimate) then decides, and without
+    it the tie is bad input. The matched pairs are fitted by :func:`fit_offsets`.
+    """
+    e = np.sort(np.asarray(edges_logger_s, float))
+    m = np.sort(np.asarray(events_mocap_s, float))
+    if len(e) < min_pulses or len(m) < min_pulses:
+        raise BadInput(source, f"trigger: {len(e)} pulse edges in the force log and {len(m)} "
+                               f"trigger events in the mocap file; need at least {min_pulses} "
+                               "of each")
+    spacing = min(np.min(np.diff(e)), np.min(np.diff(m)))
+    span = max(m[-1] - m[0], e[-1] - e[0])
+    tol = min(0.4 * spacing, max(2e-3, max_drift_ppm * 1e-6 * span))
+    proposals = np.unique(np.round((e[:, None] - m[None, :]).ravel() / (0.1 * tol)))
+    proposals = proposals * 0.1 * tol
+    counts = np.array([_count_matches(e, m + p, tol) for p in proposals])
+    best = counts.max()
+    if best < max(min_pulses, 0.5 * min(len(e), len(m))):
+        raise BadInput(source, "trigger: the pulse edges of the force log and the mocap trigger "
+                               "events do not match (the streams may not overlap in time)")
+    top = proposals[counts >= best]
+    groups = _cluster(top, 2 * tol)
+    if len(groups) > 1:
+        if prior is None:
+            raise BadInput(source, "trigger: pulse train is periodic, the match is ambiguous "
+                                   "by whole periods")
+        centre = prior.offset_s + prior.drift_ppm * 1e-6 * np.median(m)
+        groups.sort(key=lambda g: abs(np.mean(g) - centre))
+    offset0 = float(np.mean(groups[0]))
+    pairs_m, pairs_e = _pairs(e, m, lambda t: t + offset0, tol)
+    fit = fit_offsets(pairs_m, pairs_e - pairs_m, "trigger")
+    fine_tol = max(5 * fit.rms_s, 1e-3)
+    pairs_m, pairs_e = _pairs(e, m, lambda t: fit.to_logger(t), min(tol, fine_tol))
+    fit = fit_offsets(pairs_m, pairs_e - pairs_m, "trigger")
+    if abs(fit.drift_ppm) > max_drift_ppm:
+        raise BadInput(source, f"trigger: fitted clock drift {fit.drift_ppm:.0f} ppm is "
+                               f"implausible (limit {max_drift_ppm:g} ppm)")
+    return fit
+
+
+def _count_matches(e: np.ndarray, predicted: np.ndarray, tol: float) -> int:
+    j = np.clip(np.searchsorted(e, predicted), 1, len(e) - 1)
+    d = np.minimum(np.abs(e[j] - predicted), np.abs(e[j - 1] - predicted))
+    return int((d <= tol).sum())
+
+
+def _pairs(e: np.ndarray, m: np.ndarray, to_logger: Callable[[np.ndarray], np.ndarray],
+           tol: float) -> tuple[np.ndarray, np.ndarray]:
+    pred = to_logger(m)
+    j = np.clip(np.searchsorted(e, pred), 1, len(e) - 1)
+    j = np.where(np.abs(e[j - 1] - pred) < np.abs(e[j] - pred), j - 1, j)
+    ok = np.abs(e[j] - pred) <= tol
+    return m[ok], e[j[ok]]
+
+
+def _cluster(values: np.ndarray, gap: float) -> list[np.ndarray]:
+    v = np.sort(values)
+    cuts = np.flatnonzero(np.diff(v) > gap) + 1
+    return list(np.split(v, cuts))
+
+
+# --- data-driven ----------------------------------------------------------------------------
+
+
+def coarse_lag(
+    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
+    t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
+) -> float:
+    """Whole-session lag (logger minus mocap time, s) by FFT cross-correlation of the tip depth
+    with the force magnitude on a common grid, refined by a parabola through the peak."""
+    t0 = float(np.min(t_mocap_s))
+    n_m = int(np.ceil((np.max(t_mocap_s) - t0) * rate_hz)) + 1
+    grid_m = t0 + np.arange(n_m) / rate_hz
+    a = np.interp(grid_m, t_mocap_s, np.where(np.isfinite(depth), depth, np.nan))
+    a = np.where(np.isfinite(a), a - np.nanmean(a), 0.0)
+    lo, hi = t_logger_span
+    n_f = int(np.floor((hi - lo) * rate_hz)) + 1
+    grid_f = lo + np.arange(n_f) / rate_hz
+    b = np.nan_to_num(force_at(grid_f))
+    b = b - np.mean(b)
+    size = int(2 ** np.ceil(np.log2(n_m + n_f)))
+    xc = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
+    shifts = np.arange(size)
+    shifts = np.where(shifts < n_f, shifts, shifts - size)      # lag k: b[i + k] ~ a[i]
+    lag_s = lo - t0 + shifts / rate_hz
+    xc = np.where(np.abs(lag_s) <= max_lag_s, xc, -np.inf)
+    k = int(np.argmax(xc))
+    if not np.isfinite(xc[k]):
+        raise ValueError("no admissible lag")
+    kp, km = (k + 1) % size, (k - 1) % size
+    frac = _parabola_vertex(xc[km], xc[k], xc[kp]) if np.isfinite(xc[km] + xc[kp]) else 0.0
+    return float(lag_s[k] + frac / rate_hz)
+
+
+def press_lag(
+    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
+    lag0: float, half_width_s: float, step_s: float, degree: int = 3,
+) -> tuple[float, float]:
+    """Lag (s) near ``lag0`` minimising the misfit of depth = poly(force) over one press.
+
+    ``t_mocap_s`` and ``depth`` are the press's loaded frames (chosen once, so every lag is
+    scored on the same frames). The depth is the dependent variable because it carries most of
+    the noise (the force is low-passed and far less noisy relative to its range). Returns the
+    parabola-refined lag and its standard error from the cost curvature.
+    """
+    lags = lag0 + np.arange(-half_width_s, half_width_s + 0.5 * step_s, step_s)
+    cost = np.empty(len(lags))
+    for i, lag in enumerate(lags):
+        f = force_at(t_mocap_s + lag)
+        if not np.isfinite(f).all():
+            cost[i] = np.inf
+            continue
+        g = (f - f.mean()) / max(f.std(), 1e-12)
+        q, _ = np.linalg.qr(np.vander(g, degree + 1))
+        cost[i] = float(np.sum((depth - q @ (q.T @ depth)) ** 2))
+    k = int(np.argmin(cost))
+    if k == 0 or k == len(lags) - 1 or not np.isfinite(cost[k - 1 : k + 2]).all():
+        return float(lags[k]), float("inf")
+    frac = _parabola_vertex(cost[k - 1], cost[k], cost[k + 1])
+    lag = float(lags[k] + frac * step_s)
+    curv = (cost[k - 1] - 2 * cost[k] + cost[k + 1]) / step_s**2
+    dof = max(len(depth) - degree - 2, 1)
+    sd = float(np.sqrt(2.0 * cost[k] / dof / curv)) if curv > 0 else float("inf")
+    return lag, sd
+
+
+def clock_from_data(
+    presses: Sequence[tuple[np.ndarray, np.ndarray]],
+    force_at: Callable[[np.ndarray], np.ndarray],
+    lag0: float,
+    source: str | Path | None = None,
+    search_s: float = 0.05,
+) -> ClockFit:
+    """Clock from per-press lags: ``presses`` are (mocap times, tip depth) of loaded frames.
+
+    Each press is scanned over ``lag0 +- search_s`` at 1 ms, then +-2 ms at 0.1 ms; the local
+    lags are fitted by :func:`fit_offsets` (weighted by their standard errors).
+    """
+    times, lags, sds = [], [], []
+    for t, d in presses:
+        ok = np.isfinite(d)
+        if ok.sum() < 20:
+            continue
+        t, d = t[ok], d[ok]
+        lag, _ = press_lag(t, d, force_at, lag0, search_s, 1e-3)
+        lag, sd = press_lag(t, d, force_at, lag, 2e-3, 1e-4)
+        if np.isfinite(sd):
+            times.append(float(np.mean(t)))
+            lags.append(lag)
+            sds.append(sd)
+    if not lags:
+        raise BadInput(source, "clock: no press has enough tracked tip frames to align the "
+                               "force to the motion")
+    return fit_offsets(np.array(times), np.array(lags), "data", np.array(sds))
+
+
+def _parabola_vertex(ym: float, y0: float, yp: float) -> float:
+    """Offset (in steps, clipped to +-1) of the vertex of the parabola through 3 equally
+    spaced points (a maximum or a minimum)."""
+    den = ym - 2 * y0 + yp
+    if den == 0:
+        return 0.0
+    return float(np.clip(0.5 * (ym - yp) / den, -1.0, 1.0))

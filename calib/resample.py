@@ -1,0 +1,80 @@
+"""Anti-aliased resampling of the force log onto the mocap frame times.
+
+After clock correction the mocap frames fall at arbitrary (drifting, non-integer) positions of
+the logger's grid, so picking every other sample is both aliased and misaligned. Instead the
+log is low-pass filtered on its own grid below the output Nyquist frequency with a zero-phase
+(symmetric, Kaiser-window) FIR, the same filter a polyphase decimator applies, and then
+evaluated at the exact query times with a cubic interpolant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+from scipy.signal import firwin, kaiserord
+
+
+def antialias_taps(
+    fs_in: float, fs_out: float, passband: float = 0.8, atten_db: float = 80.0
+) -> np.ndarray:
+    """Zero-phase low-pass FIR taps (odd length) for resampling from ``fs_in`` to ``fs_out``.
+
+    Flat to ``passband`` x the output Nyquist frequency, at least ``atten_db`` down at it.
+    """
+    nyq_out = 0.5 * min(fs_out, fs_in)
+    f_pass = passband * nyq_out
+    width = (nyq_out - f_pass) / (0.5 * fs_in)
+    numtaps, beta = kaiserord(atten_db, width)
+    numtaps |= 1
+    return firwin(numtaps, 0.5 * (f_pass + nyq_out), window=("kaiser", beta), fs=fs_in)
+
+
+def lowpass_zero_phase(x: np.ndarray, taps: np.ndarray) -> np.ndarray:
+    """Filter along axis 0 with symmetric ``taps`` without delay; ends padded by reflection."""
+    x = np.asarray(x, float)
+    half = len(taps) // 2
+    if half == 0:
+        return x.copy()
+    if len(x) <= half:
+        raise ValueError(f"signal of {len(x)} samples is shorter than the filter's half length")
+    pad = np.concatenate([2 * x[:1] - x[half:0:-1], x, 2 * x[-1:] - x[-2:-half - 2:-1]])
+    flat = pad.reshape(len(pad), -1)
+    out = np.stack([np.convolve(flat[:, c], taps, mode="valid") for c in range(flat.shape[1])],
+                   axis=1)
+    return out.reshape(x.shape)
+
+
+def antialiased_interpolant(
+    t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float = 0.8
+) -> Callable[[np.ndarray], np.ndarray]:
+    """A function of time (s) giving ``x`` (N, ...), sampled at uniform ``t_src`` (s), low-passed
+    for an output rate ``fs_out``; NaN outside the source's span. Build once, query often."""
+    t_src = np.asarray(t_src, float)
+    fs_in = (len(t_src) - 1) / (t_src[-1] - t_src[0])
+    y = lowpass_zero_phase(x, antialias_taps(fs_in, fs_out, passband))
+    spline = make_interp_spline(t_src, y, k=3)
+    lo, hi = t_src[0], t_src[-1]
+
+    def at(t_query: np.ndarray) -> np.ndarray:
+        tq = np.asarray(t_query, float)
+        out = spline(tq)
+        out[(tq < lo) | (tq > hi)] = np.nan
+        return out
+
+    return at
+
+
+def resample_at(
+    t_src: np.ndarray,
+    x: np.ndarray,
+    t_query: np.ndarray,
+    fs_out: float,
+    passband: float = 0.8,
+) -> np.ndarray:
+    """Values of ``x`` (N, ...) sampled at uniform times ``t_src`` (s), at ``t_query`` (s).
+
+    Anti-aliased for an output rate ``fs_out``. Queries outside the source's span are NaN.
+    """
+    return antialiased_interpolant(t_src, x, fs_out, passband)(t_query)

@@ -1,0 +1,135 @@
+"""Rigid-body fit of a marker cluster (the indenter) frame by frame.
+
+Least-squares rotation and translation (Kabsch/SVD) that map the cluster's reference shape, in
+its body frame, onto the markers seen in each frame. Three of four markers suffice; frames with
+fewer, with nearly collinear visible markers, or with a large residual are flagged rather than
+trusted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import BadInput
+
+
+@dataclass
+class RigidFit:
+    """Per-frame pose of a cluster: ``lab = rotation @ body + translation``."""
+
+    rotation: np.ndarray     # (T, 3, 3) body -> lab; NaN where no fit
+    translation: np.ndarray  # (T, 3) metres; NaN where no fit
+    rms: np.ndarray          # (T,) residual RMS over the used markers, metres; NaN where no fit
+    n_markers: np.ndarray    # (T,) int, markers used
+    ill_conditioned: np.ndarray  # (T,) bool: visible markers nearly collinear
+    poor: np.ndarray         # (T,) bool: ill-conditioned or residual above the limit
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Frames with a pose (at least 3 markers), poor or not."""
+        return self.n_markers >= 3
+
+    def apply(self, body_point: np.ndarray) -> np.ndarray:
+        """A body-frame point (3,) in the lab frame per frame, (T, 3); NaN where no fit."""
+        return self.rotation @ np.asarray(body_point, float) + self.translation
+
+
+def fit_rigid(
+    reference: np.ndarray,
+    observed: np.ndarray,
+    max_rms: float = 1.0e-3,
+    min_spread_ratio: float = 0.1,
+    drop_outlier: bool = True,
+) -> RigidFit:
+    """Fit the reference cluster (M, 3) to each frame of ``observed`` (T, M, 3), NaN = unseen.
+
+    A frame is fitted when at least 3 markers are seen. It is ``ill_conditioned`` when the seen
+    reference markers are nearly collinear (second principal spread below ``min_spread_ratio``
+    of the first), and ``poor`` when ill-conditioned or its RMS residual exceeds ``max_rms``.
+    With ``drop_outlier``, a poor frame of 4 or more markers is refitted without each marker in
+    turn, and the best well-conditioned fit within ``max_rms`` replaces it (a mislabelled or
+    ghost marker is then ignored rather than spoiling the pose).
+    """
+    fit = _fit(reference, observed, max_rms, min_spread_ratio)
+    if not drop_outlier:
+        return fit
+    obs = np.asarray(observed, float)
+    redo = np.flatnonzero(fit.poor & (fit.n_markers >= 4))
+    for m in range(obs.shape[1]):
+        if redo.size == 0:
+            break
+        trial = obs[redo].copy()
+        trial[:, m] = np.nan
+        alt = _fit(reference, trial, max_rms, min_spread_ratio)
+        better = ~alt.poor & (alt.n_markers >= 3)
+        for name in ("rotation", "translation", "rms", "n_markers", "ill_conditioned", "poor"):
+            getattr(fit, name)[redo[better]] = getattr(alt, name)[better]
+        redo = redo[~better]
+    return fit
+
+
+def _fit(reference: np.ndarray, observed: np.ndarray, max_rms: float,
+         min_spread_ratio: float) -> RigidFit:
+    """One least-squares fit per frame over every seen marker (see :func:`fit_rigid`)."""
+    ref = np.asarray(reference, float)
+    obs = np.asarray(observed, float)
+    if obs.ndim != 3 or obs.shape[1:] != ref.shape or ref.shape[1] != 3:
+        raise ValueError(f"observed {obs.shape} does not match reference {ref.shape}")
+    seen = np.isfinite(obs).all(axis=2)                       # (T, M)
+    w = seen.astype(float)
+    n = w.sum(axis=1)                                          # (T,)
+    ok = n >= 3
+    n_safe = np.where(ok, n, 1.0)[:, None]
+    obs0 = np.where(seen[..., None], obs, 0.0)
+    c_ref = (w @ ref) / n_safe                                 # (T, 3)
+    c_obs = np.einsum("tm,tmk->tk", w, obs0) / n_safe
+    p = (ref[None] - c_ref[:, None]) * w[..., None]            # (T, M, 3) centred, masked
+    q = (obs0 - c_obs[:, None]) * w[..., None]
+    h = np.einsum("tmi,tmj->tij", p, q)                        # cross-covariance
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.einsum("tij,tjk->tik", u, vt)))
+    d = np.where(d == 0, 1.0, d)
+    fix = np.ones((len(d), 3))
+    fix[:, 2] = d
+    rot = np.einsum("tji,tj,tkj->tik", vt, fix, u)             # V diag(1,1,d) U^T
+    trans = c_obs - np.einsum("tij,tj->ti", rot, c_ref)
+    resid = obs0 - (np.einsum("tij,mj->tmi", rot, ref) + trans[:, None])
+    sq = (resid**2).sum(axis=2) * w
+    rms = np.sqrt(sq.sum(axis=1) / n_safe[:, 0])
+    spread = np.linalg.svd(p, compute_uv=False)                # (T, 3) principal spreads
+    ill = ok & (spread[:, 1] < min_spread_ratio * np.maximum(spread[:, 0], 1e-300))
+    rot[~ok] = np.nan
+    trans[~ok] = np.nan
+    rms[~ok] = np.nan
+    poor = ok & (ill | (rms > max_rms))
+    return RigidFit(rot, trans, rms, n.astype(int), ill, poor)
+
+
+def cluster_reference(
+    observed: np.ndarray, source: str | Path | None = None, iterations: int = 3
+) -> np.ndarray:
+    """The cluster's shape (M, 3) in its own body frame, from frames where every marker is seen.
+
+    Generalised Procrustes: align every complete frame to the current mean, average, repeat.
+    The body frame has its origin at the markers' centroid and its axes along their principal
+    directions (largest spread first), a right-handed frame.
+    """
+    obs = np.asarray(observed, float)
+    complete = np.isfinite(obs).all(axis=(1, 2))
+    if complete.sum() < 1:
+        raise BadInput(source, "no frame shows every marker of the indenter cluster, "
+                               "so its shape cannot be measured")
+    frames = obs[complete]
+    mean = frames[0] - frames[0].mean(axis=0)
+    for _ in range(iterations):
+        fit = fit_rigid(mean, frames, max_rms=np.inf)
+        body = np.einsum("tji,tmj->tmi", fit.rotation, frames - fit.translation[:, None])
+        mean = body.mean(axis=0)
+        mean -= mean.mean(axis=0)
+    _, _, vt = np.linalg.svd(mean)
+    if np.linalg.det(vt) < 0:
+        vt[2] *= -1
+    return mean @ vt.T

@@ -1,0 +1,186 @@
+"""What is in a file, judged by its content (magic bytes, headers), not only by its extension.
+
+``detect_format`` names every format the pipeline reads or writes; ``read_mocap`` reads any of
+the 3D marker exports (QTM TSV 3D, C3D, QTM MAT). ``sniff`` is the cheap magic-bytes step the
+readers share, and ``check_last_line`` the shared test that a text export was not cut short.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ingest.series import MarkerSeries
+from pipeline.errors import BadInput
+
+FORMATS = (
+    "qtm_tsv_3d", "qtm_tsv_6d", "c3d", "qtm_mat", "force_csv", "force_mat", "force_parquet",
+    "ati_cal", "mcap", "hdf5", "json",
+)
+_HDF5 = b"\x89HDF\r\n\x1a\n"
+_HEAD = 4096
+
+
+def _head(path: str | Path, n: int = _HEAD) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(n)
+    except IsADirectoryError:
+        raise BadInput(path, "is a folder, not a file") from None
+    except FileNotFoundError:
+        raise BadInput(path, "no such file") from None
+    except OSError as e:
+        raise BadInput(path, f"cannot read ({e.strerror or e})") from None
+
+
+def _is_c3d(head: bytes) -> bool:
+    """C3D: byte 2 is 0x50 and the parameter section it points to names a processor type."""
+    if len(head) < 512 or head[1] != 0x50 or head[0] < 2:
+        return False
+    start = (head[0] - 1) * 512
+    return len(head) >= start + 4 and head[start + 3] in (84, 85, 86)
+
+
+def _text(head: bytes) -> str | None:
+    """The head as text, or None for binary content (NUL bytes, invalid encodings)."""
+    if b"\x00" in head:
+        return None
+    try:
+        return head.decode("utf-8")
+    except UnicodeDecodeError as e:
+        if e.start >= len(head) - 3:      # a multi-byte character cut by the head's end
+            return head[: e.start].decode("utf-8")
+    try:
+        return head.decode("cp1252")
+    except UnicodeDecodeError:
+        return None
+
+
+def sniff(path: str | Path) -> str:
+    """The container of a file from its first bytes.
+
+    One of ``mcap``, ``mat73`` (HDF5 with a MATLAB userblock), ``hdf5``, ``mat5`` (MAT v5/v6/v7),
+    ``parquet``, ``c3d``, ``xml``, ``json``, ``text``, ``empty`` or ``binary``.
+    """
+    head = _head(path)
+    if not head:
+        return "empty"
+    if head.startswith(b"\x89MCAP"):
+        return "mcap"
+    if head.startswith(b"MATLAB 7.3 MAT-file") and head[512:520] == _HDF5:
+        return "mat73"
+    if any(head[o:o + 8] == _HDF5 for o in (0, 512, 1024, 2048)):
+        return "hdf5"
+    if head.startswith(b"MATLAB 5.0 MAT-file"):
+        return "mat5"
+    if head.startswith(b"PAR1"):
+        return "parquet"
+    if _is_c3d(head):
+        return "c3d"
+    text = _text(head)
+    if text is None:
+        return "binary"
+    start = text.lstrip("\ufeff \t\r\n")[:1]
+    return {"<": "xml", "{": "json", "[": "json"}.get(start, "text")
+
+
+def detect_format(path: str | Path) -> str:
+    """The format of ``path`` (one of ``FORMATS``) from its content; unknown -> BadInput."""
+    kind = sniff(path)
+    if kind in ("mcap", "hdf5", "c3d", "json"):
+        return kind
+    if kind == "parquet":
+        return "force_parquet"
+    if kind in ("mat5", "mat73"):
+        from ingest.qtm_mat import is_qtm_mat
+
+        return "qtm_mat" if is_qtm_mat(path) else "force_mat"
+    head = _text(_head(path)) or ""
+    if kind == "xml" and "<FTSensor" in head:
+        return "ati_cal"
+    if kind == "text":
+        fmt = _text_format(path, head)
+        if fmt:
+            return fmt
+    raise BadInput(path, "unknown format")
+
+
+def _text_format(path: str | Path, head: str) -> str | None:
+    from ingest.qtm_tsv import looks_like_qtm_tsv, parse_qtm_header
+
+    if looks_like_qtm_tsv(head):
+        header = parse_qtm_header(path)
+        if "MARKER_NAMES" in header:
+            return "qtm_tsv_3d"
+        if "BODY_NAMES" in header:
+            return "qtm_tsv_6d"
+        return None
+    lines = head.lstrip("\ufeff").splitlines()
+    if len(lines) < 2:
+        return None
+    sep = "\t" if "\t" in lines[0] else ","
+    names = lines[0].split(sep)
+    first = lines[1].split(sep)
+    if len(names) >= 2 and not any(_is_number(n) for n in names) and any(
+        _is_number(v) for v in first
+    ):
+        return "force_csv"
+    return None
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def read_mocap(path: str | Path) -> MarkerSeries:
+    """Read any 3D marker export (QTM TSV 3D, C3D, QTM MAT) into a ``MarkerSeries``."""
+    fmt = detect_format(path)
+    if fmt == "qtm_tsv_3d":
+        from ingest.qtm_tsv import read_qtm_3d
+
+        return read_qtm_3d(path)
+    if fmt == "c3d":
+        from ingest.c3d import read_c3d
+
+        return read_c3d(path)
+    if fmt == "qtm_mat":
+        from ingest.qtm_mat import read_qtm_mat
+
+        return read_qtm_mat(path)
+    raise BadInput(path, f"not a 3D marker export (found {fmt}); expected QTM TSV 3D, C3D or MAT")
+
+
+def check_last_line(
+    path: str | Path, sep: str, n_fields: int, reference: list[str], line_no: int
+) -> None:
+    """A text export must not end in the middle of a row.
+
+    A last line without a line break is accepted only when it has all ``n_fields`` fields and
+    its last number has as many decimals as the same field of ``reference`` (another row of
+    the file): exporters write a fixed number of decimals, so a shorter number was cut.
+    """
+    size = Path(path).stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - 65536))
+        tail = f.read()
+    if not tail or tail.endswith(b"\n"):
+        return
+    last = tail.rsplit(b"\n", 1)[-1].decode("utf-8", "replace").rstrip("\r").split(sep)
+    where = f"line {line_no}"
+    if len(last) != n_fields:
+        raise BadInput(path, f"file ends in the middle of a row ({len(last)} of {n_fields} "
+                             "fields): truncated", where=where)
+    if len(reference) == n_fields and _decimals(last[-1]) < _decimals(reference[-1]):
+        raise BadInput(path, f"file ends in the middle of a number ({last[-1].strip()!r}): "
+                             "truncated", where=where)
+
+
+def _decimals(token: str) -> int:
+    """Digits after the decimal point of a plain number; -1 for anything else."""
+    token = token.strip()
+    if not _is_number(token) or token.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+        return -1
+    return len(token.split(".", 1)[1]) if "." in token else 0

@@ -1,0 +1,82 @@
+"""Splitting a session into presses, and naming each press's location and repeat.
+
+A press runs from contact onset to release: the frames where the force magnitude stays above
+a contact level (a few noise widths), in a run that rises above a detection level. Presses at
+the same place on the phantom (tip within ``radius`` of a location's centre, measured in the
+surface plane) share a location id; locations are numbered in the order they are first
+pressed, repeats within each location.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.gaps import nan_runs
+
+
+@dataclass
+class Press:
+    """One press on the mocap frame index axis (``release`` is one past the last loaded frame)."""
+
+    onset: int
+    release: int
+    peak: int
+    location: int = -1
+    repeat: int = -1
+
+
+def segment_presses(
+    force_magnitude: np.ndarray,
+    rate_hz: float,
+    detect_n: float = 0.3,
+    contact_n: float = 0.05,
+    min_duration_s: float = 0.2,
+    merge_s: float = 0.05,
+) -> list[Press]:
+    """Presses in a force-magnitude series (NaN = unknown, treated as unloaded).
+
+    Runs above ``contact_n`` closer than ``merge_s`` are merged (noise flicker at the contact
+    level); a press is a merged run that peaks above ``detect_n`` and lasts ``min_duration_s``.
+    """
+    f = np.nan_to_num(np.asarray(force_magnitude, float), nan=0.0)
+    spans: list[list[int]] = []
+    for a, b in nan_runs(f > contact_n):
+        if spans and a - spans[-1][1] < merge_s * rate_hz:
+            spans[-1][1] = b
+        else:
+            spans.append([a, b])
+    return [Press(a, b, a + int(np.argmax(f[a:b]))) for a, b in spans
+            if f[a:b].max() > detect_n and (b - a) >= min_duration_s * rate_hz]
+
+
+def assign_locations(
+    centres: np.ndarray, radius: float = 0.010
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Location id and repeat number of each press from its contact point (K, D).
+
+    Greedy in press order: a press joins the nearest known location within ``radius`` (whose
+    centre becomes the mean of its presses), or opens a new one. Returns (location, repeat,
+    location centres (L, D)).
+    """
+    pts = np.asarray(centres, float)
+    members: list[list[int]] = []
+    loc = np.full(len(pts), -1, int)
+    rep = np.full(len(pts), -1, int)
+    for k, p in enumerate(pts):
+        if not np.isfinite(p).all():
+            continue
+        if members:
+            means = np.array([pts[m].mean(axis=0) for m in members])
+            dist = np.linalg.norm(means - p, axis=1)
+            j = int(np.argmin(dist))
+            if dist[j] <= radius:
+                loc[k], rep[k] = j, len(members[j])
+                members[j].append(k)
+                continue
+        loc[k], rep[k] = len(members), 0
+        members.append([k])
+    means = np.array([pts[m].mean(axis=0) for m in members]) if members else np.empty(
+        (0, pts.shape[1]))
+    return loc, rep, means

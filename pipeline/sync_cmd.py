@@ -1,0 +1,52 @@
+"""``pipeline sync``: the click layer over :func:`pipeline.sync_stage.run_sync`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option
+
+
+@click.command()
+@click.argument("mcap", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Synced HDF5 file to write (schema phantom.synced).")
+@click.option("--clock", type=click.Choice(["auto", "trigger", "data"]), default="auto",
+              show_default=True,
+              help="Clock alignment: trigger pulses, the tip motion against the force (data), "
+                   "or trigger when recorded (auto).")
+@click.option("--max-gap-ms", type=float, default=20.0, show_default=True,
+              help="Fill marker gaps up to this long; longer ones stay NaN and flagged.")
+@click.option("--margin-s", type=float, default=0.5, show_default=True,
+              help="Unloaded frames kept before contact onset and after release.")
+@click.option("--location-radius-mm", type=float, default=10.0, show_default=True,
+              help="Presses whose contact points are closer share a location id.")
+@rrd_option
+def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
+         location_radius_mm: float, rrd: Path | None, no_rrd: bool) -> None:
+    """Synchronise an ingested session into one record per press.
+
+    Reads MCAP (from `pipeline ingest`: mocap markers, pivot recording, force log, ATI
+    calibration, trigger). Fits the indenter cluster in every frame and calibrates its tip from
+    the pivot recording, tares the force from the unloaded start of the log, aligns the logger
+    clock to the mocap clock (offset and drift, from the trigger or from the data), resamples
+    the force onto the mocap frames with an anti-aliasing filter, fills short marker gaps, and
+    splits the session into presses with location ids. Writes --out (HDF5: per press the time,
+    25 phantom markers + tip, force vector and magnitude, tip depth and quality flags; the
+    calibration results and their uncertainty; provenance) and a rerun recording of the
+    alignment and the tip (--rrd, default beside --out). Nothing is written on bad input.
+    """
+    from pipeline.sync_stage import SyncParams, run_sync
+
+    params = SyncParams(clock=clock, max_gap_s=max_gap_ms * 1e-3, margin_s=margin_s,
+                        location_radius_m=location_radius_mm * 1e-3)
+    rrd_path = resolve_rrd(out, rrd, no_rrd)
+    r = run_sync(mcap, out, rrd_path, params)
+    c = r.clock
+    locations = len({p.press.location for p in r.presses})
+    click.echo(f"{out}: {len(r.presses)} presses at {locations} locations; clock ({c.method}) "
+               f"offset {c.offset_s * 1e3:.3f} +- {c.offset_sd_s * 1e3:.3f} ms, drift "
+               f"{c.drift_ppm:.2f} +- {c.drift_sd_ppm:.2f} ppm; tip pivot RMS "
+               f"{r.pivot.rms * 1e3:.3f} mm" + (f"; recording {rrd_path}" if rrd_path else ""))

@@ -1,0 +1,357 @@
+"""The paper's MSM data-generation protocol, written as a states file (``phantom.states``).
+
+Protocol (paper, "Data generation"): ``locations`` masses drawn at random without replacement;
+at each, ``directions`` force directions (the normal, pointing into the surface, plus random
+directions up to 45 degrees from it, uniform on that spherical cap); along each, the force on
+that one mass grows to ``fmax`` in ``steps`` equal steps, ``F_t = t fmax / steps``. Every random
+choice is drawn up front from ``seed``, so a shard draws the same plan as a full run.
+
+Layout (same as extracted lab states): sequence ``s = location * directions + direction``
+holds states ``s * (steps + 1) + t`` for t = 0 (rest) .. steps; ``tip`` is the loaded mass,
+``force`` the force magnitude, ``force_vector`` the force; single-step examples are
+(t, t + 1) for every t of every sequence, multi-step examples ``min(15, #pairs)`` random pairs
+(start, end) with end - start >= 2 per sequence (drawn without replacement, sorted).
+
+Shards (``shard=(i, count)``, i from 0) simulate a contiguous block of locations
+(``np.array_split``) and are complete states files themselves; :func:`merge_shards` joins all
+``count`` of them into the arrays a one-process run writes, byte for byte.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from data_schema.hdf5 import validate_h5
+from data_schema.states import STATES
+from pipeline.atomic import atomic_output
+from pipeline.errors import BadInput
+from pipeline.progress import progress
+from pipeline.provenance import make_provenance
+from sim.blas_threads import blas_threads
+from sim.msm import MSM, MSMError, MSMParams
+from sim.msm_static import DEFAULT_TOL, StaticSolver, residual, simulate_sequence
+
+MULTI_PER_SEQUENCE = 15
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """What to simulate: the paper's defaults."""
+
+    locations: int = 100
+    directions: int = 11
+    steps: int = 15
+    fmax: float = 7.5
+    max_angle_deg: float = 45.0
+    seed: int = 0
+
+    def check(self, n_masses: int) -> None:
+        """Refuse a protocol that cannot be simulated (one line naming the parameter)."""
+        for name in ("locations", "directions", "steps"):
+            if getattr(self, name) < 1:
+                raise BadInput(None, f"--{name} must be at least 1, got {getattr(self, name)}")
+        if self.locations > n_masses:
+            raise BadInput(None, f"--locations {self.locations} exceeds the {n_masses} masses")
+        if not (math.isfinite(self.fmax) and self.fmax > 0):
+            raise BadInput(None, f"--fmax must be a finite positive force, got {self.fmax}")
+        if not 0 <= self.max_angle_deg <= 90:
+            raise BadInput(None, f"max angle must be within 0..90 degrees, got "
+                                 f"{self.max_angle_deg}")
+
+    @property
+    def sequences(self) -> int:
+        return self.locations * self.directions
+
+    @property
+    def multi_per_sequence(self) -> int:
+        pairs = (self.steps + 1) * self.steps // 2 - self.steps   # end - start >= 2
+        return min(MULTI_PER_SEQUENCE, pairs)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Every random choice of a protocol."""
+
+    protocol: Protocol
+    nodes: np.ndarray        # (L,) loaded mass of each location
+    directions: np.ndarray   # (L, D, 3) unit force directions; [:, 0] is the normal (0, 0, -1)
+    multi: np.ndarray        # (L * D, M, 2) multi-step (start, end) steps of each sequence
+
+
+def draw_plan(protocol: Protocol, n_masses: int) -> Plan:
+    """Draw locations, directions and multi-step pairs from ``protocol.seed``."""
+    protocol.check(n_masses)
+    p = protocol
+    rng = np.random.default_rng(p.seed)
+    nodes = rng.choice(n_masses, size=p.locations, replace=False)
+    cos_max = math.cos(math.radians(p.max_angle_deg))
+    cos_t = rng.uniform(cos_max, 1.0, size=(p.locations, p.directions - 1))
+    phi = rng.uniform(0.0, 2 * math.pi, size=(p.locations, p.directions - 1))
+    sin_t = np.sqrt(1.0 - cos_t ** 2)
+    dirs = np.empty((p.locations, p.directions, 3))
+    dirs[:, 0] = (0.0, 0.0, -1.0)
+    dirs[:, 1:] = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), -cos_t], -1)
+    pairs = np.array([(s, e) for s in range(p.steps + 1) for e in range(s + 2, p.steps + 1)],
+                     dtype=np.int64).reshape(-1, 2)
+    multi = np.empty((p.sequences, p.multi_per_sequence, 2), dtype=np.int64)
+    for s in range(p.sequences):
+        pick = np.sort(rng.choice(len(pairs), size=p.multi_per_sequence, replace=False))
+        multi[s] = pairs[pick]
+    return Plan(p, nodes.astype(np.int64), dirs, multi)
+
+
+def shard_locations(locations: int, shard: tuple[int, int] | None) -> np.ndarray:
+    """The contiguous block of location indices of shard (i, count), or all of them."""
+    if shard is None:
+        return np.arange(locations)
+    i, count = shard
+    if not (0 <= i < count) or count > locations:
+        raise BadInput(None, f"--shard {i}/{count}: need 0 <= I < N <= locations ({locations})")
+    return np.array_split(np.arange(locations), count)[i]
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"I/N"`` -> (I, N)."""
+    try:
+        i, count = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise BadInput(None, f"--shard must look like I/N (e.g. 0/4), got {text!r}") from None
+    return i, count
+
+
+# -- simulation ------------------------------------------------------------------------------
+
+@dataclass
+class Simulated:
+    """States of a block of locations, in file order, and what they cost."""
+
+    locations: np.ndarray    # (l,) location indices
+    points: np.ndarray       # (l * D * (steps + 1), N, 3) float32
+    max_residual: float      # N, largest force on any mass of any state (float64 solution)
+    iterations: int
+    factorizations: int
+
+
+def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int]:
+    """One location, all its directions: (D, steps + 1, N, 3) float32 and solver counts."""
+    params, node, directions, steps, fmax, tol = args
+    model = MSM(params)
+    solver = StaticSolver(model, tol)
+    out = np.empty((len(directions), steps + 1, model.N, 3), dtype=np.float32)
+    worst = 0.0
+    with blas_threads(1):
+        for d, direction in enumerate(directions):
+            states = simulate_sequence(model, int(node), direction, steps, fmax, solver=solver)
+            if not np.isfinite(states).all():
+                raise MSMError(f"non-finite state at mass {node}, direction {d}")
+            last = model.load(int(node), direction * fmax)
+            worst = max(worst, residual(model, states[-1], last))
+            out[d] = states
+    return out, worst, solver.stats.iterations, solver.stats.factorizations
+
+
+def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
+             tol: float = DEFAULT_TOL, workers: int = 1) -> Simulated:
+    """Simulate ``locations`` (default: all) of ``plan`` with the fast static path.
+
+    ``workers`` processes share the locations; the result does not depend on how many.
+    """
+    p = plan.protocol
+    locs = np.arange(p.locations) if locations is None else np.asarray(locations)
+    jobs = [(params, plan.nodes[loc], plan.directions[loc], p.steps, p.fmax, tol)
+            for loc in locs]
+    per_loc = p.directions * (p.steps + 1)
+    points = np.empty((len(locs) * per_loc, params.n * params.n, 3), dtype=np.float32)
+    worst, its, facts = 0.0, 0, 0
+    workers = max(1, min(workers, len(jobs)))
+    pool = _pool(workers) if workers > 1 else None
+    try:
+        results = pool.imap(_simulate_location, jobs) if pool else map(_simulate_location, jobs)
+        with progress(results, "simulating MSM locations", length=len(jobs)) as bar:
+            for k, (states, w, i, f) in enumerate(bar):
+                points[k * per_loc:(k + 1) * per_loc] = states.reshape(per_loc, -1, 3)
+                worst, its, facts = max(worst, w), its + i, facts + f
+    finally:
+        if pool:
+            pool.terminate()
+            pool.join()
+    return Simulated(locs, points, worst, its, facts)
+
+
+def _pool(workers: int) -> multiprocessing.pool.Pool:
+    methods = multiprocessing.get_all_start_methods()
+    ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    return ctx.Pool(workers)
+
+
+def default_workers() -> int:
+    """Cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+# -- arrays and file -------------------------------------------------------------------------
+
+def states_arrays(plan: Plan, sim: Simulated) -> dict[str, np.ndarray]:
+    """The states-file datasets of a simulated block of locations."""
+    p = plan.protocol
+    T = p.steps + 1
+    seq = (sim.locations[:, None] * p.directions + np.arange(p.directions)).ravel()
+    n_seq = len(seq)
+    step = np.tile(np.arange(T), n_seq)
+    force = (step * (p.fmax / p.steps)).astype(np.float32)
+    dirs = plan.directions[sim.locations].reshape(n_seq, 3)
+    force_vector = (np.repeat(dirs, T, 0) * (step * (p.fmax / p.steps))[:, None])
+    nodes = np.repeat(plan.nodes[sim.locations], p.directions * T)
+    base = np.arange(n_seq)[:, None] * T
+    single = base + np.arange(p.steps)
+    multi = base[:, :, None] + plan.multi[seq]
+    return {
+        "states/points": sim.points,
+        "states/tip": sim.points[np.arange(len(step)), nodes],
+        "states/force": force,
+        "states/force_vector": force_vector.astype(np.float32),
+        "states/step": step.astype(np.int32),
+        "states/sequence": np.repeat(seq, T).astype(np.int32),
+        "states/location": np.repeat(seq // p.directions, T).astype(np.int32),
+        "single/start": single.ravel().astype(np.int32),
+        "single/end": (single + 1).ravel().astype(np.int32),
+        "multi/start": multi[..., 0].ravel().astype(np.int32),
+        "multi/end": multi[..., 1].ravel().astype(np.int32),
+    }
+
+
+UNITS = {"states/points": "m", "states/tip": "m", "states/force": "N",
+         "states/force_vector": "N"}
+
+
+def write_states(path: str | Path, arrays: dict[str, np.ndarray], attrs: dict) -> None:
+    """Write a states file atomically and validate it against ``phantom.states``."""
+    with atomic_output(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["schema"] = STATES.name
+            f.attrs["schema_version"] = STATES.version
+            for key, value in attrs.items():
+                f.attrs[key] = value
+            for name, data in arrays.items():
+                if not np.isfinite(data).all():
+                    raise MSMError(f"refusing to write non-finite values in {name}")
+                ds = f.create_dataset(name, data=data)
+                if name in UNITS:
+                    ds.attrs["units"] = UNITS[name]
+        validate_h5(tmp, STATES)
+
+
+def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
+               shard: tuple[int, int] | None) -> dict:
+    """Root attributes of an MSM states file (shards add ``shard = "I/N"``)."""
+    attrs = {
+        "provenance": json.dumps(provenance),
+        "source": "msm",
+        "units_length": "m",
+        "units_force": "N",
+        "msm_params": json.dumps(params.as_dict()),
+        "protocol": json.dumps(asdict(plan.protocol)),
+        "solver": json.dumps({"method": "static equilibrium (preconditioned L-BFGS)",
+                              "tol_N": tol}),
+        "k_between": params.k_between,
+        "k_fixed": params.k_fixed,
+    }
+    if shard is not None:
+        attrs["shard"] = f"{shard[0]}/{shard[1]}"
+    return attrs
+
+
+def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
+             tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
+             command_params: dict | None = None
+             ) -> tuple[Simulated, dict[str, np.ndarray]]:
+    """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
+    simulation and the arrays written."""
+    plan = draw_plan(protocol, params.n * params.n)
+    locs = shard_locations(protocol.locations, shard)
+    sim = simulate(plan, params, locs, tol, workers)
+    prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
+                           schema=STATES.name, schema_version=STATES.version)
+    arrays = states_arrays(plan, sim)
+    write_states(out, arrays, file_attrs(plan, params, tol, prov, shard))
+    return sim, arrays
+
+
+# -- merge -----------------------------------------------------------------------------------
+
+SAME_ATTRS = ("msm_params", "protocol", "solver")
+
+
+def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.ndarray]:
+    """Join the shard files of one run into the states file a one-process run writes."""
+    if not paths:
+        raise BadInput(None, "--merge needs the shard files")
+    shards: dict[int, Path] = {}
+    first: dict | None = None
+    count = None
+    for path in map(Path, paths):
+        validate_h5(path, STATES)
+        with h5py.File(path, "r") as f:
+            attrs = {k: _text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
+        if attrs["source"] != "msm" or not attrs["shard"]:
+            raise BadInput(path, "not an MSM shard (no 'shard' attribute from simulate --shard)")
+        i, n = parse_shard(attrs["shard"])
+        if first is None:
+            first, count = attrs, n
+        for key in SAME_ATTRS:
+            if attrs[key] != first[key]:
+                raise BadInput(path, f"shard of a different run: its {key} differs")
+        if n != count:
+            raise BadInput(path, f"shard {i}/{n} does not belong to a run of {count} shards")
+        if i in shards:
+            raise BadInput(path, f"shard {i}/{n} given twice (also {shards[i]})")
+        shards[i] = path
+    missing = sorted(set(range(count)) - set(shards))
+    if missing:
+        raise BadInput(None, f"shards {missing} of {count} are missing")
+    parts = []
+    for i in range(count):
+        with h5py.File(shards[i], "r") as f:
+            parts.append({name: f[name][()] for name in _dataset_names(f)})
+    arrays = {}
+    offset = np.cumsum([0] + [len(p["states/step"]) for p in parts[:-1]])
+    for name in parts[0]:
+        chunks = [p[name] + (o if name.startswith(("single/", "multi/")) else 0)
+                  for p, o in zip(parts, offset, strict=True)]
+        arrays[name] = np.concatenate(chunks).astype(parts[0][name].dtype)
+    protocol = json.loads(first["protocol"])
+    prov = make_provenance("simulate --merge", {"shards": count, **protocol},
+                           inputs=[shards[i] for i in range(count)],
+                           schema=STATES.name, schema_version=STATES.version)
+    attrs = {k: v for k, v in _root_attrs(shards[0]).items()
+             if k not in ("shard", "provenance", "schema", "schema_version")}
+    attrs["provenance"] = json.dumps(prov)
+    write_states(out, arrays, attrs)
+    return arrays
+
+
+def _dataset_names(f: h5py.File) -> list[str]:
+    names: list[str] = []
+    f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+    return sorted(names)
+
+
+def _root_attrs(path: Path) -> dict:
+    with h5py.File(path, "r") as f:
+        return dict(f.attrs.items())
+
+
+def _text(v: object) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)

@@ -1,0 +1,256 @@
+"""The phantom twin's silicone block: a volumetric spring lattice with a strain-stiffening material.
+
+The 100 x 100 x 32 mm block is a cubic lattice of nodes (21 x 21 x 5 by default: 5 mm across,
+8 mm through the thickness) joined by springs along the edges, the face diagonals and the body
+diagonals of every cell (13 directions per node); its bottom layer is fixed to the table. It is
+volumetric on purpose: the network is pre-trained on a surface mass-spring model, and the twin
+must leave it a real gap to cross.
+
+Kinematics are linearised (a spring's strain is the relative displacement of its ends projected
+on its rest direction, over its rest length), and a spring of rest length ``L`` at strain ``e``
+stores ``kappa * L**2 * (e**2 / 2 + beta * e**4 / 4)``: stiff where it is strained, which makes
+the block stiffen as it is pressed deeper (depth about 4.5 mm at 0.5 N, 25.6 mm at 6.2 N and
+28.5 mm at 7.5 N for a normal press at the centre, like the paper's experimental phantom). The
+energy is convex, so every load has exactly one equilibrium and the depth along the load rises
+monotonically with the force (its derivative is ``f^T K^-1 f > 0``).
+
+A press is a dead load ``F * direction`` shared by a contact node (60 %) and its four neighbours
+on the top surface, the rounded tip. Equilibria are found by nonlinear conjugate gradients
+preconditioned with one sparse factorisation of the rest stiffness, shared by every solve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.interpolate import PchipInterpolator
+
+# the 13 lattice directions of a node: 3 edges, 6 face diagonals, 4 body diagonals
+_DIRECTIONS = ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
+               (0, 1, 1), (0, 1, -1), (1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1))
+_PATCH = ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1))   # the tip's contact node and neighbours
+
+
+@dataclass(frozen=True)
+class PhantomSpec:
+    """Geometry and material of the block (SI units)."""
+
+    size: tuple[float, float, float] = (0.100, 0.100, 0.032)   # x, y, thickness (m)
+    nodes: tuple[int, int, int] = (21, 21, 5)                  # lattice nodes along x, y, z
+    stiffness: float = 9.14          # kappa (N/m): a spring's stiffness at small strain
+    stiffening: float = 2.0          # beta: the quartic term of the spring energy
+    marker_grid: int = 5             # 5 x 5 surface markers ...
+    marker_pitch: float = 0.020      # ... 20 mm apart, centred on the block
+    marker_radius: float = 0.0015    # 3 mm spheres: centre 1.5 mm above the surface
+    tip_share: float = 0.6           # share of the load on the contact node (rest: neighbours)
+    tol: float = 1e-5                # N: largest nodal force left unbalanced at equilibrium
+
+
+@dataclass
+class LoadPath:
+    """Equilibria of one press at increasing force levels (phantom frame, metres)."""
+
+    forces: np.ndarray    # (K,) N, ascending, forces[0] == 0
+    direction: np.ndarray  # (3,) unit vector of the load
+    tip: np.ndarray       # (K, 3) the tip (load-weighted contact patch)
+    markers: np.ndarray   # (K, M, 3) marker centres
+    surface: np.ndarray   # (K, nx, ny, 3) top-layer nodes
+
+    def interpolate(self, force: np.ndarray, what: str = "tip") -> np.ndarray:
+        """``tip``, ``markers`` or ``surface`` at arbitrary forces (monotone cubic in force)."""
+        values = getattr(self, what)
+        f = np.clip(np.asarray(force, dtype=np.float64), self.forces[0], self.forces[-1])
+        flat = values.reshape(len(self.forces), -1)
+        out = PchipInterpolator(self.forces, flat, axis=0)(f)
+        return out.reshape(f.shape + values.shape[1:])
+
+
+class Phantom:
+    """The lattice, its rest stiffness factorisation and static solves of presses."""
+
+    def __init__(self, spec: PhantomSpec | None = None) -> None:
+        self.spec = spec or PhantomSpec()
+        nx, ny, nz = self.spec.nodes
+        lx, ly, lz = self.spec.size
+        axes = (np.linspace(-lx / 2, lx / 2, nx), np.linspace(-ly / 2, ly / 2, ny),
+                np.linspace(0.0, lz, nz))
+        self.rest = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        self.grid = np.arange(nx * ny * nz).reshape(nx, ny, nz)
+        self.springs = _springs(self.grid)
+        delta = self.rest[self.springs[:, 1]] - self.rest[self.springs[:, 0]]
+        length = np.linalg.norm(delta, axis=1)
+        free = self.rest[:, 2] > lz * 1e-9
+        self.dof = np.full((len(self.rest), 3), -1, dtype=np.int64)
+        self.dof[free] = np.arange(3 * int(free.sum())).reshape(-1, 3)
+        self.n_dof = 3 * int(free.sum())
+        # strain = A @ u: each spring's end displacements projected on its rest direction / L
+        ends = np.concatenate([self.dof[self.springs[:, 0]], self.dof[self.springs[:, 1]]], 1)
+        coef = np.concatenate([-delta, delta], axis=1) / (length**2)[:, None]
+        coef[ends < 0] = 0.0
+        ends = np.where(ends < 0, 0, ends)
+        rows = np.repeat(np.arange(len(length)), 6)
+        self._A = sp.csr_matrix((coef.ravel(), (rows, ends.ravel())),
+                                shape=(len(length), self.n_dof))
+        self._AT = self._A.T.tocsr()
+        self._energy = self.spec.stiffness * length**2     # kappa * L^2 per spring
+        self._rest_k = (self._AT @ sp.diags(self._energy) @ self._A).tocsc()
+        self.solves = 0
+        self.iterations = 0
+
+    # ------------------------------------------------------------------------- geometry
+
+    def top(self, i: int, j: int) -> int:
+        """Node id of top-surface grid point (i along x, j along y)."""
+        return int(self.grid[i, j, -1])
+
+    @cached_property
+    def marker_ij(self) -> np.ndarray:
+        """(M, 2) top-grid indices of the markers, row-major: marker ``5 * row + col``."""
+        s = self.spec
+        nx, ny, _ = s.nodes
+        pitch_nodes = s.marker_pitch / (s.size[0] / (nx - 1))
+        if abs(pitch_nodes - round(pitch_nodes)) > 1e-9:
+            raise ValueError("marker pitch must be a whole number of lattice spacings")
+        p = int(round(pitch_nodes))
+        first = (nx - 1 - p * (s.marker_grid - 1)) // 2
+        idx = first + p * np.arange(s.marker_grid)
+        return np.array([(i, j) for j in idx for i in idx])
+
+    def candidate_locations(self, margin: float = 0.020) -> np.ndarray:
+        """(C, 2) top nodes a press may target: at least two lattice spacings from every
+        marker (the tip's patch never touches one) and ``margin`` from the edges."""
+        nx, ny, _ = self.spec.nodes
+        pos = self.rest[self.grid[:, :, -1]][..., :2]
+        inner = ((np.abs(pos[..., 0]) <= self.spec.size[0] / 2 - margin)
+                 & (np.abs(pos[..., 1]) <= self.spec.size[1] / 2 - margin))
+        ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+        far = np.ones((nx, ny), dtype=bool)
+        for mi, mj in self.marker_ij:
+            far &= np.maximum(np.abs(ii - mi), np.abs(jj - mj)) >= 2
+        return np.argwhere(inner & far)
+
+    def contact_point(self, ij: tuple[int, int]) -> np.ndarray:
+        """Rest position of the tip at a location (the contact node)."""
+        return self.rest[self.top(*ij)].copy()
+
+    # ------------------------------------------------------------------------- statics
+
+    def load_path(self, ij: tuple[int, int], direction: np.ndarray,
+                  forces: np.ndarray) -> LoadPath:
+        """Equilibria under ``F * direction`` on the tip patch at ``ij``, for each force.
+
+        ``forces`` must ascend; 0 N (the rest state) is prepended when absent. Each solve
+        starts from the secant extrapolation of the two previous equilibria.
+        """
+        d = np.asarray(direction, dtype=np.float64)
+        d = d / np.linalg.norm(d)
+        levels = np.asarray(forces, dtype=np.float64)
+        if levels[0] != 0.0:
+            levels = np.concatenate([[0.0], levels])
+        if np.any(np.diff(levels) <= 0):
+            raise ValueError("force levels must ascend")
+        unit = np.zeros(self.n_dof)
+        for node, w in self._patch(ij):
+            unit[self.dof[node]] += w * d
+        states = [np.zeros(self.n_dof)]
+        for k in range(1, len(levels)):
+            if k >= 2:
+                slope = (states[-1] - states[-2]) / (levels[k - 1] - levels[k - 2])
+                guess = states[-1] + slope * (levels[k] - levels[k - 1])
+            else:
+                guess = states[-1]
+            states.append(self.solve(levels[k] * unit, guess))
+        obs = [self.observe(u, ij) for u in states]
+        return LoadPath(forces=levels, direction=d,
+                        tip=np.array([o[0] for o in obs]),
+                        markers=np.array([o[1] for o in obs]),
+                        surface=np.array([o[2] for o in obs]))
+
+    def solve(self, load: np.ndarray, guess: np.ndarray | None = None,
+              max_iter: int = 500) -> np.ndarray:
+        """Free-node displacements (n_dof,) in equilibrium with the nodal ``load``."""
+        A, AT, c, beta = self._A, self._AT, self._energy, self.spec.stiffening
+        u = np.zeros(self.n_dof) if guess is None else np.array(guess, dtype=np.float64)
+        e = A @ u
+        g = AT @ (c * e * (1.0 + beta * e * e)) - load
+        self.solves += 1
+        if np.abs(g).max() < self.spec.tol:
+            return u
+        z = self._rest_lu.solve(g)
+        p, gz = -z, float((g * z).sum())
+        for _ in range(max_iter):
+            de = A @ p
+            u_step = _line_search(e, de, c, beta, float((load * p).sum()))
+            u += u_step * p
+            e += u_step * de
+            self.iterations += 1
+            g_new = AT @ (c * e * (1.0 + beta * e * e)) - load
+            if np.abs(g_new).max() < self.spec.tol:
+                return u
+            z_new = self._rest_lu.solve(g_new)
+            gz_new = float((g_new * z_new).sum())
+            polak = max(0.0, (gz_new - float((g_new * z).sum())) / gz)   # Polak-Ribiere+
+            p = -z_new + polak * p
+            z, gz = z_new, gz_new
+        raise RuntimeError(f"phantom equilibrium not reached in {max_iter} iterations")
+
+    def observe(self, u: np.ndarray, ij: tuple[int, int] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Tip (3,) (NaN without ``ij``), marker centres (M, 3) and top surface (nx, ny, 3)."""
+        pos = self.rest.copy()
+        free = self.dof[:, 0] >= 0
+        pos[free] += u.reshape(-1, 3)
+        surface = pos[self.grid[:, :, -1]]
+        du = np.gradient(surface, axis=0)
+        dv = np.gradient(surface, axis=1)
+        normal = np.cross(du, dv)
+        normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+        mi, mj = self.marker_ij[:, 0], self.marker_ij[:, 1]
+        markers = surface[mi, mj] + self.spec.marker_radius * normal[mi, mj]
+        tip = np.full(3, np.nan)
+        if ij is not None:
+            tip = sum(w * pos[node] for node, w in self._patch(ij))
+        return tip, markers, surface
+
+    @cached_property
+    def _rest_lu(self) -> spla.SuperLU:
+        return spla.splu(self._rest_k, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                         options={"SymmetricMode": True})
+
+    def _patch(self, ij: tuple[int, int]) -> list[tuple[int, float]]:
+        share = (1.0 - self.spec.tip_share) / (len(_PATCH) - 1)
+        return [(self.top(ij[0] + a, ij[1] + b), self.spec.tip_share if (a, b) == (0, 0)
+                 else share) for a, b in _PATCH]
+
+
+def _springs(grid: np.ndarray) -> np.ndarray:
+    """(E, 2) node pairs joined along the 13 lattice directions."""
+    shape = grid.shape
+    pairs = []
+    for step in _DIRECTIONS:
+        src = tuple(slice(max(0, -s), n - max(0, s)) for s, n in zip(step, shape, strict=True))
+        dst = tuple(slice(max(0, s), n - max(0, -s)) for s, n in zip(step, shape, strict=True))
+        pairs.append(np.stack([grid[src].ravel(), grid[dst].ravel()], axis=1))
+    return np.concatenate(pairs)
+
+
+def _line_search(e: np.ndarray, de: np.ndarray, c: np.ndarray, beta: float,
+                 load_step: float) -> float:
+    """Exact step along a search direction: Newton on the energy's derivative (convex in a)."""
+    cde = c * de
+    cde2 = cde * de
+    a = 0.0
+    for _ in range(8):
+        en = e + a * de
+        e2 = en * en
+        slope = float((cde * en * (1.0 + beta * e2)).sum()) - load_step
+        curve = float((cde2 * (1.0 + 3.0 * beta * e2)).sum())
+        step = slope / curve
+        a -= step
+        if abs(step) <= 1e-6 * max(abs(a), 1e-12):
+            break
+    return a

@@ -1,0 +1,98 @@
+"""Format detection by content (a wrong extension does not fool it) and read_mocap dispatch."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+import scipy.io
+from mcap.writer import Writer
+
+from ingest.ati_cal import read_ati_cal, write_ati_cal
+from ingest.detect import detect_format, read_mocap, sniff
+from ingest.qtm_mat import write_mat73, write_qtm_mat
+from ingest.qtm_tsv import read_qtm_3d
+from pipeline.errors import BadInput
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
+
+
+@pytest.mark.parametrize(("path", "fmt"), [
+    ("qtm/qtm2010_3d_noheader_nan_gaps.tsv", "qtm_tsv_3d"),
+    ("qtm/qtm2026_3d_15markers_100hz.tsv", "qtm_tsv_3d"),
+    ("qtm/qtm2010_6d_3bodies.tsv", "qtm_tsv_6d"),
+    ("c3d/qualisys_55markers_200hz.c3d", "c3d"),
+    ("ati/nano17_FT14048_SI-50-0.5.cal", "ati_cal"),
+])
+def test_real_samples(path, fmt):
+    assert detect_format(REAL / path) == fmt
+
+
+def _make(tmp: Path) -> dict[str, Path]:
+    """One file of every other format, each under a misleading extension."""
+    df = pd.DataFrame({"time": [0.0, 0.001, 0.002], "G0": [0.1, 0.2, 0.3]})
+    files = {name: tmp / f"{name}.dat" for name in (
+        "force_csv", "force_tsv", "force_parquet", "force_mat", "force_mat73", "qtm_mat",
+        "qtm_mat73", "ati_cal", "mcap", "hdf5", "json")}
+    df.to_csv(files["force_csv"], index=False)
+    df.to_csv(files["force_tsv"], index=False, sep="\t")
+    df.to_parquet(files["force_parquet"])
+    scipy.io.savemat(files["force_mat"], {c: df[c].to_numpy() for c in df})
+    write_mat73(files["force_mat73"], {c: df[c].to_numpy() for c in df})
+    series = read_qtm_3d(REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv")
+    write_qtm_mat(files["qtm_mat"], series, version="7")
+    write_qtm_mat(files["qtm_mat73"], series, version="7.3")
+    write_ati_cal(files["ati_cal"], read_ati_cal(REAL / "ati" / "nano17_FT14048_SI-50-0.5.cal"))
+    with open(files["mcap"], "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    with h5py.File(files["hdf5"], "w") as f:
+        f["x"] = np.arange(3)
+    files["json"].write_text(json.dumps([{"train": [0], "val": [1]}]))
+    return files
+
+
+def test_generated_files_of_every_format(tmp_path):
+    files = _make(tmp_path)
+    expected = {"force_csv": "force_csv", "force_tsv": "force_csv",
+                "force_parquet": "force_parquet", "force_mat": "force_mat",
+                "force_mat73": "force_mat", "qtm_mat": "qtm_mat", "qtm_mat73": "qtm_mat",
+                "ati_cal": "ati_cal", "mcap": "mcap", "hdf5": "hdf5", "json": "json"}
+    assert {k: detect_format(p) for k, p in files.items()} == expected
+    assert sniff(files["qtm_mat73"]) == "mat73" and sniff(files["hdf5"]) == "hdf5"
+
+
+@pytest.mark.parametrize("content", [
+    b"", b"\x00\xff\x10binary junk" * 40, b"Dear colleague,\nplease find the data.\n",
+    b"<svg xmlns='http://www.w3.org/2000/svg'/>", b"1,2,3\n4,5,6\n",
+])
+def test_unknown_formats(tmp_path, content):
+    p = tmp_path / "x.tsv"
+    p.write_bytes(content)
+    with pytest.raises(BadInput, match="unknown format") as e:
+        detect_format(p)
+    assert str(p) in str(e.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(BadInput, match="no such file"):
+        detect_format(tmp_path / "nope.tsv")
+
+
+def test_read_mocap_dispatch(tmp_path):
+    tsv = read_mocap(REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv")
+    c3d = read_mocap(REAL / "c3d" / "qualisys_55markers_200hz.c3d")
+    assert (tsv.frames, c3d.frames) == (2000, 340)
+    files = _make(tmp_path)
+    for key in ("qtm_mat", "qtm_mat73"):
+        m = read_mocap(files[key])
+        assert m.labels == tsv.labels
+        assert np.allclose(m.positions, tsv.positions, equal_nan=True, atol=1e-12)
+    for path in (REAL / "qtm" / "qtm2010_6d_3bodies.tsv", files["force_csv"]):
+        with pytest.raises(BadInput, match="not a 3D marker export"):
+            read_mocap(path)

@@ -1,0 +1,270 @@
+"""`pipeline ingest`: a small session folder in the lab formats to MCAP and back, and bad input."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ingest.mcap_io import read_raw_mcap
+from pipeline.cli import cli
+from pipeline.provenance import sha256_file
+from pipeline.recording import rrd_entities, rrd_has_blueprint
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
+PHANTOM = [f"P{r}{c}" for r in range(5) for c in range(5)]
+INDENTER = ["Ind 1", "Ind 2", "Ind 3", "Ind 4"]          # names with spaces, as QTM allows
+LABELS = PHANTOM + INDENTER + ["stray"]
+FRAMES, RATE = 120, 500
+FORCE_SAMPLES = 250
+GAPS = {(10, 3): "NaN", (11, 3): "NaN", (50, 26): "", (51, 26): "", (80, 7): "null"}
+
+
+def mocap_mm(rng: np.random.Generator) -> np.ndarray:
+    """Marker positions (frames, markers, 3) in mm, three decimals, NaN in the gaps."""
+    grid = np.array([[20.0 * (i % 5), 20.0 * (i // 5), 32.0] for i in range(25)])
+    base = np.vstack([grid, [[40, 40, 80], [60, 40, 80], [40, 60, 85], [50, 50, 110]],
+                      [[-100, 0, 0]]])
+    pos = base[None] + rng.normal(0, 0.2, (FRAMES, len(LABELS), 3)).cumsum(axis=0)
+    pos = np.round(pos, 3)
+    for f, m in GAPS:
+        pos[f, m] = np.nan
+    return pos
+
+
+def write_tsv(path: Path, pos: np.ndarray, labels: list[str] = LABELS,
+              frames: int | None = None) -> None:
+    """A QTM 2026-style 3D export: header keys, an EVENT, a Frame/Time column line."""
+    lines = [f"NO_OF_FRAMES\t{frames or pos.shape[0]}", "NO_OF_CAMERAS\t8",
+             f"NO_OF_MARKERS\t{len(labels)}", f"FREQUENCY\t{RATE}", "NO_OF_ANALOG\t0",
+             "ANALOG_FREQUENCY\t0", "DESCRIPTION\t--",
+             "TIME_STAMP\t2026-11-21, 10:00:00.000\t1234.5", "DATA_INCLUDED\t3D",
+             "EVENT\tTrigger\t21\t0.040", "MARKER_NAMES\t" + "\t".join(labels),
+             "TRAJECTORY_TYPES\t" + "\t".join(["Measured"] * len(labels)),
+             "Frame\tTime\t" + "\t".join(f"{n} {a}" for n in labels for a in "XYZ") + "\t"]
+    for f in range(pos.shape[0]):
+        cells = [str(f + 1), f"{f / RATE:.5f}"]
+        for m in range(len(labels)):
+            gap = GAPS.get((f, m))
+            cells += [gap] * 3 if gap is not None else [f"{v:.3f}" for v in pos[f, m]]
+        lines.append("\t".join(cells))
+    path.write_text("\r\n".join(lines) + "\r\n")
+
+
+def write_force(path: Path, rng: np.random.Generator) -> np.ndarray:
+    """A 1 kHz gauge log: time (s), six volts, a trigger column; returns the values."""
+    values = np.round(rng.normal(0, 0.5, (FORCE_SAMPLES, 6)), 6)
+    trigger = (np.arange(FORCE_SAMPLES) % 100 < 5).astype(float)
+    rows = ["time,G0,G1,G2,G3,G4,G5,trigger"]
+    for i in range(FORCE_SAMPLES):
+        rows.append(",".join([f"{i / 1000:.3f}", *(f"{v:.6f}" for v in values[i]),
+                              f"{trigger[i]:g}"]))
+    path.write_text("\n".join(rows) + "\n")
+    return values
+
+
+SESSION_TOML = """schema = "phantom.session"
+schema_version = "1.0"
+name = "tiny-session"
+
+[mocap]
+file = "trial_3d.tsv"
+phantom_markers = [{phantom}]
+indenter_markers = [{indenter}]
+trigger_event = "Trigger"
+
+[force]
+file = "force.csv"
+time_column = "time"
+time_unit = "s"
+kind = "gauge"
+channels = ["G0", "G1", "G2", "G3", "G4", "G5"]
+units = "V"
+calibration = "FT14048.cal"
+trigger_column = "trigger"
+"""
+
+
+def write_toml(folder: Path, phantom: list[str] = PHANTOM,
+               indenter: list[str] = INDENTER) -> None:
+    quote = lambda names: ", ".join(f'"{n}"' for n in names)  # noqa: E731
+    (folder / "session.toml").write_text(
+        SESSION_TOML.format(phantom=quote(phantom), indenter=quote(indenter)))
+
+
+@pytest.fixture
+def session(tmp_path) -> tuple[Path, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    folder = tmp_path / "session"
+    folder.mkdir()
+    pos = mocap_mm(rng)
+    write_tsv(folder / "trial_3d.tsv", pos)
+    values = write_force(folder / "force.csv", rng)
+    shutil.copy(REAL / "ati" / "nano17_FT14048_SI-50-0.5.cal", folder / "FT14048.cal")
+    write_toml(folder)
+    return folder, pos, values
+
+
+def folder_hash(folder: Path) -> str:
+    h = hashlib.sha256()
+    for p in sorted(folder.rglob("*")):
+        h.update(p.name.encode() + (p.read_bytes() if p.is_file() else b""))
+    return h.hexdigest()
+
+
+def run(args: list[str]):
+    return CliRunner().invoke(cli, ["-q", *args])
+
+
+def test_ingest_round_trip(session, tmp_path):
+    from ingest.ati_cal import read_ati_cal
+    from ingest.detect import read_mocap
+
+    folder, pos_mm, values = session
+    before = folder_hash(folder)
+    out, rrd = tmp_path / "out" / "tiny.mcap", tmp_path / "out" / "tiny.rrd"
+    res = run(["ingest", str(folder), "--out", str(out), "--rrd", str(rrd)])
+    assert res.exit_code == 0, res.output + res.stderr
+    assert folder_hash(folder) == before
+    s = read_raw_mcap(out)
+    m = s.markers
+    assert m.labels == LABELS and m.rate_hz == RATE and m.frames == FRAMES
+    assert s.phantom_markers == PHANTOM and s.indenter_markers == INDENTER
+    # positions within 1e-4 mm of the file, NaN exactly in the gaps
+    np.testing.assert_allclose(m.positions * 1000.0, pos_mm, rtol=0, atol=1e-4)
+    assert np.array_equal(np.isnan(m.positions).any(axis=2), np.isnan(pos_mm).any(axis=2))
+    assert m.missing_samples() == len(GAPS)
+    np.testing.assert_allclose(m.time_ns, np.arange(FRAMES) * 2_000_000, rtol=0, atol=1_000)
+    direct = read_mocap(folder / "trial_3d.tsv")        # identical to what the reader gives
+    assert np.array_equal(m.time_ns, direct.time_ns)
+    assert np.array_equal(m.positions, direct.positions, equal_nan=True)
+    assert [e for e, _ in m.events] == ["Trigger"] and s.trigger_event == "Trigger"
+    f = s.force
+    assert f.channels == [f"G{i}" for i in range(6)] and f.kind == "gauge" and f.units == ["V"] * 6
+    np.testing.assert_allclose(f.values, values, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(f.time_ns, np.arange(FORCE_SAMPLES) * 1_000_000, rtol=0, atol=1)
+    assert f.trigger is not None and f.trigger.sum() == 15
+    assert np.array_equal(s.calibration.matrix, read_ati_cal(folder / "FT14048.cal").matrix)
+    assert s.provenance["stage"] == "ingest"
+    assert sorted(Path(p).name for p in s.provenance["inputs"]) == \
+        ["FT14048.cal", "force.csv", "session.toml", "trial_3d.tsv"]
+    assert all(sha256_file(p) == h for p, h in s.provenance["inputs"].items())
+    assert "tiny.mcap" in res.output
+    ents = rrd_entities(rrd)
+    for name in PHANTOM:
+        assert "Points3D" in ents[f"/mocap/phantom/{name}"]
+    assert "Points3D" in ents["/mocap/indenter/Ind\\ 1"]
+    assert "Points3D" in ents["/mocap/other/stray"]
+    for e, kind in [("/force/raw", "Scalars"), ("/force/trigger", "Scalars"),
+                    ("/quality/missing_markers", "Scalars"), ("/trails/phantom", "LineStrips3D"),
+                    ("/trails/indenter", "LineStrips3D"), ("/mocap/events", "TextLog")]:
+        assert kind in ents[e], e
+    assert rrd_has_blueprint(rrd)
+
+
+def test_default_rrd_and_no_rrd(session, tmp_path):
+    folder, _, _ = session
+    res = run(["ingest", str(folder), "--out", str(tmp_path / "a.mcap")])
+    assert res.exit_code == 0, res.stderr
+    assert (tmp_path / "a.rrd").is_file()
+    res = run(["ingest", str(folder), "--out", str(tmp_path / "b.mcap"), "--no-rrd"])
+    assert res.exit_code == 0 and (tmp_path / "b.mcap").is_file()
+    assert not (tmp_path / "b.rrd").exists()
+
+
+def _absent_marker(folder: Path) -> str:
+    write_toml(folder, phantom=[*PHANTOM[:24], "P99"])
+    return "trial_3d.tsv"
+
+
+def _duplicate_marker(folder: Path) -> str:
+    rng = np.random.default_rng(1)
+    write_tsv(folder / "trial_3d.tsv", mocap_mm(rng), labels=[*LABELS[:-1], "P00"])
+    return "trial_3d.tsv"
+
+
+def _unknown_format(folder: Path) -> str:
+    (folder / "trial_3d.tsv").write_bytes(b"\x00\x01garbage that is no lab format\n" * 20)
+    return "trial_3d.tsv"
+
+
+def _cal_not_6x6(folder: Path) -> str:
+    cal = folder / "FT14048.cal"
+    lines = cal.read_text().splitlines()
+    cal.write_text("\n".join(x for x in lines if 'UserAxis Name="Tz"' not in x))
+    return "FT14048.cal"
+
+
+def _force_missing_column(folder: Path) -> str:
+    path = folder / "force.csv"
+    rows = [r.rsplit(",", 2)[0] for r in path.read_text().splitlines()]   # drop G5, trigger
+    path.write_text("\n".join(rows) + "\n")
+    return "force.csv"
+
+
+def _force_text_in_numbers(folder: Path) -> str:
+    path = folder / "force.csv"
+    rows = path.read_text().splitlines()
+    cells = rows[40].split(",")
+    cells[2] = "abc"
+    rows[40] = ",".join(cells)
+    path.write_text("\n".join(rows) + "\n")
+    return "force.csv"
+
+
+def _force_time_not_increasing(folder: Path) -> str:
+    path = folder / "force.csv"
+    rows = path.read_text().splitlines()
+    rows[60], rows[61] = rows[61], rows[60]
+    path.write_text("\n".join(rows) + "\n")
+    return "force.csv"
+
+
+def _truncated_tsv(folder: Path) -> str:
+    path = folder / "trial_3d.tsv"
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * 0.6)])       # cut in the middle of a line
+    return "trial_3d.tsv"
+
+
+def _duplicate_in_toml(folder: Path) -> str:
+    write_toml(folder, phantom=[*PHANTOM, "P00"])
+    return "session.toml"
+
+
+BAD = [_absent_marker, _duplicate_marker, _unknown_format, _cal_not_6x6, _force_missing_column,
+       _force_text_in_numbers, _force_time_not_increasing, _truncated_tsv, _duplicate_in_toml]
+
+
+@pytest.mark.parametrize("spoil", BAD, ids=[f.__name__.strip("_") for f in BAD])
+def test_bad_input(session, tmp_path, spoil):
+    folder, _, _ = session
+    culprit = spoil(folder)
+    before = folder_hash(folder)
+    out = tmp_path / "out" / "x.mcap"
+    res = run(["ingest", str(folder), "--out", str(out)])
+    assert res.exit_code == 2, (res.output, res.stderr, res.exception)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and culprit in lines[0], lines
+    assert "Traceback" not in res.stderr
+    assert folder_hash(folder) == before
+    assert not out.parent.exists() or not list(out.parent.iterdir())
+
+
+def test_absent_markers_are_all_listed(session, tmp_path):
+    folder, _, _ = session
+    write_toml(folder, phantom=[*PHANTOM[:23], "P98", "P99"])
+    res = run(["ingest", str(folder), "--out", str(tmp_path / "x.mcap")])
+    assert res.exit_code == 2 and "P98" in res.stderr and "P99" in res.stderr
+
+
+def test_output_over_an_input_is_refused(session):
+    folder, _, _ = session
+    before = folder_hash(folder)
+    res = run(["ingest", str(folder), "--out", str(folder / "force.csv"), "--no-rrd"])
+    assert res.exit_code == 2 and "overwrite an input" in res.stderr
+    assert folder_hash(folder) == before

@@ -1,0 +1,191 @@
+"""`pipeline inspect`: summaries of the real lab samples and of the files the pipeline writes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from pipeline.cli import cli
+from pipeline.inspect import KEYS, inspect_file
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
+QTM2010 = REAL / "qtm" / "qtm2010_3d_noheader_nan_gaps.tsv"
+QTM2026 = REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv"
+QTM6D = REAL / "qtm" / "qtm2010_6d_3bodies.tsv"
+C3D = REAL / "c3d" / "qualisys_55markers_200hz.c3d"
+CAL = REAL / "ati" / "nano17_FT14048_SI-50-0.5.cal"
+
+
+def inspect_json(path: Path) -> dict:
+    res = CliRunner().invoke(cli, ["inspect", str(path), "--json"])
+    assert res.exit_code == 0, res.stderr
+    summary = json.loads(res.output)
+    assert tuple(summary) == KEYS                     # the documented keys, always all there
+    return summary
+
+
+@pytest.mark.parametrize("path,fmt,frames,rate,names,missing,first", [
+    (QTM2010, "qtm_tsv_3d", 904, 256.0, 14, 7, "Hip"),
+    (QTM2026, "qtm_tsv_3d", 2000, 100.0, 15, 0, "New 0000"),
+    (C3D, "c3d", 340, 200.0, 55, None, None),
+])
+def test_marker_exports(path, fmt, frames, rate, names, missing, first):
+    s = inspect_json(path)
+    assert s["format"] == fmt and s["frames"] == frames and s["rate_hz"] == rate
+    assert len(s["markers"]) == names and len(set(s["markers"])) == names
+    assert s["duration_s"] == pytest.approx(frames / rate)
+    assert s["units"]["position"] == "mm"
+    if first:
+        assert s["markers"][0] == first
+    if missing is not None:
+        assert s["missing_samples"] == missing
+    assert s["schema"] is None and s["provenance"] is None
+
+
+def test_qtm2010_names_with_spaces_and_dashes():
+    s = inspect_file(QTM2010)
+    assert "Knee Hinge" in s["markers"] and "Lower Leg IMU - 3" in s["markers"]
+
+
+def test_c3d_missing_samples_match_ezc3d():
+    import ezc3d
+
+    c = ezc3d.c3d(str(C3D))
+    pts = c["data"]["points"][:3]
+    res = c["data"]["meta_points"]["residuals"][0]
+    expected = int(((res < 0) | np.isnan(pts).any(axis=0)).sum())
+    assert inspect_file(C3D)["missing_samples"] == expected
+
+
+def test_6d_export():
+    s = inspect_json(QTM6D)
+    assert s["format"] == "qtm_tsv_6d" and s["frames"] == 904 and s["rate_hz"] == 256.0
+    assert s["bodies"] == ["Upper Leg IMU", "Foot IMU", "Lower Leg IMU"]
+    # lost body = residual -1: count independently from the text (16 values + a separator)
+    lost = 0
+    for line in QTM6D.read_text().splitlines()[11:]:
+        cells = line.split("\t")
+        lost += sum(float(cells[b * 17 + 6]) < 0 for b in range(3))
+    assert s["missing_samples"] == lost > 0
+
+
+def test_ati_calibration():
+    s = inspect_json(CAL)
+    assert s["format"] == "ati_cal" and s["frames"] is None
+    c = s["calibration"]
+    assert (c["serial"], c["body_style"], c["calibration"]) == ("FT14048", "Nano17", "SI-50-0.5")
+    assert c["matrix_shape"] == [6, 6]
+    assert c["matrix"][0] == pytest.approx([-0.00280, -0.06682, 0.31523, -6.83852, -0.23752,
+                                            6.63100])
+    assert s["units"] == {"force": "N", "torque": "N-mm"}
+
+
+def test_force_log(tmp_path):
+    path = tmp_path / "force.csv"
+    t = np.arange(3000) / 1000
+    rows = ["time,G0,G1,G2,G3,G4,G5"] + [",".join([f"{x:.3f}"] + ["0.125"] * 6) for x in t]
+    path.write_text("\n".join(rows) + "\n")
+    s = inspect_json(path)
+    assert s["format"] == "force_csv" and s["frames"] == 3000
+    assert s["rate_hz"] == pytest.approx(1000.0) and s["duration_s"] == pytest.approx(3.0)
+    assert s["channels"] == [f"G{i}" for i in range(6)] and s["missing_samples"] == 0
+
+
+@pytest.fixture(scope="module")
+def ingested(tmp_path_factory) -> tuple[Path, Path]:
+    """`pipeline ingest` of a folder made of the real 2026 TSV, the real .cal and a force CSV."""
+    folder = tmp_path_factory.mktemp("session")
+    shutil.copy(QTM2026, folder / "trial.tsv")
+    shutil.copy(CAL, folder / "ft.cal")
+    t = np.arange(20_000) / 1000
+    rows = ["time,a,b,c,d,e,f"] + [",".join([f"{x:.3f}"] + [f"{np.sin(x + k):.5f}"
+                                                          for k in range(6)]) for x in t]
+    (folder / "force.csv").write_text("\n".join(rows) + "\n")
+    names = [f"New {i:04d}" for i in (0, *range(2, 16))]
+    (folder / "session.toml").write_text(
+        'name = "real-2026"\n[mocap]\nfile = "trial.tsv"\n'
+        f"phantom_markers = {json.dumps(names[:10])}\nindenter_markers = "
+        f"{json.dumps(names[10:14])}\n[force]\nfile = \"force.csv\"\n"
+        'channels = ["a", "b", "c", "d", "e", "f"]\ncalibration = "ft.cal"\n')
+    out = folder.parent / "real.mcap"
+    res = CliRunner().invoke(cli, ["-q", "ingest", str(folder), "--out", str(out)])
+    assert res.exit_code == 0, res.stderr
+    return out, out.with_suffix(".rrd")
+
+
+def test_raw_mcap(ingested):
+    s = inspect_json(ingested[0])
+    assert s["format"] == "mcap" and s["schema"] == "phantom.raw_mcap"
+    assert s["schema_version"] == "1.0"
+    assert s["frames"] == 2000 and s["rate_hz"] == 100.0 and len(s["markers"]) == 15
+    assert s["missing_samples"] == 0 and s["duration_s"] == pytest.approx(20.0)
+    assert s["channels"] == ["a", "b", "c", "d", "e", "f"]
+    assert s["streams"]["/force/raw"]["frames"] == 20_000
+    assert s["streams"]["/mocap/markers"]["names"] == s["markers"]
+    assert s["provenance"]["stage"] == "ingest"
+    assert {Path(p).name for p in s["provenance"]["inputs"]} == \
+        {"session.toml", "trial.tsv", "force.csv", "ft.cal"}
+    assert s["calibration"]["serial"] == "FT14048"
+    text = CliRunner().invoke(cli, ["inspect", str(ingested[0])]).output
+    assert "frames:      2000 at 100 Hz" in text and "phantom.raw_mcap 1.0" in text
+    assert "provenance:  stage ingest" in text
+
+
+def test_recording(ingested):
+    s = inspect_json(ingested[1])
+    assert s["format"] == "rrd" and s["details"]["blueprint"] is True
+    assert "Scalars" in s["entities"]["/force/raw"]
+    assert "Points3D" in s["entities"]["/mocap/phantom/New\\ 0000"]
+
+
+def test_hdf5_generic(tmp_path):
+    path = tmp_path / "x.h5"
+    pts = np.zeros((100, 26, 3))
+    pts[[3, 3, 50], [0, 1, 25]] = np.nan
+    prov = {"stage": "sync", "inputs": {"a.mcap": "ab" * 32}}
+    with h5py.File(path, "w") as f:
+        f.attrs.update(schema="phantom.synced", schema_version="1.0",
+                       provenance=json.dumps(prov))
+        f["time_ns"] = np.arange(100, dtype=np.int64) * 2_000_000
+        f["time_ns"].attrs["units"] = "ns"
+        f["points"] = pts
+        f["points"].attrs["units"] = "m"
+        f.create_group("force")["magnitude"] = np.ones(100)
+    s = inspect_json(path)
+    assert s["format"] == "hdf5" and s["schema"] == "phantom.synced"
+    assert s["schema_version"] == "1.0" and s["provenance"] == prov
+    assert s["frames"] == 100 and s["rate_hz"] == pytest.approx(500.0)
+    assert s["missing_samples"] == 3
+    assert s["datasets"]["points"] == {"shape": [100, 26, 3], "dtype": "float64", "units": "m"}
+    assert s["datasets"]["force/magnitude"]["units"] is None
+
+
+def test_json_manifest(tmp_path):
+    path = tmp_path / "splits.json"
+    folds = [{"train": [1, 2, 3], "val": [4]}, {"train": [4, 1], "val": [2, 3]}]
+    path.write_text(json.dumps(folds))
+    s = inspect_json(path)
+    assert s["format"] == "json"
+    assert s["details"]["folds"] == [{"train": 3, "val": 1}, {"train": 2, "val": 2}]
+
+
+def test_unknown_file_is_bad_input(tmp_path):
+    path = tmp_path / "blob.bin"
+    path.write_bytes(bytes(range(256)) * 4)
+    res = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert res.exit_code == 2
+    assert res.stderr.strip().splitlines() == [f"error: {path}: unknown format"]
+
+
+def test_text_summary_is_readable():
+    res = CliRunner().invoke(cli, ["inspect", str(QTM2010)])
+    assert res.exit_code == 0
+    assert "format:      qtm_tsv_3d" in res.output
+    assert "frames:      904 at 256 Hz (3.531 s)" in res.output
+    assert "missing:     7 samples" in res.output

@@ -1,0 +1,51 @@
+"""Press segmentation and location/repeat numbering on synthetic force and tip tracks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.presses import assign_locations, segment_presses
+
+RATE = 500.0
+
+
+def _force(onsets: list[float], lengths: list[float], seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 30, 1 / RATE)
+    f = rng.normal(0, 0.01, len(t))
+    for on, length in zip(onsets, lengths, strict=True):
+        s = (t - on) / length
+        inside = (s >= 0) & (s <= 1)
+        f[inside] += 6.0 * np.sin(np.pi * s[inside]) ** 2
+    return f
+
+
+def test_presses_found_from_onset_to_release() -> None:
+    onsets, lengths = [2.0, 8.5, 15.0], [2.0, 3.0, 2.5]
+    presses = segment_presses(_force(onsets, lengths), RATE, contact_n=0.05)
+    assert len(presses) == 3
+    for p, on, length in zip(presses, onsets, lengths, strict=True):
+        # 6 sin^2(pi s) passes 0.05 N at s = asin(sqrt(0.05/6))/pi ~ 0.029
+        lead = np.arcsin(np.sqrt(0.05 / 6)) / np.pi * length
+        assert abs(p.onset / RATE - (on + lead)) < 0.02
+        assert abs(p.release / RATE - (on + length - lead)) < 0.02
+        assert abs(p.peak / RATE - (on + length / 2)) < 0.05
+
+
+def test_noise_spikes_and_short_touches_are_not_presses() -> None:
+    f = _force([5.0, 12.0], [0.1, 2.0])            # a 0.1 s touch, then a press
+    f[3000] = 1.0                                   # one spike
+    f[np.arange(10)] = np.nan                       # unknown frames count as unloaded
+    presses = segment_presses(f, RATE, min_duration_s=0.2)
+    assert len(presses) == 1 and abs(presses[0].peak / RATE - 13.0) < 0.05
+
+
+def test_locations_and_repeats_in_press_order() -> None:
+    centres = np.array([[0, 0], [0.03, 0], [0.001, 0.002], [0.031, -0.001], [0.0, 0.03],
+                        [-0.002, 0.0]])
+    loc, rep, means = assign_locations(centres, radius=0.01)
+    np.testing.assert_array_equal(loc, [0, 1, 0, 1, 2, 0])
+    np.testing.assert_array_equal(rep, [0, 0, 1, 1, 0, 2])
+    np.testing.assert_allclose(means[0], centres[[0, 2, 5]].mean(axis=0))
+    loc, rep, _ = assign_locations(np.array([[np.nan, 0.0], [0.0, 0.0]]))
+    np.testing.assert_array_equal(loc, [-1, 0])

@@ -1,0 +1,204 @@
+"""`pipeline sync` on a small analytic session written straight to MCAP: output layout,
+recording, both clock paths, and every bad input (exit 2, one line, nothing written)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
+
+from data_schema.hdf5 import validate_h5
+from data_schema.synced import SYNCED
+from ingest.mcap_io import write_raw_mcap
+from ingest.series import ForceSeries, MarkerSeries, RawSession
+from pipeline.cli import cli
+from pipeline.provenance import make_provenance
+from pipeline.recording import rrd_entities, rrd_has_blueprint
+
+RATE, LOG_RATE = 500.0, 1000.0
+OFFSET, DRIFT = 0.8, 20.0                       # logger clock: OFFSET + (1 + DRIFT ppm) t_m
+CLUSTER = np.array([[0, 0, 0.10], [0.045, 0, 0.10], [0, 0.03, 0.10], [0.012, 0.015, 0.138]])
+PHANTOM = [f"P{i:02d}" for i in range(25)]
+INDENTER = ["I1", "I2", "I3", "I4"]
+
+
+def _session(seed: int = 0, presses: int = 4, trigger: bool = True) -> RawSession:
+    """Presses alternating between two places, tip in the body origin, force along z."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int((4 * presses + 3) * RATE)) / RATE
+    gx, gy = np.meshgrid(np.linspace(-0.04, 0.04, 5), np.linspace(-0.04, 0.04, 5))
+    phantom = np.stack([gx.ravel(), gy.ravel(), np.zeros(25)], axis=1)
+    tip = np.zeros((len(t), 3))
+    tip[:, 2] = 0.03
+    for k in range(presses):
+        s = (t - (1.5 + 4 * k)) / 2.0
+        inside = (s >= 0) & (s <= 1)
+        tip[inside, 2] = 0.03 - 0.036 * np.sin(np.pi * s[inside]) ** 2
+        tip[(t >= 1 + 4 * k) & (t < 4.5 + 4 * k), 0] = 0.02 * (k % 2)
+    rot = Rotation.from_euler("xy", [5, 3], degrees=True).as_matrix()
+    pos = np.zeros((len(t), 29, 3))
+    pos[:, :25] = phantom
+    pos[:, 25:] = (CLUSTER @ rot.T)[None] + tip[:, None]
+    pos += rng.normal(0, 0.1e-3, pos.shape)
+    pulses = np.cumsum(rng.uniform(0.7, 1.3, int(t[-1])))
+    pulses = pulses[pulses < t[-1]]
+    t_ns = np.round(t * 1e9).astype(np.int64)
+    markers = MarkerSeries("trial.tsv", t_ns, PHANTOM + INDENTER, pos, RATE,
+                           events=[("Trigger", int(p * 1e9)) for p in pulses])
+    tilt = np.column_stack([rng.uniform(-25, 25, 1500), rng.uniform(-25, 25, 1500),
+                            np.zeros(1500)])
+    rots = Rotation.from_euler("xyz", tilt, degrees=True).as_matrix()
+    piv = np.einsum("kij,mj->kmi", rots, CLUSTER) + np.array([0.1, 0.1, 0.0])
+    piv += rng.normal(0, 0.1e-3, piv.shape)
+    pivot = MarkerSeries("pivot.tsv", np.arange(1500, dtype=np.int64) * 2_000_000, INDENTER,
+                         piv, RATE)
+    t_f = np.arange(0, t[-1] + 1.0, 1 / LOG_RATE)
+    depth = np.interp((t_f - OFFSET) / (1 + DRIFT * 1e-6), t, -tip[:, 2], left=-1, right=-1)
+    wrench = np.zeros((len(t_f), 6))
+    wrench[:, 2] = 7.0 * (np.clip(depth, 0, None) / 0.006) ** 1.5
+    wrench += rng.normal(0, 0.005, wrench.shape) + np.array([0.1, -0.2, 0.3, 0.01, 0, 0])
+    ttl = np.zeros(len(t_f))
+    for p in pulses:
+        at = OFFSET + (1 + DRIFT * 1e-6) * p
+        ttl[(t_f >= at) & (t_f < at + 0.01)] = 5.0
+    force = ForceSeries("force.csv", np.round(t_f * 1e9).astype(np.int64),
+                        ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"], wrench,
+                        ["N"] * 3 + ["N*m"] * 3, "wrench", LOG_RATE,
+                        trigger=ttl if trigger else None)
+    return RawSession("analytic", markers, force, PHANTOM, INDENTER, pivot=pivot,
+                      trigger_event="Trigger" if trigger else None,
+                      provenance=make_provenance("test", {"seed": seed}, [],
+                                                 "phantom.raw_mcap", "1.0"))
+
+
+def _mcap(tmp_path: Path, session: RawSession, name: str = "s.mcap") -> Path:
+    path = tmp_path / name
+    write_raw_mcap(path, session, {})
+    return path
+
+
+def _sync(mcap: Path, out: Path, *extra: str):
+    return CliRunner().invoke(cli, ["-q", "sync", str(mcap), "--out", str(out), *extra])
+
+
+def test_sync_writes_valid_presses_and_recording(tmp_path: Path) -> None:
+    mcap = _mcap(tmp_path, _session())
+    out = tmp_path / "s.h5"
+    res = _sync(mcap, out)
+    assert res.exit_code == 0, res.output
+    validate_h5(out, SYNCED)
+    with h5py.File(out) as h:
+        assert len(h["presses"]) == 4
+        assert [h[f"presses/{k:03d}"].attrs["location"] for k in range(4)] == [0, 1, 0, 1]
+        assert [h[f"presses/{k:03d}"].attrs["repeat"] for k in range(4)] == [0, 0, 1, 1]
+        cal = h["calibration"].attrs
+        assert cal["clock_method"] == "trigger"
+        assert abs(cal["clock_offset_s"] - OFFSET) < 0.5e-3
+        assert abs(cal["clock_drift_ppm"] - DRIFT) < 4 * cal["clock_drift_sd_ppm"] + 5
+        g = h["presses/001"]
+        i = g.attrs["peak_index"]
+        # depth 6 mm at peak = 7 N; the bias (0.1, -0.2, 0.3) N is tared away
+        assert abs(g["force_magnitude"][i] - 7.0) < 0.1
+        assert abs(g["depth"][i] - 0.006) < 0.5e-3
+        assert g["force_magnitude"][0] < 0.05                  # unloaded margin kept
+        assert list(h["point_names"].asstr()[-2:]) == ["P24", "tip"]
+        prov = json.loads(h.attrs["provenance"])
+        assert prov["stage"] == "sync" and str(mcap) in prov["inputs"]
+    rrd = tmp_path / "s.rrd"
+    ents = rrd_entities(rrd)
+    for e in ("/before/force_magnitude", "/after/force_magnitude", "/after/depth_mm",
+              "/force_vs_depth/before", "/force_vs_depth/after", "/scene/tip",
+              "/scene/cluster", "/scene/phantom", "/quality/filled", "/presses"):
+        assert e in ents, e
+    assert "Points3D" in ents["/scene/tip"] and "Points2D" in ents["/force_vs_depth/after"]
+    assert rrd_has_blueprint(rrd)
+
+
+def test_data_clock_agrees_with_trigger(tmp_path: Path) -> None:
+    mcap = _mcap(tmp_path, _session(seed=1))
+    fits = {}
+    for method in ("trigger", "data"):
+        out = tmp_path / f"{method}.h5"
+        res = _sync(mcap, out, "--clock", method, "--no-rrd")
+        assert res.exit_code == 0, res.output
+        with h5py.File(out) as h:
+            fits[method] = dict(h["calibration"].attrs)
+        assert not (tmp_path / f"{method}.rrd").exists()
+    assert fits["data"]["clock_method"] == "data"
+    assert abs(fits["data"]["clock_offset_s"] - OFFSET) < 1e-3
+    assert abs(fits["trigger"]["clock_offset_s"] - OFFSET) < 0.5e-3
+
+
+def _bad(tmp_path: Path, session: RawSession, pattern: str, *extra: str) -> None:
+    mcap = _mcap(tmp_path, session)
+    before = mcap.read_bytes()
+    out = tmp_path / "bad.h5"
+    res = _sync(mcap, out, *extra)
+    assert res.exit_code == 2, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.output
+    assert pattern in lines[0], lines[0]
+    assert not out.exists() and not (tmp_path / "bad.rrd").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.mcap"]
+    assert mcap.read_bytes() == before
+
+
+def test_cluster_hidden_through_a_press(tmp_path: Path) -> None:
+    s = _session()
+    t = s.markers.time_ns * 1e-9
+    hide = (t > 5.0) & (t < 8.0)                          # the whole second press
+    s.markers.positions[np.ix_(hide, [25, 26])] = np.nan
+    _bad(tmp_path, s, "trial.tsv:frames")
+
+
+def test_no_unloaded_start_to_tare(tmp_path: Path) -> None:
+    s = _session()
+    f = s.force
+    start = np.searchsorted(f.time_ns, int((OFFSET + 2.5) * 1e9))   # at the first peak
+    f.time_ns, f.values, f.trigger = f.time_ns[start:], f.values[start:], f.trigger[start:]
+    _bad(tmp_path, s, "force.csv:sample 0: ")
+
+
+def test_log_starting_under_a_steady_load(tmp_path: Path) -> None:
+    """A held press at the start looks flat, but then the force between presses is not 0."""
+    s = _session()
+    s.force.values[: int(1.2 * LOG_RATE), 2] += 5.0
+    _bad(tmp_path, s, "force.csv:sample 0: force log did not start unloaded")
+
+
+def test_streams_that_do_not_overlap(tmp_path: Path) -> None:
+    s = _session()
+    s.force.time_ns = s.force.time_ns + 3_600_000_000_000         # logger an hour later
+    s.trigger_event = None
+    _bad(tmp_path, s, "do not overlap", "--clock", "data")
+
+
+def test_pivot_without_rotation(tmp_path: Path) -> None:
+    s = _session()
+    p = s.pivot.positions
+    s.pivot.positions = np.repeat(p[:1], len(p), axis=0) + np.random.default_rng(0).normal(
+        0, 1e-4, p.shape)
+    _bad(tmp_path, s, "pivot.tsv: pivot recording has too little rotation")
+
+
+def test_trigger_asked_for_but_not_recorded(tmp_path: Path) -> None:
+    _bad(tmp_path, _session(trigger=False), "no trigger channel", "--clock", "trigger")
+
+
+def test_output_never_overwrites_the_input(tmp_path: Path) -> None:
+    mcap = _mcap(tmp_path, _session(presses=2))
+    before = mcap.read_bytes()
+    res = _sync(mcap, mcap)
+    assert res.exit_code == 2 and "overwrite" in res.output
+    assert mcap.read_bytes() == before
+
+
+@pytest.mark.parametrize("bad", ["--max-gap-ms=x", "--clock=gps"])
+def test_bad_options_are_usage_errors(tmp_path: Path, bad: str) -> None:
+    res = _sync(tmp_path / "missing.mcap", tmp_path / "o.h5", bad)
+    assert res.exit_code == 2
