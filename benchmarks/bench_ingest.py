@@ -108,16 +108,13 @@ def ingest(folder: Path, out: Path, rrd: Path | None) -> None:
     ingest_session(folder, out, rrd)
 
 
-def median_time(fn, repeats: int, fresh: tuple[Path, ...] = ()) -> float:  # noqa: ANN001
-    """Median wall time of ``fn()``; the ``fresh`` outputs are deleted (untimed) before each."""
-    times = []
-    for _ in range(repeats):
-        for p in fresh:
-            p.unlink(missing_ok=True)
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+def timed(fn, fresh: tuple[Path, ...] = ()) -> float:  # noqa: ANN001 - any callable
+    """Wall time of ``fn()``; the ``fresh`` outputs are deleted (untimed) first."""
+    for p in fresh:
+        p.unlink(missing_ok=True)
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
 
 
 _PEAK = """
@@ -165,15 +162,21 @@ def main() -> None:
               f"CSV {(folder / 'force.csv').stat().st_size / 1e6:.0f} MB "
               f"(written in {time.perf_counter() - t0:.1f} s)")
         out, rrd = Path(tmp) / "out.mcap", Path(tmp) / "out.rrd"
-        t_bare = median_time(lambda: bare_parse(tsv), args.repeats)
-        t_ingest = median_time(lambda: ingest(folder, out, None), args.repeats, (out,))
-        t_rrd = median_time(lambda: ingest(folder, out, rrd), args.repeats, (out, rrd))
+        rounds = []        # interleaved, so that each round's peers see the same machine load
+        for _ in range(args.repeats):
+            rounds.append((timed(lambda: bare_parse(tsv)),
+                           timed(lambda: ingest(folder, out, None), (out,)),
+                           timed(lambda: ingest(folder, out, rrd), (out, rrd))))
+        t_bare, t_ingest, t_rrd = (statistics.median(r[i] for r in rounds) for i in range(3))
         print(f"bare pandas.read_csv of the TSV data block: {t_bare:7.2f} s (median of "
-              f"{args.repeats})")
+              f"{args.repeats}; rounds {', '.join(f'{r[0]:.2f}' for r in rounds)})")
         print(f"ingest_session, no recording:               {t_ingest:7.2f} s   "
-              f"ratio {t_ingest / t_bare:.2f}x (target <= 1.5x)")
+              f"ratio {t_ingest / t_bare:.2f}x (target <= 1.5x); per round "
+              f"{', '.join(f'{r[1] / r[0]:.2f}' for r in rounds)}")
         print(f"ingest_session, with recording:             {t_rrd:7.2f} s   "
-              f"ratio {t_rrd / t_bare:.2f}x; recording {rrd.stat().st_size / 1e6:.0f} MB")
+              f"ratio {t_rrd / t_bare:.2f}x; per round "
+              f"{', '.join(f'{r[2] / r[0]:.2f}' for r in rounds)}; recording "
+              f"{rrd.stat().st_size / 1e6:.0f} MB")
         print(f"MCAP {out.stat().st_size / 1e6:.0f} MB")
         parsed = sum(v for k, v in sizes.items() if k != "gap_samples")
         out.unlink()

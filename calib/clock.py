@@ -119,6 +119,7 @@ def match_trigger(
     prior: ClockFit | None = None,
     max_drift_ppm: float = 200.0,
     min_pulses: int = 3,
+    timing_sd_s: float = 0.0,
 ) -> ClockFit:
     """Clock from trigger pulses seen by both systems (logger edges, mocap EVENT times).
 
@@ -127,7 +128,10 @@ def match_trigger(
     must explain at least half the pulses of the shorter list (a few missing on either side
     are fine; unrelated trains are refused). A periodic train makes
     proposals a period apart tie; ``prior`` (a data-driven estimate) then decides, and without
-    it the tie is bad input. The matched pairs are fitted by :func:`fit_offsets`.
+    it the tie is bad input. The matched pairs are fitted by :func:`fit_offsets`, each with
+    at least ``timing_sd_s`` uncertainty (the rounding of both time stamps: with a square
+    pulse and events written to the millisecond, a short session can show no scatter at all,
+    and its drift is then far less certain than a perfect fit suggests).
     """
     e = np.sort(np.asarray(edges_logger_s, float))
     m = np.sort(np.asarray(events_mocap_s, float))
@@ -158,11 +162,22 @@ def match_trigger(
     fit = fit_offsets(pairs_m, pairs_e - pairs_m, "trigger")
     fine_tol = max(5 * fit.rms_s, 1e-3)
     pairs_m, pairs_e = _pairs(e, m, lambda t: fit.to_logger(t), min(tol, fine_tol))
-    fit = fit_offsets(pairs_m, pairs_e - pairs_m, "trigger")
+    sd = np.full(len(pairs_m), timing_sd_s) if timing_sd_s > 0 else None
+    fit = fit_offsets(pairs_m, pairs_e - pairs_m, "trigger", sd)
     if abs(fit.drift_ppm) > max_drift_ppm:
         raise BadInput(source, f"trigger: fitted clock drift {fit.drift_ppm:.0f} ppm is "
                                f"implausible (limit {max_drift_ppm:g} ppm)")
     return fit
+
+
+def stamp_resolution_s(time_ns: np.ndarray) -> float:
+    """The coarsest power-of-ten step (1 ns .. 1 s) that every time stamp is a multiple of:
+    the rounding of times written with a fixed number of decimals (events to the ms)."""
+    t = np.asarray(time_ns, np.int64)
+    step = 1
+    while step < 10**9 and t.size and np.all(t % (step * 10) == 0):
+        step *= 10
+    return step * 1e-9
 
 
 def _count_matches(e: np.ndarray, predicted: np.ndarray, tol: float) -> int:

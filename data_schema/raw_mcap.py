@@ -142,7 +142,7 @@ RAW_MCAP = McapLayout(
                 doc="the six force-log channels as logged"),
         Channel("/force/trigger", "phantom.raw.Trigger",
                 (Field("trigger", (1,), "1", doc="sync/trigger channel as logged"),),
-                "force logger rate", dim="C", doc="the logger's trigger column, when logged"),
+                "force logger rate", doc="the logger's trigger column, when logged"),
     ),
     metadata={
         "session": ("schema", "schema_version", "name", "phantom_markers", "indenter_markers",

@@ -6,8 +6,9 @@ from data_schema.hdf5 import H5Schema
 from data_schema.raw_mcap import RAW_MCAP, McapLayout
 from data_schema.states import STATES
 from data_schema.synced import SYNCED
+from data_schema.truth import TRUTH
 
-SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES, SYNCED)}
+SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES, SYNCED, TRUTH)}
 MCAP_SCHEMAS: dict[str, McapLayout] = {RAW_MCAP.name: RAW_MCAP}   # validate: raw_mcap module
 
 

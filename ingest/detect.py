@@ -32,6 +32,15 @@ def _head(path: str | Path, n: int = _HEAD) -> bytes:
         raise BadInput(path, f"cannot read ({e.strerror or e})") from None
 
 
+def _is_mat(head: bytes) -> bool:
+    """MAT v5/v7/v7.3: bytes 126-127 are the endian mark, 124-125 the version (0x0100 or 0x0200
+    for v7.3), as scipy checks; the descriptive text before them varies with the writer."""
+    if len(head) < 128 or head[126:128] not in (b"IM", b"MI"):
+        return False
+    version = int.from_bytes(head[124:126], "little" if head[126:128] == b"IM" else "big")
+    return version in (0x0100, 0x0200) and head[:1] != b"\x00"
+
+
 def _is_c3d(head: bytes) -> bool:
     """C3D: byte 2 is 0x50 and the parameter section it points to names a processor type."""
     if len(head) < 512 or head[1] != 0x50 or head[0] < 2:
@@ -66,12 +75,12 @@ def sniff(path: str | Path) -> str:
         return "empty"
     if head.startswith(b"\x89MCAP"):
         return "mcap"
-    if head.startswith(b"MATLAB 7.3 MAT-file") and head[512:520] == _HDF5:
-        return "mat73"
-    if any(head[o:o + 8] == _HDF5 for o in (0, 512, 1024, 2048)):
+    if head.startswith(_HDF5):
         return "hdf5"
-    if head.startswith(b"MATLAB 5.0 MAT-file"):
-        return "mat5"
+    if _is_mat(head):                     # 128-byte MAT header: text, version, endian mark
+        return "mat73" if head[512:520] == _HDF5 else "mat5"
+    if any(head[o:o + 8] == _HDF5 for o in (512, 1024, 2048)):
+        return "hdf5"                     # HDF5 behind a user block that is not MATLAB's
     if head.startswith(b"PAR1"):
         return "parquet"
     if _is_c3d(head):

@@ -45,7 +45,7 @@ def force_log_columns(path: str | Path) -> list[str]:
         if kind == "parquet":
             return list(pq.read_schema(path).names)
         return list(_mat_columns(path, kind, None))
-    except (OSError, ValueError, pa.ArrowException) as e:
+    except (OSError, ValueError, KeyError, TypeError, pa.ArrowException) as e:
         raise BadInput(path, f"cannot read force log ({e})") from None
 
 
@@ -92,8 +92,8 @@ def _mat_variables(path: str | Path, kind: str) -> dict[str, Any]:
         raw = scipy.io.loadmat(path, squeeze_me=False)
         out: dict[str, Any] = {}
         for k, v in raw.items():
-            if k.startswith("__") or not isinstance(v, np.ndarray):
-                continue
+            if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.names:
+                continue                                 # MATLAB's own keys, structs
             if v.dtype == object:                    # a cell array of strings
                 out[k] = [str(np.ravel(x)[0]) if np.size(x) else "" for x in v.ravel(order="F")]
             elif v.dtype.kind in "US":
@@ -260,7 +260,7 @@ def read_force_log(
             where = _row
         else:
             cols, where = _mat_columns(path, fmt, wanted), _row
-    except (OSError, ValueError, KeyError, pa.ArrowException) as e:
+    except (OSError, ValueError, KeyError, TypeError, pa.ArrowException) as e:
         raise BadInput(path, f"cannot read force log ({e})") from None
     lengths = {c: len(v) for c, v in cols.items()}
     if len(set(lengths.values())) != 1:

@@ -28,6 +28,7 @@ from pipeline.errors import BadInput
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
         "missing_samples", "units", "events", "schema", "schema_version", "provenance",
         "streams", "datasets", "entities", "calibration", "details")
+_SHOWN = ("format", "units_in_file")      # details already shown by the text summary
 TIME_NAMES = ("time", "t", "timestamp", "time_s", "times")
 WRENCH_NAMES = ("fx", "fy", "fz", "tx", "ty", "tz", "mx", "my", "mz")
 
@@ -64,7 +65,7 @@ def format_summary(s: dict[str, Any]) -> str:
     if s["calibration"]:
         c = s["calibration"]
         lines.append(f"  calibration: {c['serial']} {c['body_style']} {c['calibration']}, "
-                     f"matrix {c['matrix_shape']}, max load {c['max_load']}")
+                     f"matrix {c['matrix_shape']} (SI), max load {c['max_load']} N, N*m")
     if s["schema"]:
         lines.append(f"  schema:      {s['schema']} {s['schema_version']}")
     for topic, st in (s["streams"] or {}).items():
@@ -76,7 +77,8 @@ def format_summary(s: dict[str, Any]) -> str:
     for entity, kinds in (s["entities"] or {}).items():
         lines.append(f"  entity:      {entity} ({', '.join(kinds)})")
     for key, value in s["details"].items():
-        lines.append(f"  {key + ':':12} {_short(value)}")
+        if key not in _SHOWN:
+            lines.append(f"  {key + ':':12} {_short(value)}")
     if s["provenance"]:
         lines.append("  provenance:  " + _provenance_text(s["provenance"]))
     return "\n".join(lines)
@@ -113,10 +115,9 @@ def _events(events: list[tuple[str, int]]) -> list[list[Any]]:
 
 
 def _file_units(meta: dict[str, Any], default: str) -> str:
-    for key in ("units_in_file", "units", "point_units"):
-        if isinstance(meta.get(key), str):
-            return meta[key]
-    return default
+    """The length unit the file was written in (the readers' ``units_in_file``)."""
+    unit = meta.get("units_in_file")
+    return unit if isinstance(unit, str) else default
 
 
 def _markers(m: MarkerSeries, default_units: str) -> dict[str, Any]:
@@ -205,7 +206,8 @@ def _inspect_mcap(path: Path) -> dict[str, Any]:
         provenance=s.provenance,
         streams={t: {"frames": c.frames, "rate_hz": c.rate_hz, "names": c.names,
                      "source": c.source} for t, c in index.channels.items()},
-        units={"position": "m", "force": ", ".join(s.force.units), "time": "ns"},
+        units={"position": "m", "time": "ns",
+               **dict(zip(s.force.channels, s.force.units, strict=True))},
         details={"session": s.name, "phantom_markers": len(s.phantom_markers),
                  "indenter_markers": len(s.indenter_markers), "force_kind": s.force.kind,
                  "trigger_event": s.trigger_event},
@@ -339,7 +341,13 @@ def _plain(meta: dict[str, Any]) -> dict[str, Any]:
 
 
 def _short(value: Any, limit: int = 200) -> str:
-    text = value if isinstance(value, str) else json.dumps(value, default=str)
+    """One line of text: dicts as ``key value; ...``, lists space-separated, cut at ``limit``."""
+    if isinstance(value, dict):
+        text = "; ".join(f"{k} {_short(v, limit)}" for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        text = " ".join(_short(v, limit) for v in value)
+    else:
+        text = value if isinstance(value, str) else json.dumps(value, default=str)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 

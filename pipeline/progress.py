@@ -22,11 +22,12 @@ def set_quiet(quiet: bool) -> None:
 @contextlib.contextmanager
 def progress(items: Iterable[T], label: str, length: int | None = None) -> Iterator[Iterable[T]]:
     """A click progress bar (counts, rate, ETA) over ``items``, on stderr, unless quiet."""
-    if _QUIET:
+    stderr = click.get_text_stream("stderr")
+    if _QUIET or not stderr.isatty():
         yield items
         return
     with click.progressbar(
-        items, length=length, label=label, file=click.get_text_stream("stderr"),
+        items, length=length, label=label, file=stderr,
         show_pos=True, show_eta=True,
     ) as bar:
         yield bar

@@ -32,12 +32,14 @@ from calib.clock import (
     coarse_lag,
     match_trigger,
     rising_edges,
+    stamp_resolution_s,
 )
 from calib.force import Tare, apply_calibration, unloaded_start
 from calib.gaps import fill_gaps
 from calib.pivot import PivotResult, pivot_calibrate
 from calib.resample import antialiased_interpolant
 from calib.rigid import RigidFit, cluster_reference, fit_rigid
+from calib.smooth import lowpass_track
 from data_schema.hdf5 import validate_h5
 from data_schema.synced import FORCE_BITS, QUALITY_BITS, SYNCED
 from ingest.series import RawSession
@@ -63,6 +65,7 @@ class SyncParams:
     max_offset_s: float = 30.0       # data-driven clock: largest clock offset searched
     passband: float = 0.8            # resampler flat to this fraction of the mocap Nyquist
     max_fit_rms_m: float = 1.0e-3    # rigid fits with a larger residual are poor
+    tip_cutoff_hz: float = 20.0      # zero-phase low-pass of the tip track (0: off)
     min_pivot_rotation_deg: float = 5.0
     min_correlation: float = 0.5     # data-driven clock: force must follow the depth this well
 
@@ -136,6 +139,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
 
     points = np.concatenate([phantom, tip[:, None]], axis=1)
     points, quality = fill_gaps(t_m, points, p.max_gap_s)
+    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
     quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
     depth = (surface_point - points[:, -1]) @ normal
 
@@ -241,13 +245,16 @@ def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nd
         raise BadInput(raw.force.source, "--clock trigger, but the session has no trigger "
                                          "channel with matching mocap events")
     if use_trigger:
+        # both stamps are rounded: the logger's edge to its sample, the EVENT to its decimals
+        step = np.median(np.diff(t_f))
+        sd = float(np.sqrt((step**2 + stamp_resolution_s(np.round(events * 1e9)) ** 2) / 12))
         try:
-            return match_trigger(edges, events, raw.force.source)
+            return match_trigger(edges, events, raw.force.source, timing_sd_s=sd)
         except BadInput as e:
             if "ambiguous" not in e.what:
                 raise
             prior = _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
-            return match_trigger(edges, events, raw.force.source, prior=prior)
+            return match_trigger(edges, events, raw.force.source, prior=prior, timing_sd_s=sd)
     return _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
 
 

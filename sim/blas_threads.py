@@ -12,23 +12,25 @@ from __future__ import annotations
 import contextlib
 import ctypes
 from collections.abc import Iterator
+from functools import lru_cache
 from pathlib import Path
 
 _SETTERS = ("scipy_openblas_set_num_threads", "scipy_openblas_set_num_threads64_",
             "openblas_set_num_threads", "openblas_set_num_threads64_")
 
 
-def _openblas_libraries() -> list[ctypes.CDLL]:
+@lru_cache(maxsize=1)
+def _openblas_libraries() -> tuple[ctypes.CDLL, ...]:
     maps = Path("/proc/self/maps")
     if not maps.exists():
-        return []
+        return ()
     paths = {line.split()[-1] for line in maps.read_text().splitlines()
              if "openblas" in line.lower() and line.split()[-1].startswith("/")}
     libs = []
     for p in sorted(paths):
         with contextlib.suppress(OSError):
             libs.append(ctypes.CDLL(p))
-    return libs
+    return tuple(libs)
 
 
 def _get_set(lib: ctypes.CDLL) -> tuple:

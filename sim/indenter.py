@@ -246,7 +246,7 @@ class HandStyle:
     max_tilt_deg: float = 20.0
     fmax_mean: float = 6.2
     fmax_sd: float = 1.4
-    fmax_range: tuple[float, float] = (2.0, 8.5)
+    fmax_range: tuple[float, float] = (2.5, 8.0)
     scale: float = 1.0              # all durations are multiplied by it
 
     @property

@@ -115,25 +115,31 @@ class MSM:
 
     def energy_forces(self, x: np.ndarray, f_ext: np.ndarray) -> tuple[float, np.ndarray]:
         """Potential energy (J, with the load's) and the force on every mass (N, 3), no damping."""
+        return self._forces(x, f_ext, with_energy=True)
+
+    def forces(self, x: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
+        """Force on every mass (N, 3): springs plus the load, without damping."""
+        return self._forces(x, f_ext, with_energy=False)[1]
+
+    def _forces(self, x: np.ndarray, f_ext: np.ndarray, with_energy: bool
+                ) -> tuple[float, np.ndarray]:
         p = self.params
         n = self.n
-        g = x.reshape(n, n, 3)
         disp = x - self.rest
         f = f_ext - p.k_fixed * disp
         fg = f.reshape(n, n, 3)
-        energy = 0.5 * p.k_fixed * np.einsum("ij,ij->", disp, disp) - np.einsum(
-            "ij,ij->", f_ext, x)
-        for (di, dj), d, length in self._springs(g):
+        energy = 0.0
+        if with_energy:
+            energy = 0.5 * p.k_fixed * np.einsum("ij,ij->", disp, disp) - np.einsum(
+                "ij,ij->", f_ext, x)
+        for (di, dj), d, length in self._springs(x.reshape(n, n, 3)):
             stretch = length - self.rest_length[(di, dj)]
-            energy += 0.5 * p.k_between * np.einsum("ij,ij->", stretch, stretch)
+            if with_energy:
+                energy += 0.5 * p.k_between * np.einsum("ij,ij->", stretch, stretch)
             fs = (p.k_between * stretch / length)[..., None] * d
             fg[: n - di, : n - dj] += fs
             fg[di:, dj:] -= fs
         return float(energy), f
-
-    def forces(self, x: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
-        """Force on every mass (N, 3): springs plus the load, without damping."""
-        return self.energy_forces(x, f_ext)[1]
 
     def load(self, node: int, force: np.ndarray) -> np.ndarray:
         """External force array (N, 3) with ``force`` on one mass."""
@@ -240,18 +246,18 @@ def relax_explicit(
     dt, c, m = p.dt, p.damping, p.mass
     e0 = None
     for step in range(max_steps + 1):
-        energy, f = model.energy_forces(x, f_ext)
-        kinetic = 0.5 * m * np.einsum("ij,ij->", v, v)
-        if e0 is None:
-            e0 = energy + kinetic
         if step % check_every == 0:
-            total = energy + kinetic
+            energy, f = model.energy_forces(x, f_ext)
+            total = energy + 0.5 * m * np.einsum("ij,ij->", v, v)
+            e0 = total if e0 is None else e0
             if not math.isfinite(total) or total > e0 + 1e-6 + 1e-3 * abs(e0):
                 raise MSMError(f"explicit integration diverged after {step} steps: energy "
                                f"grew from {e0:.4g} J to {total:.4g} J; dt={dt:g} s, stability "
                                f"limit {model.dt_limit:.4g} s at rest, "
                                f"{stability_limit(model, start):.4g} s at the start state")
-        if (_max_norm(v) < v_tol and _max_norm(f) < f_tol) and step > 0:
+        else:
+            f = model.forces(x, f_ext)
+        if step > 0 and _max_norm(v) < v_tol and _max_norm(f) < f_tol:
             return x, v, step
         if step == max_steps:
             break

@@ -36,9 +36,14 @@ from pipeline.atomic import atomic_output
 from pipeline.errors import BadInput
 from pipeline.progress import progress
 from pipeline.provenance import make_provenance
-from sim.blas_threads import blas_threads
 from sim.msm import MSM, MSMError, MSMParams
-from sim.msm_static import DEFAULT_TOL, StaticSolver, residual, simulate_sequence
+from sim.msm_static import (
+    DEFAULT_TOL,
+    StaticSolver,
+    check_tol,
+    residual,
+    simulate_sequence,
+)
 
 MULTI_PER_SEQUENCE = 15
 
@@ -148,14 +153,12 @@ def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int]:
     solver = StaticSolver(model, tol)
     out = np.empty((len(directions), steps + 1, model.N, 3), dtype=np.float32)
     worst = 0.0
-    with blas_threads(1):
-        for d, direction in enumerate(directions):
-            states = simulate_sequence(model, int(node), direction, steps, fmax, solver=solver)
-            if not np.isfinite(states).all():
-                raise MSMError(f"non-finite state at mass {node}, direction {d}")
-            last = model.load(int(node), direction * fmax)
-            worst = max(worst, residual(model, states[-1], last))
-            out[d] = states
+    for d, direction in enumerate(directions):
+        states = simulate_sequence(model, int(node), direction, steps, fmax, solver=solver)
+        if not np.isfinite(states).all():
+            raise MSMError(f"non-finite state at mass {node}, direction {d}")
+        worst = max(worst, residual(model, states[-1], model.load(int(node), direction * fmax)))
+        out[d] = states
     return out, worst, solver.stats.iterations, solver.stats.factorizations
 
 
@@ -279,6 +282,7 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
              ) -> tuple[Simulated, dict[str, np.ndarray]]:
     """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
     simulation and the arrays written."""
+    check_tol(tol)
     plan = draw_plan(protocol, params.n * params.n)
     locs = shard_locations(protocol.locations, shard)
     sim = simulate(plan, params, locs, tol, workers)
@@ -328,8 +332,10 @@ def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.n
     arrays = {}
     offset = np.cumsum([0] + [len(p["states/step"]) for p in parts[:-1]])
     for name in parts[0]:
-        chunks = [p[name] + (o if name.startswith(("single/", "multi/")) else 0)
-                  for p, o in zip(parts, offset, strict=True)]
+        if name.startswith(("single/", "multi/")):        # state indices: shift per shard
+            chunks = [p[name] + o for p, o in zip(parts, offset, strict=True)]
+        else:
+            chunks = [p[name] for p in parts]
         arrays[name] = np.concatenate(chunks).astype(parts[0][name].dtype)
     protocol = json.loads(first["protocol"])
     prov = make_provenance("simulate --merge", {"shards": count, **protocol},

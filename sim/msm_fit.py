@@ -5,9 +5,10 @@ points and the MSM's static response to the measured loading (it found 100 and 2
 
 - MSM-produced states (``source = "msm"``, points = the grid's masses): each point is its mass,
   the loaded mass is the one at the tip's rest position, the load is ``force_vector``.
-- Lab states (e.g. 25 markers + tip): the MSM grid is laid on the plane of the rest points
-  (step 0 of each sequence; centred on their centroid, x along their principal in-plane axis,
-  +z the side the force pushes from), each measured point follows the mass nearest its rest
+- Lab states (e.g. 25 markers + tip): the MSM grid is laid on the plane of the rest surface
+  points (step 0 of the first sequence, the tip left out): centred on their centroid, +z the
+  side the force pushes from, x along the lab's x axis projected on that plane (the phantom
+  is assumed square to the lab axes). Each measured point follows the mass nearest its rest
   position, the loaded mass is the one nearest the tip, the load is ``force_vector`` (rotated
   into the grid frame) or, without it, ``force`` along -z.
 
@@ -34,6 +35,7 @@ from sim.msm import MSM, MSMError, MSMParams
 from sim.msm_static import StaticSolver
 
 FIT_TOL = 1e-7            # N, static tolerance inside the fit (well below the fit's resolution)
+TIP_RADIUS = 1e-3         # m: a rest point this close to the tip is the tip, not the surface
 
 
 @dataclass(frozen=True)
@@ -102,7 +104,7 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
                 raise BadInput(path, f"sequence {s}: rest points are not the MSM grid")
             here = (np.eye(3), np.zeros(3))
         else:
-            frame = frame or _grid_frame(path, model, rest, loads, force[r[1:]])
+            frame = frame or _grid_frame(path, model, rest, tip[r[0]], loads)
             here = frame
         rest_g = _to_grid(rest, here)
         loads_g = (loads @ here[0].T if loads is not None and np.isfinite(loads).all()
@@ -164,19 +166,25 @@ def fit_msm(sequences: list[MeasuredSequence], params: MSMParams,
         sequences=len(sequences), states=sum(len(s.forces) for s in sequences))
 
 
-def _grid_frame(path: Path, model: MSM, rest: np.ndarray, loads: np.ndarray | None,
-                magnitudes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _grid_frame(path: Path, model: MSM, rest: np.ndarray, tip: np.ndarray,
+                loads: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Rotation and shift taking lab coordinates to the grid frame (see module doc)."""
     finite = np.isfinite(rest).all(axis=1)
-    if finite.sum() < 3:
+    surface = rest[finite & (np.linalg.norm(rest - tip, axis=1) > TIP_RADIUS)]
+    if len(surface) < 3:
         raise BadInput(path, "fewer than 3 finite rest points: cannot place the MSM grid")
-    centre = rest[finite].mean(axis=0)
-    _, _, vt = np.linalg.svd(rest[finite] - centre)
-    ex, normal = vt[0], vt[2]
-    if loads is not None and np.isfinite(loads).all() and float((loads @ normal).sum()) > 0:
-        normal = -normal                 # the force pushes into the surface: against +z
-    ey = np.cross(normal, ex)
-    rot = np.stack([ex, ey, normal])
+    centre = surface.mean(axis=0)
+    normal = np.linalg.svd(surface - centre)[2][2]
+    if loads is not None and np.isfinite(loads).all():
+        push = float((loads @ normal).sum())
+    else:
+        push = float(normal[2])          # no force vectors: the lab's z is up
+    if push > 0:
+        normal = -normal                 # the force pushes into the surface, against +z
+    axis = np.eye(3)[0] if abs(normal[0]) < 0.9 else np.eye(3)[1]
+    ex = axis - (axis @ normal) * normal
+    ex /= np.linalg.norm(ex)
+    rot = np.stack([ex, np.cross(normal, ex), normal])
     grid_centre = np.array([model.params.size / 2, model.params.size / 2, 0.0])
     return rot, grid_centre - rot @ centre
 

@@ -67,6 +67,15 @@ def test_generated_files_of_every_format(tmp_path):
     assert sniff(files["qtm_mat73"]) == "mat73" and sniff(files["hdf5"]) == "hdf5"
 
 
+def test_mat_header_text_may_vary(tmp_path):
+    """Only the version and endian bytes (124-127) make a MAT file; writers vary the text."""
+    p = tmp_path / "log.mat"
+    scipy.io.savemat(p, {"time": np.arange(3.0), "G0": np.zeros(3)})
+    with open(p, "r+b") as f:
+        f.write(b"phantom twin force log".ljust(116))
+    assert sniff(p) == "mat5" and detect_format(p) == "force_mat"
+
+
 @pytest.mark.parametrize("content", [
     b"", b"\x00\xff\x10binary junk" * 40, b"Dear colleague,\nplease find the data.\n",
     b"<svg xmlns='http://www.w3.org/2000/svg'/>", b"1,2,3\n4,5,6\n",

@@ -137,7 +137,7 @@ def test_bad_non_increasing_time(tmp_path):
     assert e.where == "row 31"
 
 
-@pytest.mark.parametrize("how", ["csv", "parquet", "mat73"])
+@pytest.mark.parametrize("how", ["csv", "parquet", "mat7", "mat73"])
 def test_bad_truncated_file(tmp_path, how):
     p = _write(_log(), tmp_path / f"f.{how}", how)
     raw = p.read_bytes()

@@ -268,3 +268,27 @@ def test_output_over_an_input_is_refused(session):
     res = run(["ingest", str(folder), "--out", str(folder / "force.csv"), "--no-rrd"])
     assert res.exit_code == 2 and "overwrite an input" in res.stderr
     assert folder_hash(folder) == before
+
+
+def test_phantom_twin_session(tmp_path):
+    """A whole synthetic session (6D bodies, pivot, trigger) survives ingest bit for bit."""
+    twin = pytest.importorskip("sim.twin")
+    from ingest.detect import read_mocap
+    from ingest.qtm_tsv import read_qtm_6d
+
+    folder = twin.synthesize_session(tmp_path / "twin", seed=1, locations=1, repeats=1)
+    out = tmp_path / "twin.mcap"
+    res = run(["ingest", str(folder), "--out", str(out), "--no-rrd"])
+    assert res.exit_code == 0, res.stderr
+    s = read_raw_mcap(out)
+    cfg = (folder / "session.toml").read_text()
+    mocap = read_mocap(folder / "indentation.tsv")
+    assert s.markers.labels == mocap.labels and len(s.phantom_markers) == 25
+    assert np.array_equal(s.markers.positions, mocap.positions, equal_nan=True)
+    assert np.array_equal(s.markers.time_ns, mocap.time_ns)
+    assert s.markers.events == mocap.events and s.trigger_event == "Trigger"
+    bodies = read_qtm_6d(folder / "indentation_6D.tsv")
+    assert s.bodies.bodies == ["Indenter"] and 'indenter_body = "Indenter"' in cfg
+    assert np.array_equal(s.bodies.rotations, bodies.rotations, equal_nan=True)
+    assert s.pivot is not None and s.pivot.labels == s.indenter_markers
+    assert s.force.trigger is not None and s.calibration is not None

@@ -97,6 +97,41 @@ def test_force_log(tmp_path):
     assert s["channels"] == [f"G{i}" for i in range(6)] and s["missing_samples"] == 0
 
 
+@pytest.mark.parametrize("version", ["7", "7.3"])
+def test_qtm_mat(tmp_path, version):
+    from ingest.qtm_mat import write_qtm_mat
+    from ingest.series import MarkerSeries
+
+    pos = np.random.default_rng(0).normal(0, 0.1, (300, 4, 3))
+    pos[20:30, 1] = np.nan
+    m = MarkerSeries("x", np.arange(300, dtype=np.int64) * 5_000_000, ["a", "b c", "d", "e"],
+                     pos, 200.0)
+    path = tmp_path / "trial.mat"
+    write_qtm_mat(path, m, version)
+    s = inspect_json(path)
+    assert s["format"] == "qtm_mat" and s["frames"] == 300 and s["rate_hz"] == 200.0
+    assert s["markers"] == ["a", "b c", "d", "e"] and s["missing_samples"] == 10
+
+
+@pytest.mark.parametrize("kind", ["parquet", "mat"])
+def test_force_log_parquet_and_mat(tmp_path, kind):
+    import pandas as pd
+    import scipy.io
+
+    names = ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"]
+    cols = {"t": np.arange(2000) / 1000, **{n: np.full(2000, 0.5) for n in names}}
+    path = tmp_path / f"force.{kind}"
+    if kind == "parquet":
+        pd.DataFrame(cols).to_parquet(path)
+    else:
+        scipy.io.savemat(path, cols)
+    s = inspect_json(path)
+    assert s["format"] == f"force_{kind}" and s["frames"] == 2000
+    assert s["rate_hz"] == pytest.approx(1000.0) and s["channels"] == names
+    assert s["details"]["time_column"] == "t" and s["details"]["kind"] == "wrench"
+    assert s["units"] == {"Fx": "N", "Fy": "N", "Fz": "N", "Tx": "N*m", "Ty": "N*m", "Tz": "N*m"}
+
+
 @pytest.fixture(scope="module")
 def ingested(tmp_path_factory) -> tuple[Path, Path]:
     """`pipeline ingest` of a folder made of the real 2026 TSV, the real .cal and a force CSV."""

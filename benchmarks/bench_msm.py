@@ -1,0 +1,170 @@
+"""MSM generation: the full 16,500-example set, and the fast path against the reference.
+
+Prints (1) the wall time of the paper's whole protocol (100 locations x 11 directions x 15
+steps) with ``--workers`` processes, written to a states file; (2) per-example time of the
+fast static path against the reference explicit integration (the paper's method) on the same
+sequences in the same run, medians, their ratio and the largest point difference; (3) the trade
+of accuracy against time as the fast path's tolerance and the reference's stopping criterion
+move, errors against an equilibrium solved to 1e-10 N; (4) what HDF5 compression would cost.
+
+    python benchmarks/bench_msm.py                 # everything (~2-3 min on 2 free cores)
+    python benchmarks/bench_msm.py --skip-full     # only the per-example comparison and trade
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from sim.msm import MSM, MSMParams, simulate_reference
+from sim.msm_dataset import Protocol, draw_plan, generate
+from sim.msm_static import simulate_sequence
+
+PAPER_S_PER_EXAMPLE = 2.93
+PAPER_CRITERION = 0.02                              # m/s and N
+TIGHT_CRITERION = 2e-4
+FAST_TOLS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
+REF_CRITERIA = (0.02, 2e-3, 2e-4, 2e-5)
+
+
+def full_set(workers: int) -> None:
+    protocol = Protocol()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "msm.h5"
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu0 = time.process_time()
+        t0 = time.perf_counter()
+        sim, arrays = generate(out, protocol, MSMParams(), workers=workers)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (time.process_time() - cpu0) + (after.ru_utime - before.ru_utime
+                                              + after.ru_stime - before.ru_stime)
+        n = protocol.sequences * protocol.steps
+        print(f"full set: {n} examples ({len(arrays['states/step'])} states, "
+              f"{out.stat().st_size / 1e6:.0f} MB) in {wall:.1f} s wall with {workers} "
+              f"workers (target <= 60 s); {cpu:.1f} s CPU = {cpu / n * 1e3:.2f} ms CPU per "
+              f"example; {sim.factorizations / n:.2f} factorizations and "
+              f"{sim.iterations / n:.2f} iterations per example; max residual "
+              f"{sim.max_residual:.2g} N; load average {os.getloadavg()[0]:.1f}")
+        print(f"  against the paper: {PAPER_S_PER_EXAMPLE * n / 3600:.1f} CPU-hours "
+              f"-> {cpu / 60:.1f} CPU-minutes ({PAPER_S_PER_EXAMPLE * n / cpu:.0f}x)")
+        compression(arrays, Path(tmp))
+
+
+def compression(arrays: dict, tmp: Path) -> None:
+    points = arrays["states/points"]
+    print("  states/points storage (write time, size):")
+    for name, kwargs in (("none", {}), ("lzf", {"compression": "lzf"}),
+                         ("gzip-1", {"compression": "gzip", "compression_opts": 1})):
+        path = tmp / f"c_{name}.h5"
+        t0 = time.perf_counter()
+        with h5py.File(path, "w") as f:
+            chunks = (1, *points.shape[1:]) if kwargs else None
+            f.create_dataset("points", data=points, chunks=chunks, **kwargs)
+        t = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        with h5py.File(path, "r") as f:
+            f["points"][()]
+        r = time.perf_counter() - t0
+        size = path.stat().st_size / 1e6
+        print(f"    {name:7s} write {t:5.2f} s  read {r:5.2f} s  {size:6.1f} MB")
+
+
+def sequences(count: int) -> list[tuple[int, np.ndarray]]:
+    """The protocol's first locations, alternately the normal and a random direction."""
+    plan = draw_plan(Protocol(), 1024)
+    return [(int(plan.nodes[k]), plan.directions[k, 0 if k % 2 == 0 else 1 + (k // 2) % 10])
+            for k in range(count)]
+
+
+def timed(fn, *args, **kwargs) -> tuple[float, object]:
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return time.perf_counter() - t0, out
+
+
+def per_example(count: int, repeats: int) -> None:
+    model = MSM()
+    steps = 15
+    seqs = sequences(count)
+    truth = [simulate_sequence(model, n, d, tol=1e-10) for n, d in seqs]   # also warms up
+    simulate_reference(model, *seqs[0], steps=1)
+    fast_t, ref_t, tight_t = [], [], []
+    fast_err, ref_err, tight_err, ref_vs_fast = [], [], [], []
+    for (node, d), exact in zip(seqs, truth, strict=True):
+        ts = [timed(simulate_sequence, model, node, d) for _ in range(repeats)]
+        fast_t.append(statistics.median(t for t, _ in ts) / steps)
+        fast = ts[0][1]
+        t, (ref, _) = timed(simulate_reference, model, node, d)
+        ref_t.append(t / steps)
+        t, (tight, _) = timed(simulate_reference, model, node, d, v_tol=TIGHT_CRITERION,
+                              f_tol=TIGHT_CRITERION)
+        tight_t.append(t / steps)
+        fast_err.append(_max_mm(fast, exact))
+        ref_err.append(_max_mm(ref, exact))
+        tight_err.append(_max_mm(tight, exact))
+        ref_vs_fast.append((_max_mm(ref, fast), _max_mm(tight, fast)))
+    f, r, rt = (statistics.median(v) for v in (fast_t, ref_t, tight_t))
+    print(f"\nper example, median of {count} sequences x 15 steps (fast: median of {repeats} "
+          "runs), one process:")
+    print(f"  fast static path (tol 1e-6 N)            {f * 1e3:8.2f} ms   max error "
+          f"{max(fast_err):.1e} mm")
+    print(f"  reference, paper criterion (0.02)        {r * 1e3:8.2f} ms   max error "
+          f"{max(ref_err):.1e} mm   ratio {r / f:5.1f}x   fast vs it: "
+          f"{max(a for a, _ in ref_vs_fast):.4f} mm")
+    print(f"  reference, tightened ({TIGHT_CRITERION:g})            {rt * 1e3:8.2f} ms   "
+          f"max error {max(tight_err):.1e} mm   ratio {rt / f:5.1f}x   fast vs it: "
+          f"{max(b for _, b in ref_vs_fast):.5f} mm")
+    print(f"  paper's reported time                    {PAPER_S_PER_EXAMPLE * 1e3:8.0f} ms"
+          f"                        ratio {PAPER_S_PER_EXAMPLE / f:5.0f}x")
+    trade(model, seqs, truth, repeats)
+
+
+def trade(model: MSM, seqs: list, truth: list, repeats: int) -> None:
+    print("\ntrade: max point error against the 1e-10 N equilibrium, and time per example")
+    print("  fast path tol (N)   ms/example   max error (mm)")
+    for tol in FAST_TOLS:
+        times, errs = [], []
+        for (node, d), exact in zip(seqs, truth, strict=True):
+            ts = [timed(simulate_sequence, model, node, d, tol=tol) for _ in range(repeats)]
+            times.append(statistics.median(t for t, _ in ts) / 15)
+            errs.append(_max_mm(ts[0][1], exact))
+        print(f"  {tol:16.0e}   {statistics.median(times) * 1e3:10.2f}   {max(errs):.2e}")
+    print("  reference criterion (m/s and N)   ms/example   max error (mm)")
+    for crit in REF_CRITERIA:
+        times, errs = [], []
+        for (node, d), exact in zip(seqs, truth, strict=True):
+            t, (ref, _) = timed(simulate_reference, model, node, d, v_tol=crit, f_tol=crit)
+            times.append(t / 15)
+            errs.append(_max_mm(ref, exact))
+        print(f"  {crit:30.0e}   {statistics.median(times) * 1e3:10.2f}   {max(errs):.2e}")
+
+
+def _max_mm(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b, axis=-1).max() * 1e3)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--sequences", type=int, default=6,
+                        help="sequences for the per-example comparison and the trade")
+    parser.add_argument("--repeats", type=int, default=3, help="fast-path repeats (median)")
+    parser.add_argument("--skip-full", action="store_true")
+    args = parser.parse_args()
+    print(f"load average at start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    if not args.skip_full:
+        full_set(args.workers)
+    per_example(args.sequences, args.repeats)
+
+
+if __name__ == "__main__":
+    main()
