@@ -11,7 +11,8 @@ Two estimators, both ending in a straight-line fit of local offsets ``t_f - t_m`
 * data: per press, the lag that best explains the tip depth as a smooth function of the force
   magnitude (a profile least-squares cross-correlation that is insensitive to the nonlinear
   force-depth law), scanned coarse to fine and refined to sub-sample by a parabola through the
-  cost minimum; the whole-session lag that seeds it comes from an FFT cross-correlation.
+  cost minimum; the whole-session lag that seeds it comes from an FFT cross-correlation of
+  the contact state seen by each stream.
 """
 
 from __future__ import annotations
@@ -204,22 +205,25 @@ def _cluster(values: np.ndarray, gap: float) -> list[np.ndarray]:
 # --- data-driven ----------------------------------------------------------------------------
 
 
-def coarse_lag(
-    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
+def xcorr_lag(
+    t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
     t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
-) -> float:
-    """Whole-session lag (logger minus mocap time, s) by FFT cross-correlation of the tip depth
-    with the force magnitude on a common grid, refined by a parabola through the peak."""
+) -> tuple[float, float]:
+    """Lag (logger minus mocap time, s) that best matches a mocap signal to a logger signal.
+
+    FFT cross-correlation on common grids at ``rate_hz`` over lags within ``max_lag_s``,
+    refined by a parabola through the peak. Returns the lag and the normalised correlation
+    there. NaN samples count as the signal's mean.
+    """
     t0 = float(np.min(t_mocap_s))
     n_m = int(np.ceil((np.max(t_mocap_s) - t0) * rate_hz)) + 1
     grid_m = t0 + np.arange(n_m) / rate_hz
-    a = np.interp(grid_m, t_mocap_s, np.where(np.isfinite(depth), depth, np.nan))
+    a = np.interp(grid_m, t_mocap_s, np.asarray(signal_m, float))
     a = np.where(np.isfinite(a), a - np.nanmean(a), 0.0)
     lo, hi = t_logger_span
     n_f = int(np.floor((hi - lo) * rate_hz)) + 1
-    grid_f = lo + np.arange(n_f) / rate_hz
-    b = np.nan_to_num(force_at(grid_f))
-    b = b - np.mean(b)
+    b = np.asarray(signal_f_at(lo + np.arange(n_f) / rate_hz), float)
+    b = np.where(np.isfinite(b), b - np.nanmean(b), 0.0)
     size = int(2 ** np.ceil(np.log2(n_m + n_f)))
     xc = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
     shifts = np.arange(size)
@@ -231,7 +235,35 @@ def coarse_lag(
         raise ValueError("no admissible lag")
     kp, km = (k + 1) % size, (k - 1) % size
     frac = _parabola_vertex(xc[km], xc[k], xc[kp]) if np.isfinite(xc[km] + xc[kp]) else 0.0
-    return float(lag_s[k] + frac / rate_hz)
+    norm = float(np.sqrt((a @ a) * (b @ b)))
+    return float(lag_s[k] + frac / rate_hz), float(xc[k] / norm) if norm > 0 else 0.0
+
+
+def contact_lag(
+    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
+    t_logger_span: tuple[float, float], max_lag_s: float, force_level: float = 0.25,
+    levels: int = 24,
+) -> float:
+    """Whole-session lag (s) by matching contact: tip deeper than a level against force above
+    ``force_level``.
+
+    Raw depth is a poor partner for the force (the hand's moves between presses dominate it,
+    and a lag of one press cycle can fit as well); the contact state is the same on/off pattern
+    in both streams. The depth at which contact starts depends on the marker and tip geometry,
+    so levels across the upper depth range are tried and the best-matching one kept.
+    """
+    finite = depth[np.isfinite(depth)]
+    if finite.size == 0:
+        raise ValueError("no depth")
+    best = (-np.inf, 0.0)
+    for level in np.unique(np.percentile(finite, np.linspace(30, 99, levels))):
+        inside = np.where(np.isfinite(depth), (depth > level).astype(float), np.nan)
+        lag, score = xcorr_lag(t_mocap_s, inside,
+                               lambda t: (force_at(t) > force_level).astype(float),
+                               t_logger_span, max_lag_s)
+        if score > best[0]:
+            best = (score, lag)
+    return best[1]
 
 
 def press_lag(
@@ -243,7 +275,8 @@ def press_lag(
     ``t_mocap_s`` and ``depth`` are the press's loaded frames (chosen once, so every lag is
     scored on the same frames). The depth is the dependent variable because it carries most of
     the noise (the force is low-passed and far less noisy relative to its range). Returns the
-    parabola-refined lag and its standard error from the cost curvature.
+    parabola-refined lag and its standard error from the cost curvature (as if the residuals
+    were independent; :func:`clock_from_data` rescales by the scatter between presses).
     """
     lags = lag0 + np.arange(-half_width_s, half_width_s + 0.5 * step_s, step_s)
     cost = np.empty(len(lags))

@@ -36,6 +36,11 @@ class RigidFit:
         """A body-frame point (3,) in the lab frame per frame, (T, 3); NaN where no fit."""
         return self.rotation @ np.asarray(body_point, float) + self.translation
 
+    def apply_all(self, body_points: np.ndarray) -> np.ndarray:
+        """Body-frame points (M, 3) in the lab frame per frame, (T, M, 3)."""
+        return np.einsum("tij,mj->tmi", self.rotation, np.asarray(body_points, float)) + \
+            self.translation[:, None]
+
 
 def fit_rigid(
     reference: np.ndarray,
@@ -43,6 +48,7 @@ def fit_rigid(
     max_rms: float = 1.0e-3,
     min_spread_ratio: float = 0.1,
     drop_outlier: bool = True,
+    robust_scale: float | None = None,
 ) -> RigidFit:
     """Fit the reference cluster (M, 3) to each frame of ``observed`` (T, M, 3), NaN = unseen.
 
@@ -51,9 +57,16 @@ def fit_rigid(
     of the first), and ``poor`` when ill-conditioned or its RMS residual exceeds ``max_rms``.
     With ``drop_outlier``, a poor frame of 4 or more markers is refitted without each marker in
     turn, and the best well-conditioned fit within ``max_rms`` replaces it (a mislabelled or
-    ghost marker is then ignored rather than spoiling the pose).
+    ghost marker is then ignored rather than spoiling the pose). With ``robust_scale`` (m),
+    the fit is iteratively reweighted with Cauchy weights ``1 / (1 + (r / scale)^2)`` of each
+    marker's residual ``r``, so a marker far off in a heavy-tailed noise draw pulls less.
     """
     fit = _fit(reference, observed, max_rms, min_spread_ratio)
+    if robust_scale:
+        for _ in range(3):
+            r = np.linalg.norm(observed - fit.apply_all(reference), axis=2)
+            weights = 1.0 / (1.0 + (np.nan_to_num(r) / robust_scale) ** 2)
+            fit = _fit(reference, observed, max_rms, min_spread_ratio, weights)
     if not drop_outlier:
         return fit
     obs = np.asarray(observed, float)
@@ -63,7 +76,7 @@ def fit_rigid(
             break
         trial = obs[redo].copy()
         trial[:, m] = np.nan
-        alt = _fit(reference, trial, max_rms, min_spread_ratio)
+        alt = fit_rigid(reference, trial, max_rms, min_spread_ratio, False, robust_scale)
         better = ~alt.poor & (alt.n_markers >= 3)
         for name in ("rotation", "translation", "rms", "n_markers", "ill_conditioned", "poor"):
             getattr(fit, name)[redo[better]] = getattr(alt, name)[better]
@@ -72,23 +85,26 @@ def fit_rigid(
 
 
 def _fit(reference: np.ndarray, observed: np.ndarray, max_rms: float,
-         min_spread_ratio: float) -> RigidFit:
-    """One least-squares fit per frame over every seen marker (see :func:`fit_rigid`)."""
+         min_spread_ratio: float, weights: np.ndarray | None = None) -> RigidFit:
+    """One weighted least-squares fit per frame over the seen markers (see :func:`fit_rigid`).
+
+    ``weights`` (T, M) default to 1 for every seen marker; the RMS residual is unweighted.
+    """
     ref = np.asarray(reference, float)
     obs = np.asarray(observed, float)
     if obs.ndim != 3 or obs.shape[1:] != ref.shape or ref.shape[1] != 3:
         raise ValueError(f"observed {obs.shape} does not match reference {ref.shape}")
     seen = np.isfinite(obs).all(axis=2)                       # (T, M)
-    w = seen.astype(float)
-    n = w.sum(axis=1)                                          # (T,)
+    n = seen.sum(axis=1)                                       # (T,)
     ok = n >= 3
-    n_safe = np.where(ok, n, 1.0)[:, None]
+    w = seen.astype(float) if weights is None else np.where(seen, weights, 0.0)
+    w_sum = np.where(ok, w.sum(axis=1), 1.0)[:, None]
     obs0 = np.where(seen[..., None], obs, 0.0)
-    c_ref = (w @ ref) / n_safe                                 # (T, 3)
-    c_obs = np.einsum("tm,tmk->tk", w, obs0) / n_safe
-    p = (ref[None] - c_ref[:, None]) * w[..., None]            # (T, M, 3) centred, masked
-    q = (obs0 - c_obs[:, None]) * w[..., None]
-    h = np.einsum("tmi,tmj->tij", p, q)                        # cross-covariance
+    c_ref = (w @ ref) / w_sum                                  # (T, 3) weighted centroids
+    c_obs = np.einsum("tm,tmk->tk", w, obs0) / w_sum
+    p = ref[None] - c_ref[:, None]                             # (T, M, 3) centred
+    q = obs0 - c_obs[:, None]
+    h = np.einsum("tm,tmi,tmj->tij", w, p, q)                  # weighted cross-covariance
     u, _, vt = np.linalg.svd(h)
     d = np.sign(np.linalg.det(np.einsum("tij,tjk->tik", u, vt)))
     d = np.where(d == 0, 1.0, d)
@@ -97,9 +113,11 @@ def _fit(reference: np.ndarray, observed: np.ndarray, max_rms: float,
     rot = np.einsum("tji,tj,tkj->tik", vt, fix, u)             # V diag(1,1,d) U^T
     trans = c_obs - np.einsum("tij,tj->ti", rot, c_ref)
     resid = obs0 - (np.einsum("tij,mj->tmi", rot, ref) + trans[:, None])
-    sq = (resid**2).sum(axis=2) * w
-    rms = np.sqrt(sq.sum(axis=1) / n_safe[:, 0])
-    spread = np.linalg.svd(p, compute_uv=False)                # (T, 3) principal spreads
+    sq = (resid**2).sum(axis=2) * seen
+    rms = np.sqrt(sq.sum(axis=1) / np.where(ok, n, 1))
+    ps = p * seen[..., None]
+    lam = np.linalg.eigvalsh(np.einsum("tmi,tmj->tij", ps, ps))      # ascending
+    spread = np.sqrt(np.clip(lam[:, ::-1], 0.0, None))               # principal spreads
     ill = ok & (spread[:, 1] < min_spread_ratio * np.maximum(spread[:, 0], 1e-300))
     rot[~ok] = np.nan
     trans[~ok] = np.nan

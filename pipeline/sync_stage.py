@@ -29,7 +29,7 @@ from calib.clock import (
     IDENTITY,
     ClockFit,
     clock_from_data,
-    coarse_lag,
+    contact_lag,
     match_trigger,
     rising_edges,
     stamp_resolution_s,
@@ -65,7 +65,8 @@ class SyncParams:
     max_offset_s: float = 30.0       # data-driven clock: largest clock offset searched
     passband: float = 0.8            # resampler flat to this fraction of the mocap Nyquist
     max_fit_rms_m: float = 1.0e-3    # rigid fits with a larger residual are poor
-    tip_cutoff_hz: float = 20.0      # zero-phase low-pass of the tip track (0: off)
+    robust_scale_m: float = 0.3e-3   # Cauchy reweighting of the cluster fit (0: plain LS)
+    tip_cutoff_hz: float = 15.0      # zero-phase low-pass of the tip track (0: off)
     min_pivot_rotation_deg: float = 5.0
     min_correlation: float = 0.5     # data-driven clock: force must follow the depth this well
 
@@ -114,11 +115,16 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     cluster = mk.select(raw.indenter_markers)
 
     ref, pivot = _pivot(raw, p)
-    pose = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m)
+    pose = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m, robust_scale=p.robust_scale_m)
     tip = pose.apply(pivot.tip_body)
     tip[pose.poor] = np.nan
-    surface_point, normal = rest_plane(phantom, tip, mk.source)
-    depth_raw = (surface_point - tip) @ normal
+    points, quality = fill_gaps(t_m, np.concatenate([phantom, tip[:, None]], axis=1),
+                                p.max_gap_s)
+    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
+    quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
+    shaft = np.nanmean(cluster, axis=1) - tip
+    surface_point, normal = rest_plane(phantom, shaft, mk.source)
+    depth = (surface_point - points[:, -1]) @ normal
 
     tare, wrench = _force(raw, p.detect_n)
     t_f = _force_times(raw)
@@ -127,7 +133,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     def magnitude_at(t: np.ndarray) -> np.ndarray:
         return np.linalg.norm(force_at(t)[:, :3], axis=1)
 
-    clock = estimate_clock(raw, p, t_m, depth_raw, t_f, magnitude_at)
+    clock = estimate_clock(raw, p, t_m, depth, t_f, magnitude_at)
     _check_overlap(raw, clock, t_m, t_f)
 
     sampled = force_at(clock.to_logger(t_m))
@@ -136,12 +142,6 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     force_q = (force_q | np.where(over, FORCE_BITS["over_range"], 0)).astype(np.uint8)
     force, torque = sampled[:, :3], sampled[:, 3:]
     magnitude = np.linalg.norm(force, axis=1)
-
-    points = np.concatenate([phantom, tip[:, None]], axis=1)
-    points, quality = fill_gaps(t_m, points, p.max_gap_s)
-    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
-    quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
-    depth = (surface_point - points[:, -1]) @ normal
 
     noise = _noise_level(wrench, tare)
     presses = segment_presses(magnitude, rate, p.detect_n, max(p.contact_n, 5 * noise))
@@ -179,19 +179,21 @@ def _pivot(raw: RawSession, p: SyncParams) -> tuple[np.ndarray, PivotResult]:
                                            "of the indenter is unknown")
     cluster = raw.pivot.select(raw.indenter_markers)
     ref = cluster_reference(cluster, raw.pivot.source)
-    fit = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m)
+    fit = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m, robust_scale=p.robust_scale_m)
     good = fit.valid & ~fit.poor
     res = pivot_calibrate(fit.rotation[good], fit.translation[good], raw.pivot.source,
                           p.min_pivot_rotation_deg)
     return ref, res
 
 
-def rest_plane(phantom: np.ndarray, tip: np.ndarray, source: str | Path
+def rest_plane(phantom: np.ndarray, up: np.ndarray, source: str | Path
                ) -> tuple[np.ndarray, np.ndarray]:
-    """The phantom markers' rest plane: a point and the unit normal pointing to the indenter.
+    """The phantom markers' rest plane: a point and the unit normal out of the phantom.
 
-    Each marker's rest position is its median over the session (it is pressed only a small
-    part of the time); the plane is their least-squares fit.
+    Each marker's rest position is its median over the session (it is pressed only a part of
+    the time); the plane is their least-squares fit. The normal is turned to agree with ``up``
+    (T, 3): the indenter's shaft, from the tip to its marker cluster, which always stands
+    above the surface.
     """
     rest = np.nanmedian(phantom, axis=0)
     ok = np.isfinite(rest).all(axis=1)
@@ -199,8 +201,7 @@ def rest_plane(phantom: np.ndarray, tip: np.ndarray, source: str | Path
         raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
     centre = rest[ok].mean(axis=0)
     normal = np.linalg.svd(rest[ok] - centre)[2][2]
-    above = np.nanmedian((tip - centre) @ normal)
-    if np.isfinite(above) and above < 0:
+    if np.nanmedian(up @ normal) < 0:
         normal = -normal
     return centre, normal
 
@@ -275,7 +276,7 @@ def _data_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarr
     if np.isfinite(depth).sum() < 100:
         raise BadInput(src, "clock: the tip is tracked in too few frames to align the force")
     try:
-        lag0 = coarse_lag(t_m, depth, magnitude_at, (t_f[0], t_f[-1]), p.max_offset_s)
+        lag0 = contact_lag(t_m, depth, magnitude_at, (t_f[0], t_f[-1]), p.max_offset_s)
     except ValueError:
         raise BadInput(src, f"clock: force log and mocap recording do not overlap in time "
                             f"for any clock offset within +-{p.max_offset_s:g} s") from None
@@ -325,13 +326,20 @@ def _check_cluster(raw: RawSession, pose: RigidFit, presses: list[Press],
 
 
 def _contact_points(tip: np.ndarray, presses: list[Press], point: np.ndarray,
-                    normal: np.ndarray) -> np.ndarray:
-    """Each press's tip at peak force (median over its top frames), projected on the plane."""
+                    normal: np.ndarray, frames: int = 10) -> np.ndarray:
+    """Where each press touched: the tip over its first loaded frames, on the rest plane.
+
+    The onset, not the peak: a tilted press slides the tip sideways as it sinks in.
+    """
     out = np.full((len(presses), 3), np.nan)
     for k, pr in enumerate(presses):
-        seg = tip[pr.onset:pr.release]
-        if np.isfinite(seg).all(axis=1).any():
-            c = np.nanmedian(seg, axis=0)
+        seg = tip[pr.onset:min(pr.onset + frames, pr.release)]
+        seg = seg[np.isfinite(seg).all(axis=1)]
+        if len(seg) == 0:
+            seg = tip[pr.onset:pr.release]
+            seg = seg[np.isfinite(seg).all(axis=1)][:frames]
+        if len(seg):
+            c = np.median(seg, axis=0)
             out[k] = c - ((c - point) @ normal) * normal
     return out
 

@@ -71,7 +71,7 @@ def write_qtm_3d(
 
 
 def qtm_euler(rotations: np.ndarray) -> np.ndarray:
-    """(T, 3) roll, pitch, yaw (degrees) of body-to-lab rotations: R = Rx(roll) Ry(pitch) Rz(yaw)."""
+    """(T, 3) roll, pitch, yaw (deg) of body-to-lab rotations: R = Rx(roll) Ry(pitch) Rz(yaw)."""
     return Rotation.from_matrix(rotations).as_euler("XYZ", degrees=True)
 
 

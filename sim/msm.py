@@ -35,6 +35,9 @@ class MSMError(BadInput):
     def __init__(self, what: str) -> None:
         super().__init__("msm", what)
 
+    def __reduce__(self) -> tuple:       # so it crosses from a worker process intact
+        return MSMError, (self.what,)
+
 
 @dataclass(frozen=True)
 class MSMParams:

@@ -23,6 +23,7 @@ import json
 import math
 import multiprocessing
 import os
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -144,10 +145,12 @@ class Simulated:
     max_residual: float      # N, largest force on any mass of any state (float64 solution)
     iterations: int
     factorizations: int
+    cpu_s: float             # CPU seconds of the solves, summed over worker processes
 
 
-def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int]:
+def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int, float]:
     """One location, all its directions: (D, steps + 1, N, 3) float32 and solver counts."""
+    cpu = time.process_time()
     params, node, directions, steps, fmax, tol = args
     model = MSM(params)
     solver = StaticSolver(model, tol)
@@ -159,7 +162,8 @@ def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int]:
             raise MSMError(f"non-finite state at mass {node}, direction {d}")
         worst = max(worst, residual(model, states[-1], model.load(int(node), direction * fmax)))
         out[d] = states
-    return out, worst, solver.stats.iterations, solver.stats.factorizations
+    stats = solver.stats
+    return out, worst, stats.iterations, stats.factorizations, time.process_time() - cpu
 
 
 def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
@@ -174,20 +178,20 @@ def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = No
             for loc in locs]
     per_loc = p.directions * (p.steps + 1)
     points = np.empty((len(locs) * per_loc, params.n * params.n, 3), dtype=np.float32)
-    worst, its, facts = 0.0, 0, 0
+    worst, its, facts, cpu = 0.0, 0, 0, 0.0
     workers = max(1, min(workers, len(jobs)))
     pool = _pool(workers) if workers > 1 else None
     try:
         results = pool.imap(_simulate_location, jobs) if pool else map(_simulate_location, jobs)
         with progress(results, "simulating MSM locations", length=len(jobs)) as bar:
-            for k, (states, w, i, f) in enumerate(bar):
+            for k, (states, w, i, f, c) in enumerate(bar):
                 points[k * per_loc:(k + 1) * per_loc] = states.reshape(per_loc, -1, 3)
-                worst, its, facts = max(worst, w), its + i, facts + f
+                worst, its, facts, cpu = max(worst, w), its + i, facts + f, cpu + c
     finally:
         if pool:
             pool.terminate()
             pool.join()
-    return Simulated(locs, points, worst, its, facts)
+    return Simulated(locs, points, worst, its, facts, cpu)
 
 
 def _pool(workers: int) -> multiprocessing.pool.Pool:

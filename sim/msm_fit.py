@@ -85,9 +85,12 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
         rows = {int(s): np.flatnonzero(seq == s) for s in ids}
         wanted = np.sort(np.concatenate(list(rows.values())))
         pts = dict(zip(wanted.tolist(), points_ds[wanted].astype(float), strict=True))
-    if params is None:
-        params = MSMParams(**json.loads(_text(file_params))) if (
-            source == "msm" and file_params is not None) else MSMParams()
+    if params is None and source == "msm" and file_params is not None:
+        try:
+            params = MSMParams(**json.loads(_text(file_params)))
+        except (TypeError, ValueError) as e:
+            raise BadInput(path, f"unreadable msm_params attribute ({e})") from None
+    params = params or MSMParams()
     model = MSM(params)
     frame = None
     sequences = []

@@ -104,6 +104,7 @@ class StaticSolver:
         self.tangent = BandedTangent(model)
         self.stats = SolveStats()
         self._chol: np.ndarray | None = None
+        self._rest_chol: np.ndarray | None = None     # every sequence starts here
         self._last_iterations = 0
 
     def reset(self) -> None:
@@ -155,8 +156,15 @@ class StaticSolver:
                        f"(max |f| {_max_norm(g):.3g} N > tol {self.tol:g} N)")
 
     def _refactor(self, x: np.ndarray, convex: bool = False) -> None:
-        self._chol = self.tangent.factor(x.reshape(-1, 3), convex)
+        x = x.reshape(-1, 3)
+        at_rest = not convex and np.array_equal(x, self.model.rest)
+        if at_rest and self._rest_chol is not None:
+            self._chol = self._rest_chol
+            return
+        self._chol = self.tangent.factor(x, convex)
         self.stats.factorizations += 1
+        if at_rest:
+            self._rest_chol = self._chol
 
     def _evaluate(self, x: np.ndarray, f_ext: np.ndarray) -> tuple[float, np.ndarray]:
         """Energy and its gradient (minus the forces), flat; refuses non-finite values."""
@@ -218,7 +226,12 @@ def simulate_sequence(
     with blas_threads(1):
         for t in range(1, steps + 1):
             guess = states[t - 1] if t == 1 else 2 * states[t - 1] - states[t - 2]
-            states[t] = solver.solve(guess, model.load(node, direction * fmax * t / steps))
+            force = direction * fmax * t / steps
+            try:
+                states[t] = solver.solve(guess, model.load(node, force))
+            except MSMError as e:
+                raise MSMError(f"mass {node}, force {np.round(force, 4).tolist()} N (step {t}): "
+                               f"{e.what}") from None
     return states
 
 

@@ -9,8 +9,9 @@ must leave it a real gap to cross.
 Kinematics are linearised (a spring's strain is the relative displacement of its ends projected
 on its rest direction, over its rest length), and a spring of rest length ``L`` at strain ``e``
 stores ``kappa * L**2 * (e**2 / 2 + beta * e**4 / 4)``: stiff where it is strained, which makes
-the block stiffen as it is pressed deeper (depth about 4.5 mm at 0.5 N, 25.6 mm at 6.2 N and
-28.5 mm at 7.5 N for a normal press at the centre, like the paper's experimental phantom). The
+the block stiffen as it is pressed deeper (depth 5.3 mm at 0.5 N, 24.7 mm at 6.2 N and 27.0 mm
+at 7.5 N for a normal press at the centre; over a session of 20 presses the largest tip travel
+between two static states is about 30 mm, like the paper's experimental phantom). The
 energy is convex, so every load has exactly one equilibrium and the depth along the load rises
 monotonically with the force (its derivative is ``f^T K^-1 f > 0``).
 
@@ -41,8 +42,8 @@ class PhantomSpec:
 
     size: tuple[float, float, float] = (0.100, 0.100, 0.032)   # x, y, thickness (m)
     nodes: tuple[int, int, int] = (21, 21, 5)                  # lattice nodes along x, y, z
-    stiffness: float = 9.14          # kappa (N/m): a spring's stiffness at small strain
-    stiffening: float = 2.0          # beta: the quartic term of the spring energy
+    stiffness: float = 6.494         # kappa (N/m): a spring's stiffness at small strain
+    stiffening: float = 5.0          # beta: the quartic term of the spring energy
     marker_grid: int = 5             # 5 x 5 surface markers ...
     marker_pitch: float = 0.020      # ... 20 mm apart, centred on the block
     marker_radius: float = 0.0015    # 3 mm spheres: centre 1.5 mm above the surface

@@ -25,7 +25,9 @@ logger at ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``; the log starts befo
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import h5py
@@ -172,7 +174,14 @@ class Twin:
 
     def lab(self, p: np.ndarray) -> np.ndarray:
         """Phantom-frame points (..., 3) in the lab."""
-        return p @ self.to_lab[:3, :3].T + self.to_lab[:3, 3]
+        return _apply(self.to_lab, p)
+
+
+Lab = Callable[[np.ndarray], np.ndarray]
+
+
+def _apply(to_lab: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return np.asarray(p) @ to_lab[:3, :3].T + to_lab[:3, 3]
 
 
 # ------------------------------------------------------------------------------ entry point
@@ -186,8 +195,11 @@ def synthesize_session(out_dir: str | Path, seed: int = 0, locations: int = 5,
     ``params`` are further :class:`TwinParams` fields; ``rrd`` also writes a rerun recording of
     press ``view_press``.
     """
-    p = TwinParams(seed=seed, locations=locations, repeats=repeats, **params)  # type: ignore[arg-type]
+    p = TwinParams(seed=seed, locations=locations, repeats=repeats, **params)
     folder = _output_folder(out_dir)
+    if rrd is not None and not 0 <= view_press < locations * repeats:
+        raise BadInput("--view-press",
+                       f"press {view_press} does not exist (0..{locations * repeats - 1})")
     twin = simulate(p)
     write_twin(twin, folder, rrd, view_press)
     return folder
@@ -200,7 +212,7 @@ def simulate(p: TwinParams) -> Twin:
     g_place, g_hand, g_cam, g_force, g_clock, g_pivot, g_build, g_gap = rng
     phantom = Phantom(p.phantom)
     to_lab = _placement(g_place)
-    lab = _lab(to_lab)
+    lab = partial(_apply, to_lab)
     nodes = _choose_locations(g_place, phantom, p.locations)
     contacts = lab(np.array([phantom.contact_point(tuple(ij)) for ij in nodes]))
     targets = [(loc, rep, contacts[loc]) for rep in range(p.repeats)
@@ -219,25 +231,28 @@ def simulate(p: TwinParams) -> Twin:
     mocap.events = [(TRIGGER_EVENT, int(np.floor(t * p.rate_hz + 1e-9)) + 1, float(t))
                     for t in log.pulses] if p.trigger else []
     pivot = _pivot(p, indenter, lab, g_pivot, g_gap)
-    states = _states(p, hand, paths, lab, mocap)
+    states = _states(hand, paths, lab, mocap)
     return Twin(params=p, phantom=phantom, to_lab=to_lab, nodes=nodes, contacts=contacts,
                 indenter=indenter, sensor=sensor, hand=hand, paths=paths, mocap=mocap, log=log,
                 pivot=pivot, states=states)
 
 
 def _check_params(p: TwinParams) -> None:
-    if p.locations < 1 or p.repeats < 1:
-        raise BadInput(None, "locations and repeats must be at least 1")
-    if p.force_file not in ("csv", "mat"):
-        raise BadInput(None, f"force file must be csv or mat, not {p.force_file!r}")
-    if p.press_seconds is not None and not 2.0 <= p.press_seconds <= 60.0:
-        raise BadInput(None, "press duration must be between 2 and 60 s")
-    if not 2.0 <= p.pivot_seconds <= 600.0:
-        raise BadInput(None, "pivot recording must last between 2 and 600 s")
-    if p.drift_ppm is not None and abs(p.drift_ppm) > 1000:
-        raise BadInput(None, "clock drift beyond 1000 ppm is not a clock")
-    if p.offset_s is not None and abs(p.offset_s) > 3600:
-        raise BadInput(None, "clock offset beyond an hour is not plausible")
+    checks = [
+        ("--locations", p.locations >= 1, "must be at least 1"),
+        ("--repeats", p.repeats >= 1, "must be at least 1"),
+        ("--force-file", p.force_file in ("csv", "mat"), "must be csv or mat"),
+        ("--press-seconds", p.press_seconds is None or 2.0 <= p.press_seconds <= 60.0,
+         "must be between 2 and 60 s"),
+        ("--pivot-seconds", 2.0 <= p.pivot_seconds <= 600.0, "must be between 2 and 600 s"),
+        ("--drift", p.drift_ppm is None or abs(p.drift_ppm) <= 1000.0,
+         "beyond 1000 ppm is not a clock"),
+        ("--offset", p.offset_s is None or abs(p.offset_s) <= 3600.0,
+         "beyond an hour is not plausible"),
+    ]
+    for option, ok, what in checks:
+        if not ok:
+            raise BadInput(option, what)
 
 
 def _output_folder(out_dir: str | Path) -> Path:
@@ -264,10 +279,6 @@ def _placement(rng: np.random.Generator) -> np.ndarray:
     return out
 
 
-def _lab(to_lab: np.ndarray):  # noqa: ANN202 - a small closure
-    return lambda p: np.asarray(p) @ to_lab[:3, :3].T + to_lab[:3, 3]
-
-
 def _choose_locations(rng: np.random.Generator, phantom: Phantom, n: int,
                       min_gap: float = 0.015) -> np.ndarray:
     """``n`` candidate nodes at least ``min_gap`` apart, in random order."""
@@ -280,7 +291,7 @@ def _choose_locations(rng: np.random.Generator, phantom: Phantom, n: int,
             chosen.append(cand[i])
         if len(chosen) == n:
             return np.array(chosen)
-    raise BadInput(None, f"only {len(chosen)} indentation locations fit on the phantom "
+    raise BadInput("--locations", f"only {len(chosen)} locations fit on the phantom "
                          f"({min_gap * 1e3:.0f} mm apart); asked for {n}")
 
 
@@ -306,9 +317,9 @@ def _solve_presses(phantom: Phantom, hand: Hand, nodes: np.ndarray,
 # ------------------------------------------------------------------------------ mocap
 
 
-def _mocap(p: TwinParams, phantom: Phantom, lab, hand: Hand,  # noqa: ANN001
-           paths: list[LoadPath], indenter: IndenterGeometry, time_s: np.ndarray,
-           g_cam: np.random.Generator, g_gap: np.random.Generator) -> Mocap:
+def _mocap(p: TwinParams, phantom: Phantom, lab: Lab, hand: Hand, paths: list[LoadPath],
+           indenter: IndenterGeometry, time_s: np.ndarray, g_cam: np.random.Generator,
+           g_gap: np.random.Generator) -> Mocap:
     st = hand.state(time_s)
     rest_markers = lab(phantom.observe(np.zeros(phantom.n_dof))[1])
     tip = st.tip_air.copy()
@@ -358,9 +369,8 @@ def _force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor: Na
     t_m = (t_f - offset) / scale
 
     st = hand.state(t_m)
-    direction = np.array([hand.presses[k].direction if k >= 0 else np.zeros(3)
-                          for k in range(-1, len(hand.presses))])[st.press + 1]
-    on_tip = -st.force[:, None] * direction
+    directions = np.vstack([np.zeros(3), *(q.direction for q in hand.presses)])
+    on_tip = -st.force[:, None] * directions[st.press + 1]
     force = np.einsum("tji,tj->ti", st.rotation, on_tip)
     torque = np.cross(indenter.tip - indenter.sensor, force)
     tool = np.einsum("tji,j->ti", st.rotation, indenter.tool_mass * GRAVITY)
@@ -391,7 +401,7 @@ def _pulse_times(rng: np.random.Generator, end_s: float) -> np.ndarray:
 # ------------------------------------------------------------------------------ pivot, states
 
 
-def _pivot(p: TwinParams, indenter: IndenterGeometry, lab, g_pivot: np.random.Generator,  # noqa: ANN001
+def _pivot(p: TwinParams, indenter: IndenterGeometry, lab: Lab, g_pivot: np.random.Generator,
            g_gap: np.random.Generator) -> Pivot:
     """The tip in a divot on the table beside the phantom; the cluster swung about it."""
     time_s = np.arange(int(round(p.pivot_seconds * p.rate_hz))) / p.rate_hz
@@ -404,8 +414,7 @@ def _pivot(p: TwinParams, indenter: IndenterGeometry, lab, g_pivot: np.random.Ge
                  measured=measured)
 
 
-def _states(p: TwinParams, hand: Hand, paths: list[LoadPath], lab,  # noqa: ANN001
-            mocap: Mocap) -> States:
+def _states(hand: Hand, paths: list[LoadPath], lab: Lab, mocap: Mocap) -> States:
     rows: dict[str, list] = {k: [] for k in ("points", "force", "vector", "step", "press",
                                              "location", "time")}
     for k, (press, path) in enumerate(zip(hand.presses, paths, strict=True)):
@@ -461,9 +470,6 @@ def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
     names = [*PHANTOM_MARKERS, *twin.indenter.names]
     finals = [folder / FILES[k] for k in ("trial", "bodies", "pivot", "csv", "mat", "session",
                                           "truth")] + [folder / cal_name]
-    if rrd is not None and not 0 <= view_press < len(twin.hand.presses):
-        raise BadInput(None, f"press {view_press} to view does not exist "
-                             f"(0..{len(twin.hand.presses) - 1})")
     stamp, mat_date = _stamp(p.seed)
     columns = {"time": twin.log.time_s, **{g: twin.log.volts[:, i] for i, g in enumerate(GAUGES)}}
     formats = {"time": "%.3f", **dict.fromkeys(GAUGES, "%.6f"), TRIGGER_COLUMN: "%.4f"}

@@ -1,0 +1,95 @@
+"""How fast is the phantom twin, and is its fast static solver right?
+
+Times, as medians over repeats:
+
+* one press of the volumetric phantom (17 force levels, 20 degrees off the normal): the twin's
+  solver (nonlinear conjugate gradients preconditioned with the one factorisation of the rest
+  stiffness, cubic extrapolation between levels) against the peer, Newton's method with a
+  fresh sparse factorisation of the tangent stiffness at every iteration; both to the same
+  force tolerance, and the largest difference of their equilibria;
+* a default session (5 locations x 4 repeats, ``synthesize_session`` without a recording),
+  split into simulation and writing, against the peer that reads it back, ``pipeline ingest``.
+
+    python benchmarks/bench_twin.py [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from pipeline.ingest_stage import ingest_session
+from sim.phantom import Phantom
+from sim.twin import TwinParams, simulate, write_twin
+
+LEVELS = np.concatenate([[0.25], np.arange(0.5, 7.01, 0.5), [7.2, 7.3]])
+TILT = np.radians(20.0)
+DIRECTION = np.array([np.sin(TILT), 0.0, -np.cos(TILT)])
+LOCATION = (8, 12)
+
+
+def newton_path(ph: Phantom) -> np.ndarray:
+    """The peer: full Newton steps, a new sparse LU of the tangent at every iteration."""
+    unit = np.zeros(ph.n_dof)
+    for node, w in ph._patch(LOCATION):
+        unit[ph.dof[node]] += w * DIRECTION
+    A, AT, c, beta = ph._A, ph._AT, ph._energy, ph.spec.stiffening
+    u, out = np.zeros(ph.n_dof), []
+    for f in LEVELS:
+        for _ in range(50):
+            e = A @ u
+            g = AT @ (c * e * (1 + beta * e * e)) - f * unit
+            if np.abs(g).max() < ph.spec.tol:
+                break
+            k = (AT @ sp.diags(c * (1 + 3 * beta * e * e)) @ A).tocsc()
+            u = u - spla.splu(k, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                              options={"SymmetricMode": True}).solve(g)
+        out.append(ph.observe(u, LOCATION)[0])
+    return np.array(out)
+
+
+def median_time(fn, repeats: int) -> tuple[float, object]:  # noqa: ANN001
+    times, result = [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+
+    ph = Phantom()
+    ph._rest_lu                                            # noqa: B018 - factor once, untimed
+    fast, path = median_time(lambda: ph.load_path(LOCATION, DIRECTION, LEVELS), args.repeats)
+    slow, tips = median_time(lambda: newton_path(ph), args.repeats)
+    diff = np.abs(path.tip[1:] - tips).max()
+    print(f"phantom press ({len(LEVELS)} levels): twin solver {fast * 1e3:.0f} ms, "
+          f"Newton + LU per iteration {slow * 1e3:.0f} ms, ratio {slow / fast:.1f}x; "
+          f"largest tip difference {diff * 1e6:.2f} um")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "session"
+        sim_s, twin = median_time(lambda: simulate(TwinParams(seed=0)), args.repeats)
+        write_s, _ = median_time(lambda: write_twin(twin, folder), args.repeats)
+        read_s, _ = median_time(lambda: ingest_session(folder, Path(tmp) / "s.mcap"),
+                                args.repeats)
+        frames = len(twin.mocap.time_s)
+        print(f"default session ({len(twin.hand.presses)} presses, {frames} frames, "
+              f"{frames / twin.params.rate_hz:.0f} s): simulate {sim_s:.1f} s + write "
+              f"{write_s:.1f} s = {sim_s + write_s:.1f} s; peer ingest {read_s:.1f} s; "
+              f"ratio synth/ingest {(sim_s + write_s) / read_s:.1f}x")
+
+
+if __name__ == "__main__":
+    main()

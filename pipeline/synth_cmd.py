@@ -1,0 +1,62 @@
+"""``pipeline synth``: the click layer over :func:`sim.twin.synthesize_session`."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option, seed_option
+
+
+@click.command()
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--locations", type=click.IntRange(1, 10), default=5, show_default=True,
+              help="Indentation locations on the phantom.")
+@click.option("--repeats", type=click.IntRange(1, 50), default=4, show_default=True,
+              help="Presses per location (in rounds over the locations).")
+@click.option("--press-seconds", type=click.FloatRange(2.0, 60.0), default=None,
+              help="Mean duration of one press cycle in s (default about 6 s).")
+@click.option("--pivot-seconds", type=click.FloatRange(2.0, 600.0), default=20.0,
+              show_default=True, help="Length of the pivot-calibration recording (s).")
+@click.option("--trigger/--no-trigger", default=True, show_default=True,
+              help="Record sync pulses (force-log column 'trigger', QTM EVENT 'Trigger').")
+@click.option("--offset", "offset_s", type=float, default=None,
+              help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign).")
+@click.option("--drift", "drift_ppm", type=float, default=None,
+              help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign).")
+@click.option("--force-file", type=click.Choice(["csv", "mat"]), default="csv",
+              show_default=True, help="The force log session.toml names (both are written).")
+@click.option("--view-press", type=click.IntRange(0), default=0, show_default=True,
+              help="Press shown in the rerun recording.")
+@seed_option
+@rrd_option
+def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | None,
+          pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,
+          force_file: str, view_press: int, seed: int, rrd: Path | None,
+          no_rrd: bool) -> None:
+    """Simulate a phantom indentation session and write it as the lab would.
+
+    Reads nothing. Writes OUT_DIR (new, empty, or an earlier synth session): session.toml;
+    indentation.tsv and indentation_6D.tsv (QTM TSV 3D of 25 phantom + 4 indenter markers and
+    6D of the body 'Indenter', 500 Hz, noise and gaps); pivot.tsv (QTM TSV 3D, the tip in a
+    divot); force.csv and force.mat (Speedgoat log at 1 kHz on its own clock: six Nano17
+    gauge voltages with bias, and the trigger); FT<serial>.cal (ATI calibration, SI-12-0.12);
+    truth.h5 (noise-free markers and tip on the mocap clock, true force, clock offset and
+    drift, tip offset, static states every 0.5 N); and a rerun recording of one press beside
+    its truth (--rrd, default OUT_DIR/recording.rrd). The same seed gives the same bytes of
+    data. `pipeline ingest OUT_DIR` reads the folder as it is.
+    """
+    from sim.twin import synthesize_session
+
+    rrd_path = resolve_rrd(out_dir, rrd, no_rrd)
+    start = time.perf_counter()
+    folder = synthesize_session(
+        out_dir, seed=seed, locations=locations, repeats=repeats, rrd=rrd_path,
+        view_press=view_press, press_seconds=press_seconds,
+        pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
+        force_file=force_file)
+    click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, seed {seed}, "
+               f"in {time.perf_counter() - start:.1f} s"
+               + (f"; recording {rrd_path}" if rrd_path else ""))

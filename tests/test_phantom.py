@@ -1,0 +1,106 @@
+"""The twin's volumetric phantom: equilibrium, monotone stiffening force-depth, calibration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.phantom import Phantom, PhantomSpec
+
+LEVELS = np.array([0.25, 0.5, 1.0, 2.0, 4.0, 6.2, 7.5])
+
+
+@pytest.fixture(scope="module")
+def phantom() -> Phantom:
+    return Phantom()
+
+
+@pytest.fixture(scope="module")
+def centre_path(phantom: Phantom):
+    return phantom.load_path((10, 10), np.array([0.0, 0.0, -1.0]), LEVELS)
+
+
+def _nodal_forces(ph: Phantom, u: np.ndarray) -> np.ndarray:
+    """Spring forces on every node, summed spring by spring (independent of the solver's
+    sparse matrices): tension ``kappa * L * (e + beta e^3)`` along the rest direction."""
+    s = ph.spec
+    disp = np.zeros_like(ph.rest)
+    free = ph.dof[:, 0] >= 0
+    disp[free] = u.reshape(-1, 3)
+    i, j = ph.springs[:, 0], ph.springs[:, 1]
+    delta = ph.rest[j] - ph.rest[i]
+    length = np.linalg.norm(delta, axis=1)
+    n = delta / length[:, None]
+    e = ((disp[j] - disp[i]) * n).sum(axis=1) / length
+    tension = s.stiffness * length * (e + s.stiffening * e**3)
+    out = np.zeros_like(ph.rest)
+    np.add.at(out, i, tension[:, None] * n)
+    np.add.at(out, j, -tension[:, None] * n)
+    return out
+
+
+def test_equilibrium_balances_the_load(phantom: Phantom) -> None:
+    d = np.array([0.3, -0.2, -1.0])
+    d /= np.linalg.norm(d)
+    load = np.zeros(phantom.n_dof)
+    node = phantom.top(8, 12)
+    load[phantom.dof[node]] = 5.0 * d
+    u = phantom.solve(load)
+    forces = _nodal_forces(phantom, u)
+    free = phantom.dof[:, 0] >= 0
+    applied = np.zeros_like(phantom.rest)
+    applied[node] = 5.0 * d
+    # every free node is balanced, and the table carries the whole load
+    assert np.abs(forces[free] + applied[free]).max() < 2 * phantom.spec.tol
+    np.testing.assert_allclose(forces[~free].sum(axis=0), 5.0 * d, atol=1e-3)
+
+
+def test_force_depth_rises_monotonically_and_stiffens(centre_path) -> None:
+    depth = -(centre_path.tip[:, 2] - centre_path.tip[0, 2]) * 1e3      # mm
+    assert np.all(np.diff(depth) > 0)
+    slope = np.diff(depth) / np.diff(centre_path.forces)                # mm per N
+    assert np.all(np.diff(slope) < 0)                                   # stiffening
+    # the paper's phantom: a few mm at 0.5 N, 25-30 mm at 6-7.5 N
+    assert 4.0 < depth[2] < 7.0
+    assert 22.0 < depth[-2] < 28.0
+    assert 25.0 < depth[-1] < 30.0
+
+
+def test_markers_follow_the_surface(phantom: Phantom, centre_path) -> None:
+    rest = centre_path.markers[0]
+    assert np.allclose(rest[:, 2], phantom.spec.size[2] + phantom.spec.marker_radius)
+    np.testing.assert_allclose(rest[[0, 4, 20, 24], :2] * 1e3,
+                               [[-40, -40], [40, -40], [-40, 40], [40, 40]], atol=1e-9)
+    drop = rest[:, 2] - centre_path.markers[-1][:, 2]
+    # the marker pressed under (the centre one) sinks most; its neighbours follow; the corners
+    # barely move (they even bulge up a little, the material pushed aside)
+    assert drop.argmax() == 12
+    assert np.all(drop[[7, 11, 13, 17]] > 0.04 * drop[12])
+    assert np.abs(drop[[0, 4, 20, 24]]).max() < 0.02 * drop[12]
+
+
+def test_oblique_press_depth_monotonic_and_interpolation_exact(phantom: Phantom) -> None:
+    d = np.array([np.sin(np.radians(20)), 0.0, -np.cos(np.radians(20))])
+    path = phantom.load_path((6, 14), d, LEVELS)
+    along = (path.tip - path.tip[0]) @ d
+    assert np.all(np.diff(along) > 0)
+    assert np.all(np.diff(-(path.tip[:, 2] - path.tip[0, 2])) > 0)
+    assert (path.tip[-1] - path.tip[0])[0] > 0                      # pushed along +x as well
+    np.testing.assert_allclose(path.interpolate(path.forces, "markers"), path.markers,
+                               atol=1e-12)
+    mid = path.interpolate(np.array([3.0]), "tip")[0]
+    assert path.tip[4] @ d < mid @ d < path.tip[5] @ d
+
+
+def test_locations_keep_clear_of_markers(phantom: Phantom) -> None:
+    cand = phantom.candidate_locations()
+    assert len(cand) > 20
+    gap = np.abs(cand[:, None, :] - phantom.marker_ij[None]).max(axis=2).min(axis=1)
+    assert gap.min() >= 2
+
+
+def test_stiffer_material_presses_less() -> None:
+    soft = Phantom().load_path((10, 10), [0, 0, -1], np.array([2.0]))
+    stiff = Phantom(PhantomSpec(stiffness=13.0)).load_path((10, 10), [0, 0, -1],
+                                                           np.array([2.0]))
+    assert (stiff.tip[0, 2] - stiff.tip[-1, 2]) < (soft.tip[0, 2] - soft.tip[-1, 2])
