@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "simulate": "pipeline.simulate_cmd:simulate",
     "fit-msm": "pipeline.simulate_cmd:fit_msm",
     "inspect": "pipeline.inspect_cmd:inspect",
+    "demo": "pipeline.demo_cmd:demo",
 }
 
 

@@ -1,0 +1,48 @@
+"""``pipeline demo``: every stage on a small synthetic session, as a user would type them."""
+
+from __future__ import annotations
+
+import shlex
+import time
+from pathlib import Path
+
+import click
+
+from pipeline.options import seed_option
+
+
+def demo_steps(out: Path, seed: int) -> list[list[str]]:
+    """The command lines the demo runs, in order (also printed, so they can be copied)."""
+    s = str(seed)
+    return [
+        ["synth", str(out / "session"), "--seed", s, "--locations", "3", "--repeats", "2"],
+        ["ingest", str(out / "session"), "--out", str(out / "session.mcap")],
+        ["sync", str(out / "session.mcap"), "--out", str(out / "synced.h5")],
+        ["simulate", "--out", str(out / "msm.h5"), "--locations", "10", "--directions", "3",
+         "--seed", s],
+        ["inspect", str(out / "synced.h5")],
+    ]
+
+
+@click.command()
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
+              show_default=True, help="Folder for everything the demo writes.")
+@seed_option
+@click.pass_context
+def demo(ctx: click.Context, out: Path, seed: int) -> None:
+    """Run every stage on a small synthetic session (small settings, a minute or two).
+
+    Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
+    session.mcap (ingest), synced.h5 (sync), msm.h5 (mass-spring states), and a rerun
+    recording beside each (open one with `rerun FILE.rrd`).
+    """
+    root = ctx.find_root().command
+    for args in demo_steps(out, seed):
+        click.echo(f"\n$ pipeline {shlex.join(args)}", err=True)
+        started = time.perf_counter()
+        sub = root.make_context("pipeline", list(args), parent=ctx.find_root())
+        with sub:
+            root.invoke(sub)
+        click.echo(f"  ({time.perf_counter() - started:.1f} s)", err=True)
+    click.echo(f"\ndemo finished: outputs in {out}; recordings: "
+               + ", ".join(str(p) for p in sorted(out.rglob("*.rrd"))))
