@@ -14,7 +14,7 @@ from pipeline.errors import BadInput
 
 FORMATS = (
     "qtm_tsv_3d", "qtm_tsv_6d", "c3d", "qtm_mat", "force_csv", "force_mat", "force_parquet",
-    "ati_cal", "mcap", "hdf5", "json",
+    "ati_cal", "mcap", "hdf5", "json", "session_toml",
 )
 _HDF5 = b"\x89HDF\r\n\x1a\n"
 _HEAD = 4096
@@ -106,11 +106,18 @@ def detect_format(path: str | Path) -> str:
     head = _text(_head(path)) or ""
     if kind == "xml" and "<FTSensor" in head:
         return "ati_cal"
+    if kind == "text" and _is_session_toml(head):
+        return "session_toml"
     if kind == "text":
         fmt = _text_format(path, head)
         if fmt:
             return fmt
     raise BadInput(path, "unknown format")
+
+
+def _is_session_toml(head: str) -> bool:
+    """A session.toml declares its schema, or at least the [mocap] and [force] tables."""
+    return "phantom.session" in head or ("[mocap]" in head and "[force]" in head)
 
 
 def _text_format(path: str | Path, head: str) -> str | None:

@@ -302,6 +302,27 @@ def _inspect_json(path: Path) -> dict[str, Any]:
             "details": {"keys": sorted(k for k in doc if k != "provenance")}}
 
 
+def _inspect_session(path: Path) -> dict[str, Any]:
+    """A session.toml: which files it names and which markers belong to what."""
+    from data_schema.session import SCHEMA, VERSION, read_session
+
+    if path.name != "session.toml":
+        raise BadInput(path, "a session file must be named session.toml inside its folder")
+    cfg = read_session(path.parent)
+    files = {"mocap": cfg.mocap.file, "bodies": cfg.mocap.bodies_file, "force": cfg.force.file,
+             "calibration": cfg.force.calibration, "pivot": cfg.pivot_file}
+    return {
+        "schema": cfg.raw.get("schema", SCHEMA), "schema_version": cfg.raw.get(
+            "schema_version", VERSION),
+        "markers": cfg.mocap.phantom_markers + cfg.mocap.indenter_markers,
+        "channels": cfg.force.channels,
+        "units": {"force_channels": ",".join(cfg.force.units), "force_time": cfg.force.time_unit},
+        "details": {"name": cfg.name, "phantom_markers": len(cfg.mocap.phantom_markers),
+                    "indenter_markers": cfg.mocap.indenter_markers, "force_kind": cfg.force.kind,
+                    "files": {k: v.name for k, v in files.items() if v is not None}},
+    }
+
+
 def _inspect_rrd(path: Path) -> dict[str, Any]:
     from pipeline.recording import rrd_entities, rrd_has_blueprint
 
@@ -365,4 +386,5 @@ _INSPECT: dict[str, Callable[[Path], dict[str, Any]]] = {
     "qtm_mat": _inspect_qtm_mat, "force_csv": _inspect_force, "force_mat": _inspect_force,
     "force_parquet": _inspect_force, "ati_cal": _inspect_cal, "mcap": _inspect_mcap,
     "hdf5": _inspect_hdf5, "json": _inspect_json, "rrd": _inspect_rrd,
+    "session_toml": _inspect_session,
 }

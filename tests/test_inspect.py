@@ -224,3 +224,22 @@ def test_text_summary_is_readable():
     assert "format:      qtm_tsv_3d" in res.output
     assert "frames:      904 at 256 Hz (3.531 s)" in res.output
     assert "missing:     7 samples" in res.output
+
+
+def test_inspect_session_toml(tmp_path):
+    """A session.toml summary names its markers, channels and files."""
+    import json as _json
+
+    from click.testing import CliRunner
+
+    from pipeline.cli import cli
+    from sim.twin import synthesize_session
+
+    folder = synthesize_session(tmp_path / "s", seed=3, locations=1, repeats=1,
+                                press_seconds=3.0, pivot_seconds=3.0)
+    res = CliRunner().invoke(cli, ["inspect", str(folder / "session.toml"), "--json"])
+    assert res.exit_code == 0, res.output
+    s = _json.loads(res.output)
+    assert s["format"] == "session_toml" and s["schema"] == "phantom.session"
+    assert len(s["markers"]) == 29 and s["details"]["phantom_markers"] == 25
+    assert s["details"]["files"]["pivot"] == "pivot.tsv"

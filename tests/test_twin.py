@@ -270,8 +270,6 @@ def test_bad_options_and_foreign_folders(tmp_path: Path) -> None:
 
 def test_inspect_reads_every_data_file(skewed: Path) -> None:
     for f in sorted(skewed.iterdir()):
-        if f.name == "session.toml":
-            continue                         # inspect has no session.toml summary (yet)
         res = run(["inspect", str(f)])
         assert res.exit_code == 0, (f.name, res.output)
 
