@@ -63,7 +63,7 @@ def fit_rigid(
     """
     fit = _fit(reference, observed, max_rms, min_spread_ratio)
     if robust_scale:
-        for _ in range(3):
+        for _ in range(2):
             r = np.linalg.norm(observed - fit.apply_all(reference), axis=2)
             weights = 1.0 / (1.0 + (np.nan_to_num(r) / robust_scale) ** 2)
             fit = _fit(reference, observed, max_rms, min_spread_ratio, weights)

@@ -1,0 +1,140 @@
+"""Accuracy and speed of `pipeline sync` on default-size phantom-twin sessions.
+
+For each seed: synthesise a session (5 locations x 4 repeats), ingest it, sync it with the
+trigger clock and with the data-driven clock, and compare both with the twin's truth. Prints
+the median and worst error over seeds against the issue's targets, and the ratios against
+peers measured in the same run:
+
+* clock: the data-driven estimate against the trigger (error ratio);
+* force: our anti-aliased resampler against naive decimation (the logger sample nearest each
+  mocap frame, i.e. every other sample), same clock and tare;
+* tip: the low-passed, robustly fitted tip against a plain per-frame least-squares tip;
+* wall time of sync (median over repeats) with and without the rerun recording.
+
+Run: ``python benchmarks/bench_sync.py [--seeds 5] [--repeats 3] [--workdir DIR]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from calib.force import apply_calibration
+from ingest.mcap_io import read_raw_mcap
+from pipeline.ingest_stage import ingest_session
+from pipeline.progress import set_quiet
+from pipeline.sync_accuracy import TARGETS, sync_errors
+from pipeline.sync_stage import SyncParams, run_sync
+from sim.twin import synthesize_session
+
+
+def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
+    """Force-magnitude RMS error when each mocap frame takes the nearest logger sample."""
+    raw = read_raw_mcap(mcap)
+    with h5py.File(synced) as s, h5py.File(truth) as t:
+        bias = s["calibration/force_bias"][:]
+        cal = s["calibration"].attrs
+        offset, drift = cal["clock_offset_s"], cal["clock_drift_ppm"]
+        true_force = t["force/magnitude"][:]
+        rate = t.attrs["rate_hz"]
+        matrix = raw.calibration.matrix if raw.force.kind == "gauge" else None
+        mag = np.linalg.norm(apply_calibration(raw.force.values, bias, matrix)[:, :3], axis=1)
+        t_f = raw.force.time_ns * 1e-9
+        err = []
+        for g in s["presses"].values():
+            t_m = g["time_ns"][:] * 1e-9
+            j = np.clip(np.round((offset + (1 + drift * 1e-6) * t_m - t_f[0]) *
+                                 raw.force.rate_hz).astype(int), 0, len(t_f) - 1)
+            err.append(mag[j] - true_force[np.round(t_m * rate).astype(int)])
+    e = np.concatenate(err)
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def run(seeds: int, repeats: int, workdir: Path) -> None:
+    set_quiet(True)
+    rows: dict[str, list[dict[str, float]]] = {"trigger": [], "data": [], "plain_tip": []}
+    naive, times, times_rrd = [], [], []
+    for seed in range(seeds):
+        folder = synthesize_session(workdir / f"s{seed}", seed=seed)
+        mcap = workdir / f"s{seed}.mcap"
+        ingest_session(folder, mcap)
+        truth = folder / "truth.h5"
+        for method in ("trigger", "data"):
+            out = workdir / f"s{seed}_{method}.h5"
+            start = time.perf_counter()
+            run_sync(mcap, out, params=SyncParams(clock=method))
+            if method == "trigger":
+                times.append(time.perf_counter() - start)
+            rows[method].append(sync_errors(out, truth))
+        naive.append(naive_force_rms(mcap, workdir / f"s{seed}_trigger.h5", truth))
+        plain = workdir / f"s{seed}_plain.h5"
+        run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
+        rows["plain_tip"].append(sync_errors(plain, truth))
+        print(f"seed {seed}: done", flush=True)
+    mcap = workdir / "s0.mcap"
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run_sync(mcap, workdir / "t.h5")
+        times.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        run_sync(mcap, workdir / "t.h5", workdir / "t.rrd")
+        times_rrd.append(time.perf_counter() - start)
+    _report(rows, naive, times, times_rrd, seeds)
+
+
+def _report(rows: dict[str, list[dict[str, float]]], naive: list[float], times: list[float],
+            times_rrd: list[float], seeds: int) -> None:
+    def stat(method: str, key: str) -> tuple[float, float]:
+        v = np.array([r[key] for r in rows[method]])
+        return float(np.median(v)), float(np.max(v))
+
+    print(f"\nsync accuracy against the twin's truth, {seeds} default-size sessions "
+          "(5 locations x 4 repeats)")
+    print(f"{'error':<18}{'target':>8}{'trigger med':>13}{'max':>9}{'data med':>10}{'max':>9}"
+          f"{'pass':>6}")
+    for key, target in TARGETS.items():
+        tm, tx = stat("trigger", key)
+        dm, dx = stat("data", key)
+        print(f"{key:<18}{target:>8.3g}{tm:>13.4f}{tx:>9.4f}{dm:>10.4f}{dx:>9.4f}"
+              f"{'yes' if tx <= target else 'NO':>6}")
+    missed = sum(r["presses_missed"] for r in rows["trigger"])
+    mixed = sum(r["locations_mixed"] for r in rows["trigger"])
+    print(f"presses found {sum(r['presses'] for r in rows['trigger']):.0f}, missed "
+          f"{missed:.0f}, location ids wrong {mixed:.0f}")
+    print("\npeers (same sessions, median over seeds; ratio = peer error / ours)")
+    for key, label in (("clock_offset_ms", "clock offset [ms]"),
+                       ("clock_drift_ppm", "clock drift [ppm]")):
+        tm, dm = stat("trigger", key)[0], stat("data", key)[0]
+        print(f"  {label:<34} trigger {tm:.4f}  data-driven {dm:.4f}  ratio "
+              f"{dm / max(tm, 1e-12):.2f}")
+    ours_f = stat("trigger", "force_rms_n")[0]
+    print(f"  {'force magnitude RMS [N]':<34} anti-aliased {ours_f:.4f}  naive decimation "
+          f"{np.median(naive):.4f}  ratio {np.median(naive) / ours_f:.2f}")
+    ours_t, plain_t = stat("trigger", "tip_rms_mm")[0], stat("plain_tip", "tip_rms_mm")[0]
+    print(f"  {'tip RMS [mm]':<34} robust+low-pass {ours_t:.4f}  plain LS {plain_t:.4f}  "
+          f"ratio {plain_t / ours_t:.2f}")
+    print(f"\nsync wall time (s, median): {np.median(times):.2f} without recording, "
+          f"{np.median(times_rrd):.2f} with; ratio {np.median(times_rrd) / np.median(times):.2f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--workdir", type=Path, default=None)
+    a = ap.parse_args()
+    if a.workdir is not None:
+        a.workdir.mkdir(parents=True, exist_ok=True)
+        run(a.seeds, a.repeats, a.workdir)
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            run(a.seeds, a.repeats, Path(tmp))
+
+
+if __name__ == "__main__":
+    main()
