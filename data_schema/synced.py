@@ -6,7 +6,9 @@ margin before contact onset to a margin after release, so the unloaded start sta
 indenter tip as the 26th point, the force vector in the sensor frame (= indenter body frame)
 resampled onto the frame times, its magnitude, the tip's depth into the surface, and quality
 bits per point (``QUALITY_BITS``) and per force sample (``FORCE_BITS``). Group attributes give
-the location id, repeat number and the onset/peak/release frame indices within the press.
+the location id, repeat number, the onset/peak/release frame indices within the press (release
+is one past the last loaded frame) and ``points_missing_throughout`` (indices of points with no
+sample from onset to release: never filled in).
 
 ``calibration/`` holds what sync measured, with its uncertainty: the cluster shape and tip
 offset (pivot calibration), the force bias and tare interval, the rest surface plane used for

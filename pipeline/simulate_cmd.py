@@ -112,8 +112,8 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int,
     Reads STATES (a phantom.states file: extracted lab states or MSM states). Finds
     (k_between, k_fixed) minimising the mean distance between the measured points and the
     MSM's static response to the measured loads (see sim/msm_fit.py for how lab points are
-    placed on the grid). Prints a one-line summary; --out gets the constants, the distances
-    and the full MSM parameters as JSON.
+    placed on the grid). Prints a one-line summary, and writes --out (when given): the
+    constants, the distances and the full MSM parameters as JSON.
     """
     from pipeline.atomic import atomic_output
     from pipeline.provenance import make_provenance

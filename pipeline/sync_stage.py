@@ -3,12 +3,13 @@
 Steps, each a function of :mod:`calib` or :mod:`pipeline.presses`:
 
 1. the indenter cluster's shape and the tip offset from the pivot recording (pivot calibration);
-2. the cluster's pose in every trial frame (3 of 4 markers suffice; poor fits flagged) and the
-   tip, the 26th point;
-3. the force tare from the unloaded start of the log and the 6x6 calibration matrix;
-4. the clock: trigger pulses when recorded, otherwise the tip motion against the force;
-5. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock;
-6. short marker gaps filled, longer ones kept missing and flagged;
+2. the cluster's pose in every trial frame (3 of 4 markers suffice; robustly reweighted; poor
+   or ill-conditioned fits flagged and dropped) and the tip, the 26th point;
+3. short marker gaps filled, longer ones kept missing and flagged; the tip track low-passed
+   (zero phase) against the lever arm's noise; the tip depth below the phantom's rest plane;
+4. the force tare from the unloaded start of the log and the 6x6 calibration matrix;
+5. the clock: trigger pulses when recorded, otherwise the tip depth against the force;
+6. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock;
 7. presses from contact onset to release, each with its location id and repeat number, cut
    out with a margin of unloaded frames on both sides.
 
@@ -35,7 +36,7 @@ from calib.clock import (
     stamp_resolution_s,
 )
 from calib.force import Tare, apply_calibration, unloaded_start
-from calib.gaps import fill_gaps
+from calib.gaps import MISSING, fill_gaps
 from calib.pivot import PivotResult, pivot_calibrate
 from calib.resample import antialiased_interpolant
 from calib.rigid import RigidFit, cluster_reference, fit_rigid
@@ -424,6 +425,8 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
                 "peak_index": pr.peak, "release_index": pr.release,
                 "onset_ns": int(rec.time_ns[pr.onset]),
                 "release_ns": int(rec.time_ns[pr.release - 1]),
+                "points_missing_throughout": np.flatnonzero(
+                    (rec.quality[pr.onset:pr.release] & MISSING).all(axis=0)).astype(np.int64),
             })
 
 

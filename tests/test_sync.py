@@ -21,7 +21,7 @@ from pipeline.cli import cli
 from pipeline.ingest_stage import ingest_session
 from pipeline.recording import rrd_entities
 from pipeline.sync_accuracy import TARGETS, sync_errors
-from pipeline.sync_stage import SyncParams, run_sync, sync_session
+from pipeline.sync_stage import SyncParams, run_sync, sync_session, write_synced
 from sim.twin import synthesize_session
 
 SEEDS = (0, 1, 2, 3, 4)
@@ -102,7 +102,8 @@ def test_gap_flags_follow_what_the_cameras_missed(sessions: dict) -> None:
         assert n_filled > 0
 
 
-def test_marker_missing_through_a_press_is_not_invented(sessions: dict) -> None:
+def test_marker_missing_through_a_press_is_not_invented(sessions: dict, tmp_path: Path
+                                                        ) -> None:
     _, mcap, _ = sessions[2]
     raw = read_raw_mcap(mcap)
     t = raw.markers.time_ns * 1e-9
@@ -113,6 +114,10 @@ def test_marker_missing_through_a_press_is_not_invented(sessions: dict) -> None:
         inside = slice(rec.press.onset, rec.press.release)
         assert np.isnan(rec.points[inside, 12]).all()
         assert (rec.quality[inside, 12] == MISSING).all()
+    write_synced(tmp_path / "m.h5", r, {}, "m.mcap")
+    with h5py.File(tmp_path / "m.h5") as h:
+        for g in h["presses"].values():
+            assert 12 in g.attrs["points_missing_throughout"]
 
 
 def test_data_driven_clock_on_the_twin(sessions: dict) -> None:
