@@ -15,7 +15,7 @@ def demo_steps(out: Path, seed: int) -> list[list[str]]:
     """The command lines the demo runs, in order (also printed, so they can be copied)."""
     s = str(seed)
     return [
-        ["synth", str(out / "session"), "--seed", s, "--locations", "3", "--repeats", "2"],
+        ["synth", str(out / "session"), "--seed", s, "--locations", "5", "--repeats", "4"],
         ["ingest", str(out / "session"), "--out", str(out / "session.mcap")],
         ["sync", str(out / "session.mcap"), "--out", str(out / "synced.h5")],
         ["simulate", "--out", str(out / "msm.h5"), "--locations", "10", "--directions", "3",
@@ -44,5 +44,17 @@ def demo(ctx: click.Context, out: Path, seed: int) -> None:
         with sub:
             root.invoke(sub)
         click.echo(f"  ({time.perf_counter() - started:.1f} s)", err=True)
+    _report_accuracy(out)
     click.echo(f"\ndemo finished: outputs in {out}; recordings: "
                + ", ".join(str(p) for p in sorted(out.rglob("*.rrd"))))
+
+
+def _report_accuracy(out: Path) -> None:
+    """Print how close sync came to the twin's truth, against the accuracy targets."""
+    from pipeline.sync_accuracy import TARGETS, sync_errors
+
+    errors = sync_errors(out / "synced.h5", out / "session" / "truth.h5")
+    click.echo("\nsync against the twin's truth (error / target):")
+    for key, target in TARGETS.items():
+        mark = "ok" if errors[key] <= target else "OVER"
+        click.echo(f"  {key:18} {errors[key]:9.4f} / {target:<6} {mark}")
