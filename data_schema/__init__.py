@@ -1,7 +1,7 @@
 """Versioned, machine-checkable descriptions of every file the pipeline writes, and validators.
 
 Each file kind has one schema module here (``states``, ``synced``, ``truth``, ``raw_mcap``,
-``session``). Every stage calls :func:`validate_h5` (or the MCAP/JSON validator) on what it
+``session``, ``json_docs``). Every stage calls :func:`validate_h5` (or the MCAP/JSON validator) on what it
 reads and on what it writes, so a file that does not match its contract never travels further.
 """
 

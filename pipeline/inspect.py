@@ -278,28 +278,38 @@ def _validity(path: Path, schema: str | None) -> str | None:
     layout = schema_for(schema) if schema else None
     if layout is None:
         return None
-    try:
-        validate_h5(path, layout)
-    except BadInput as e:
-        return f"invalid: {e.what}"
-    return "valid"
+    return _valid(lambda: validate_h5(path, layout))
 
 
 def _inspect_json(path: Path) -> dict[str, Any]:
+    from data_schema.json_docs import JSON_SCHEMAS, validate_folds, validate_json_doc
+
     try:
         doc = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise BadInput(path, f"not valid JSON ({e})") from None
     if isinstance(doc, list):
-        details = {"items": len(doc)}
+        details: dict[str, Any] = {"items": len(doc)}
         if all(isinstance(x, dict) and {"train", "val"} <= set(x) for x in doc):
-            details["folds"] = [{"train": len(x["train"]), "val": len(x["val"])} for x in doc]
-        return {"details": details}
+            details["folds"] = [{k: len(x[k]) for k in ("train", "val", "test") if k in x}
+                                for x in doc]
+            details["valid"] = _valid(lambda: validate_folds(path))
+        return {"schema": "phantom.folds" if "folds" in details else None, "details": details}
     if not isinstance(doc, dict):
         return {"details": {"value": _short(doc)}}
+    details = {"keys": sorted(k for k in doc if k != "provenance")}
+    if doc.get("schema") in JSON_SCHEMAS:
+        details["valid"] = _valid(lambda: validate_json_doc(path, JSON_SCHEMAS[doc["schema"]]))
     return {"schema": doc.get("schema"), "schema_version": doc.get("schema_version"),
-            "provenance": doc.get("provenance"),
-            "details": {"keys": sorted(k for k in doc if k != "provenance")}}
+            "provenance": doc.get("provenance"), "details": details}
+
+
+def _valid(check: Callable[[], object]) -> str:
+    try:
+        check()
+    except BadInput as e:
+        return f"invalid: {e.what}"
+    return "valid"
 
 
 def _inspect_session(path: Path) -> dict[str, Any]:

@@ -115,6 +115,7 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int,
     placed on the grid). Prints a one-line summary, and writes --out (when given): the
     constants, the distances and the full MSM parameters as JSON.
     """
+    from data_schema.json_docs import MSM_PARAMS, validate_json_doc
     from pipeline.atomic import atomic_output
     from pipeline.provenance import make_provenance
     from sim.msm_fit import fit_msm as run_fit
@@ -123,7 +124,7 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int,
     sequences, params = read_measured(states, max_sequences=max_sequences, seed=seed)
     result = run_fit(sequences, params, start=start)
     record = {
-        "schema": "phantom.msm_params", "schema_version": "1.0",
+        "schema": MSM_PARAMS.name, "schema_version": MSM_PARAMS.version,
         **asdict(result), "msm_params": {**params.as_dict(), "k_between": result.k_between,
                                          "k_fixed": result.k_fixed},
         "provenance": make_provenance("fit-msm", {"max_sequences": max_sequences,
@@ -134,6 +135,7 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int,
     if out is not None:
         with atomic_output(out) as tmp:
             tmp.write_text(text + "\n")
+            validate_json_doc(tmp, MSM_PARAMS)
     click.echo(f"k_between {result.k_between:.4g} N/m, k_fixed {result.k_fixed:.4g} N/m: mean "
                f"distance {result.mean_distance_m * 1e3:.4g} mm (start "
                f"{result.start_distance_m * 1e3:.4g} mm) over {result.states} states of "
