@@ -12,7 +12,11 @@ and prints the ratio (target: ingest within 1.5x of the bare parse). Peak memory
 fresh subprocess (``ru_maxrss`` growth over the imports), is compared with the size of the
 parsed arrays (target: within 3x). ``--profile`` prints where ingest spends its time.
 
-    python benchmarks/bench_ingest.py [--minutes 10] [--repeats 3] [--profile]
+``--mat`` also times the same session with the mocap as a compressed QTM MAT v7 export against
+its peer, a bare ``scipy.io.loadmat`` of that file (the MAT must be inflated once, not once per
+format check).
+
+    python benchmarks/bench_ingest.py [--minutes 10] [--repeats 3] [--profile] [--mat]
 """
 
 from __future__ import annotations
@@ -95,6 +99,30 @@ def _cal_xml(rng: np.random.Generator) -> str:
             'TorqueUnits="N-mm" DistUnits="mm">\n' + rows + "  </Calibration>\n</FTSensor>\n")
 
 
+def write_mat_session(folder: Path, mat_folder: Path) -> Path:
+    """The session of ``folder`` with its mocap as a QTM MAT v7 export; returns the MAT file."""
+    import shutil
+
+    from ingest.detect import read_mocap
+    from ingest.qtm_mat import write_qtm_mat
+
+    mat_folder.mkdir()
+    mat = mat_folder / "trial_3d.mat"
+    write_qtm_mat(mat, read_mocap(folder / "trial_3d.tsv"), version="7")
+    for name in ("force.csv", "FT0001.cal"):
+        shutil.copy(folder / name, mat_folder / name)
+    toml = (folder / "session.toml").read_text().replace('"trial_3d.tsv"', '"trial_3d.mat"')
+    (mat_folder / "session.toml").write_text(toml)
+    return mat
+
+
+def bare_loadmat(mat: Path) -> dict:
+    """The peer of a MAT ingest: scipy's loadmat of the whole file."""
+    import scipy.io
+
+    return scipy.io.loadmat(mat)
+
+
 def bare_parse(tsv: Path) -> np.ndarray:
     """The peer: pandas' C parser on the TSV data block, to one float64 array."""
     return pd.read_csv(tsv, sep="\t", skiprows=HEADER_LINES, header=None).to_numpy(np.float64)
@@ -149,6 +177,7 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--profile", action="store_true", help="print where ingest spends time")
+    ap.add_argument("--mat", action="store_true", help="also time a QTM MAT v7 mocap file")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "session"
@@ -188,6 +217,15 @@ def main() -> None:
               f"ratio {p_ingest / parsed:.2f}x (target <= 3x)")
         print(f"peak memory growth, bare parse:         {p_bare / 1e6:7.0f} MB   "
               f"ratio {p_bare / parsed:.2f}x")
+        if args.mat:
+            mat = write_mat_session(folder, Path(tmp) / "session_mat")
+            pairs = [(timed(lambda: bare_loadmat(mat)),
+                      timed(lambda: ingest(mat.parent, out, None), (out,)))
+                     for _ in range(args.repeats)]
+            t_load, t_mat = (statistics.median(p[i] for p in pairs) for i in range(2))
+            print(f"QTM MAT v7 ({mat.stat().st_size / 1e6:.0f} MB): bare scipy.io.loadmat "
+                  f"{t_load:.2f} s, ingest_session {t_mat:.2f} s, ratio {t_mat / t_load:.2f}x; "
+                  f"per round {', '.join(f'{b / a:.2f}' for a, b in pairs)}")
         if args.profile:
             prof = cProfile.Profile()
             prof.runcall(ingest, folder, out, None)

@@ -143,9 +143,12 @@ def match_trigger(
     spacing = min(np.min(np.diff(e)), np.min(np.diff(m)))
     span = max(m[-1] - m[0], e[-1] - e[0])
     tol = min(0.4 * spacing, max(2e-3, max_drift_ppm * 1e-6 * span))
-    proposals = np.unique(np.round((e[:, None] - m[None, :]).ravel() / (0.1 * tol)))
-    proposals = proposals * 0.1 * tol
-    counts = np.array([_count_matches(e, m + p, tol) for p in proposals])
+    diffs = np.sort((e[:, None] - m[None, :]).ravel())
+    proposals = np.unique(np.round(diffs / (0.1 * tol))) * 0.1 * tol
+    # tol < spacing / 2: an event has at most one edge within tol, and an edge at most one
+    # event, so the pairs within tol of a proposal are its matches
+    counts = (np.searchsorted(diffs, proposals + tol, side="right")
+              - np.searchsorted(diffs, proposals - tol, side="left"))
     best = counts.max()
     if best < max(min_pulses, 0.5 * min(len(e), len(m))):
         raise BadInput(source, "trigger: the pulse edges of the force log and the mocap trigger "
@@ -179,12 +182,6 @@ def stamp_resolution_s(time_ns: np.ndarray) -> float:
     while step < 10**9 and t.size and np.all(t % (step * 10) == 0):
         step *= 10
     return step * 1e-9
-
-
-def _count_matches(e: np.ndarray, predicted: np.ndarray, tol: float) -> int:
-    j = np.clip(np.searchsorted(e, predicted), 1, len(e) - 1)
-    d = np.minimum(np.abs(e[j] - predicted), np.abs(e[j - 1] - predicted))
-    return int((d <= tol).sum())
 
 
 def _pairs(e: np.ndarray, m: np.ndarray, to_logger: Callable[[np.ndarray], np.ndarray],
@@ -305,11 +302,15 @@ def clock_from_data(
     lag0: float,
     source: str | Path | None = None,
     search_s: float = 0.05,
+    max_walk: int = 10,
 ) -> ClockFit:
     """Clock from per-press lags: ``presses`` are (mocap times, tip depth) of loaded frames.
 
-    Each press is scanned over ``lag0 +- search_s`` at 1 ms, then +-2 ms at 0.1 ms; the local
-    lags are fitted by :func:`fit_offsets` (weighted by their standard errors).
+    Each press is scanned over ``lag0 +- search_s`` at 1 ms (while its best lag lies on its
+    edge, the scan moves on to the next window beyond that edge, up to ``max_walk`` times: the
+    contact-state seed can be off by a few tenths of a second when presses are slow), then
+    +-2 ms at 0.1 ms; the local lags are fitted by :func:`fit_offsets` (weighted by their
+    standard errors).
     """
     times, lags, sds = [], [], []
     for t, d in presses:
@@ -317,7 +318,12 @@ def clock_from_data(
         if ok.sum() < 20:
             continue
         t, d = t[ok], d[ok]
-        lag, _ = press_lag(t, d, force_at, lag0, search_s, 1e-3)
+        centre = lag0
+        for _ in range(max_walk + 1):
+            lag, sd = press_lag(t, d, force_at, centre, search_s, 1e-3)
+            if np.isfinite(sd) or lag == centre:
+                break
+            centre = lag + np.sign(lag - centre) * (search_s - 1e-3)   # next window beyond
         lag, sd = press_lag(t, d, force_at, lag, 2e-3, 1e-4)
         if np.isfinite(sd):
             times.append(float(np.mean(t)))

@@ -4,6 +4,12 @@ The bias is the mean of the unloaded start of the recording: the longest stretch
 sample over which every channel stays within a few noise widths of its starting level. A log
 that starts loaded (or moving) has no such stretch and is refused, since any bias taken from it
 would be wrong by the load.
+
+A strain-gauge bias creeps (tens of uN/s: a Nano17 tared once is off by 0.02 N after a few
+minutes), and the weight of the tool below the sensor turns with the indenter. So the start
+tare is refined by :func:`rest_baseline`: the rest level of the unloaded stretches next to
+every press (the hover before contact and after release, where the indenter already has its
+press orientation), joined by straight lines, is subtracted from the whole log.
 """
 
 from __future__ import annotations
@@ -13,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.gaps import nan_runs
 from pipeline.errors import BadInput
 
 
@@ -107,3 +114,84 @@ def apply_calibration(values: np.ndarray, bias: np.ndarray,
     """Wrench (T, 6) = ``matrix @ (values - bias)``; without a matrix the values are a wrench."""
     v = np.asarray(values, float) - np.asarray(bias, float)
     return v if matrix is None else v @ np.asarray(matrix, float).T
+
+
+@dataclass
+class RestBaseline:
+    """The unloaded level of a tared wrench log over time: straight lines between anchors."""
+
+    time_s: np.ndarray    # (K,) anchor times, increasing (the log's clock)
+    level: np.ndarray     # (K, C) rest level at each anchor, in the wrench's units
+
+    def at(self, time_s: np.ndarray) -> np.ndarray:
+        """The rest level (len(time_s), C), linear between anchors, constant beyond them."""
+        t = np.asarray(time_s, float)
+        if len(self.time_s) == 0:
+            return np.zeros((len(t), self.level.shape[1]))
+        return np.stack([np.interp(t, self.time_s, c) for c in self.level.T], axis=1)
+
+
+def rest_baseline(
+    time_s: np.ndarray,
+    wrench: np.ndarray,
+    contact_n: float,
+    coarse_n: float,
+    window_s: float = 0.5,
+    guard_s: float = 0.1,
+    guard_fraction: float = 0.1,
+    min_s: float = 0.1,
+) -> RestBaseline:
+    """The rest level of a tared wrench log (T, C; forces in the first three columns).
+
+    Loaded spans are widened on both sides by ``guard_s`` or ``guard_fraction`` of their own
+    length, whichever is longer: the soft start and end of a contact, below the threshold that
+    found it, last longer the slower the press. Two passes. Coarse: spans above ``coarse_n``
+    (well above any creep, well below a press), widened three times as much; each unloaded
+    stretch's median is an anchor at its middle. Fine: with that level removed, spans above
+    ``contact_n``; each unloaded stretch (at least ``min_s`` long) gives two anchors, the
+    medians of its first and last ``window_s`` (one for a shorter stretch): the rest right
+    after a release and right before the next contact. The levels are taken from ``wrench``
+    itself, so the result is absolute (subtract it to re-tare). No unloaded stretch at all
+    gives an empty baseline (zero everywhere).
+    """
+    t = np.asarray(time_s, float)
+    w = np.asarray(wrench, float)
+    rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 else 1.0
+    min_len = max(round(min_s * rate), 1)
+    near = _widen(np.linalg.norm(w[:, :3], axis=1) > coarse_n, 3 * guard_s * rate,
+                  3 * guard_fraction)
+    coarse = _anchors(t, w, near, min_len, None)
+    near = _widen(np.linalg.norm((w - coarse.at(t))[:, :3], axis=1) > contact_n,
+                  guard_s * rate, guard_fraction)
+    return _anchors(t, w, near, min_len, max(round(window_s * rate), 1))
+
+
+def _widen(loaded: np.ndarray, guard: float, fraction: float) -> np.ndarray:
+    """``loaded`` with each True run widened by ``max(guard, fraction * its length)`` samples
+    on both sides."""
+    out = np.zeros(len(loaded), bool)
+    for a, b in nan_runs(loaded):
+        g = int(round(max(guard, fraction * (b - a))))
+        out[max(a - g, 0):b + g] = True
+    return out
+
+
+def _anchors(t: np.ndarray, w: np.ndarray, near: np.ndarray, min_len: int,
+             window: int | None) -> RestBaseline:
+    """Anchors of the runs outside ``near``: one median per run at its middle (``window``
+    None), else the medians of its first and last ``window`` samples (one for a run shorter
+    than two windows)."""
+    times, levels = [], []
+    for a, b in nan_runs(~near):
+        if b - a < min_len:
+            continue
+        if window is None or b - a < 2 * window:
+            parts = [(a, b)]
+        else:
+            parts = [(a, a + window), (b - window, b)]
+        for lo, hi in parts:
+            times.append(float(np.mean(t[lo:hi])))
+            levels.append(np.median(w[lo:hi], axis=0))
+    if not times:
+        return RestBaseline(np.empty(0), np.empty((0, w.shape[1])))
+    return RestBaseline(np.array(times), np.array(levels))

@@ -56,8 +56,9 @@ def fit_rigid(
     reference markers are nearly collinear (second principal spread below ``min_spread_ratio``
     of the first), and ``poor`` when ill-conditioned or its RMS residual exceeds ``max_rms``.
     With ``drop_outlier``, a poor frame of 4 or more markers is refitted without each marker in
-    turn, and the best well-conditioned fit within ``max_rms`` replaces it (a mislabelled or
-    ghost marker is then ignored rather than spoiling the pose). With ``robust_scale`` (m),
+    turn, and of the refits that are well conditioned and within ``max_rms`` the one with the
+    smallest residual replaces it (a mislabelled or ghost marker is then ignored rather than
+    spoiling the pose). With ``robust_scale`` (m),
     the fit is iteratively reweighted with Cauchy weights ``1 / (1 + (r / scale)^2)`` of each
     marker's residual ``r``, so a marker far off in a heavy-tailed noise draw pulls less.
     """
@@ -71,16 +72,17 @@ def fit_rigid(
         return fit
     obs = np.asarray(observed, float)
     redo = np.flatnonzero(fit.poor & (fit.n_markers >= 4))
+    if redo.size == 0:
+        return fit
+    best = np.full(redo.size, np.inf)
     for m in range(obs.shape[1]):
-        if redo.size == 0:
-            break
         trial = obs[redo].copy()
         trial[:, m] = np.nan
         alt = fit_rigid(reference, trial, max_rms, min_spread_ratio, False, robust_scale)
-        better = ~alt.poor & (alt.n_markers >= 3)
+        better = ~alt.poor & (alt.n_markers >= 3) & (alt.rms < best)
         for name in ("rotation", "translation", "rms", "n_markers", "ill_conditioned", "poor"):
             getattr(fit, name)[redo[better]] = getattr(alt, name)[better]
-        redo = redo[~better]
+        best[better] = alt.rms[better]
     return fit
 
 
@@ -101,22 +103,22 @@ def _fit(reference: np.ndarray, observed: np.ndarray, max_rms: float,
     w_sum = np.where(ok, w.sum(axis=1), 1.0)[:, None]
     obs0 = np.where(seen[..., None], obs, 0.0)
     c_ref = (w @ ref) / w_sum                                  # (T, 3) weighted centroids
-    c_obs = np.einsum("tm,tmk->tk", w, obs0) / w_sum
+    c_obs = np.matmul(w[:, None, :], obs0)[:, 0] / w_sum
     p = ref[None] - c_ref[:, None]                             # (T, M, 3) centred
     q = obs0 - c_obs[:, None]
-    h = np.einsum("tm,tmi,tmj->tij", w, p, q)                  # weighted cross-covariance
+    h = np.matmul((p * w[..., None]).transpose(0, 2, 1), q)  # weighted cross-covariance
     u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(np.einsum("tij,tjk->tik", u, vt)))
+    d = np.sign(np.linalg.det(u) * np.linalg.det(vt))
     d = np.where(d == 0, 1.0, d)
     fix = np.ones((len(d), 3))
     fix[:, 2] = d
-    rot = np.einsum("tji,tj,tkj->tik", vt, fix, u)             # V diag(1,1,d) U^T
-    trans = c_obs - np.einsum("tij,tj->ti", rot, c_ref)
-    resid = obs0 - (np.einsum("tij,mj->tmi", rot, ref) + trans[:, None])
+    rot = np.matmul(vt.transpose(0, 2, 1) * fix[:, None], u.transpose(0, 2, 1))  # V D U^T
+    trans = c_obs - np.matmul(rot, c_ref[..., None])[..., 0]
+    resid = obs0 - (np.matmul(ref, rot.transpose(0, 2, 1)) + trans[:, None])
     sq = (resid**2).sum(axis=2) * seen
     rms = np.sqrt(sq.sum(axis=1) / np.where(ok, n, 1))
     ps = p * seen[..., None]
-    lam = np.linalg.eigvalsh(np.einsum("tmi,tmj->tij", ps, ps))      # ascending
+    lam = np.linalg.eigvalsh(np.matmul(ps.transpose(0, 2, 1), ps))  # ascending
     spread = np.sqrt(np.clip(lam[:, ::-1], 0.0, None))               # principal spreads
     ill = ok & (spread[:, 1] < min_spread_ratio * np.maximum(spread[:, 0], 1e-300))
     rot[~ok] = np.nan

@@ -3,9 +3,10 @@
 The tip is the cluster's pose applied to an offset about 11 cm away, so the markers' noise
 reaches it multiplied by the lever arm (a fraction of a degree of pose noise is half a
 millimetre at the tip). A hand moves the indenter at a few hertz, so a zero-phase FIR low-pass
-well above that (default 20 Hz) removes most of this noise without delaying or flattening the
+well above that (sync uses 15 Hz) removes most of this noise without delaying or flattening the
 motion. Each run of finite samples is filtered on its own; runs shorter than the filter's half
-length are left as they are (there is too little to filter), and gaps stay gaps.
+length are left as they are (there is too little to filter), and gaps stay gaps. The ends of a
+run are smoothed too (see :func:`calib.resample.lowpass_zero_phase`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ def smoothing_taps(rate_hz: float, cutoff_hz: float, atten_db: float = 60.0) -> 
 
 
 def lowpass_track(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
-    """``x`` (T, ...) low-passed along time, run by run between NaN samples."""
+    """``x`` (T, ...) low-passed along time, run by run between NaN samples.
+
+    A ``cutoff_hz`` of 0, or one at or above a quarter of ``rate_hz``, returns a copy.
+    """
     x = np.asarray(x, float)
     out = x.copy()
     if cutoff_hz <= 0 or cutoff_hz >= 0.25 * rate_hz:

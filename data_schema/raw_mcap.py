@@ -222,7 +222,7 @@ class RawMcapIndex:
 
 
 ERRORS: tuple[type[Exception], ...] = (ValueError, KeyError, IndexError, TypeError, EOFError,
-                                       OSError, struct.error, UnicodeDecodeError)
+                                       AttributeError, OSError, struct.error, UnicodeDecodeError)
 
 
 @contextlib.contextmanager

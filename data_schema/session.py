@@ -34,11 +34,11 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ingest.units import TIME_UNITS, channel_units
 from pipeline.errors import BadInput
 
 SCHEMA = "phantom.session"
 VERSION = "1.0"
-TIME_UNITS = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 
 
 @dataclass(frozen=True)
@@ -83,14 +83,18 @@ def read_session(folder: str | Path) -> SessionConfig:
         raw = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise BadInput(path, f"not valid TOML ({e})") from None
-    if raw.get("schema", SCHEMA) != SCHEMA:
-        raise BadInput(path, f"schema is {raw.get('schema')!r}, expected {SCHEMA!r}")
+    schema = _str(path, raw, "schema", SCHEMA)
+    if schema != SCHEMA:
+        raise BadInput(path, f"schema is {schema!r}, expected {SCHEMA!r}")
+    version = _str(path, raw, "schema_version", VERSION)
+    if version.split(".")[0] != VERSION.split(".")[0]:
+        raise BadInput(path, f"schema_version {version!r} is not compatible with {VERSION}")
     mocap = _mocap(path, folder, _table(path, raw, "mocap"))
     force = _force(path, folder, _table(path, raw, "force"))
-    pivot = raw.get("pivot", {}).get("file")
+    pivot = _table(path, raw, "pivot", required=False)
     return SessionConfig(
-        folder=folder, name=str(raw.get("name", folder.name)), mocap=mocap, force=force,
-        pivot_file=_file(path, folder, pivot, "pivot.file") if pivot else None, raw=raw,
+        folder=folder, name=_str(path, raw, "name", folder.name), mocap=mocap, force=force,
+        pivot_file=_file(path, folder, pivot, "file", "pivot") if pivot else None, raw=raw,
     )
 
 
@@ -100,61 +104,80 @@ def _mocap(path: Path, folder: Path, t: dict) -> MocapConfig:
     dup = set(phantom) & set(indenter)
     if dup:
         raise BadInput(path, f"marker(s) listed as both phantom and indenter: {sorted(dup)}")
-    bodies = t.get("bodies_file")
     return MocapConfig(
-        file=_file(path, folder, t.get("file"), "mocap.file"),
+        file=_file(path, folder, t, "file", "mocap"),
         phantom_markers=phantom, indenter_markers=indenter,
-        bodies_file=_file(path, folder, bodies, "mocap.bodies_file") if bodies else None,
-        indenter_body=t.get("indenter_body"), trigger_event=t.get("trigger_event"),
+        bodies_file=_file(path, folder, t, "bodies_file", "mocap", required=False),
+        indenter_body=_str(path, t, "indenter_body", table="mocap"),
+        trigger_event=_str(path, t, "trigger_event", table="mocap"),
     )
 
 
 def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
-    kind = t.get("kind", "gauge")
+    kind = _str(path, t, "kind", "gauge", table="force")
     if kind not in ("gauge", "wrench"):
         raise BadInput(path, f"force.kind must be 'gauge' or 'wrench', got {kind!r}")
-    unit = t.get("time_unit", "s")
+    unit = _str(path, t, "time_unit", "s", table="force")
     if unit not in TIME_UNITS:
-        raise BadInput(path, f"force.time_unit must be one of {sorted(TIME_UNITS)}, got {unit!r}")
-    channels = _names(path, t, "channels")
+        raise BadInput(path, f"force.time_unit must be one of {', '.join(TIME_UNITS)}, "
+                             f"got {unit!r}")
+    channels = _names(path, t, "channels", table="force")
     if len(channels) != 6:
         raise BadInput(path, f"force.channels must name 6 columns, got {len(channels)}")
-    units = t.get("units", "V" if kind == "gauge" else "N,N,N,N*m,N*m,N*m")
-    units = [u.strip() for u in units.split(",")] if isinstance(units, str) else list(units)
-    if len(units) == 1:
-        units = units * 6
-    cal = t.get("calibration")
-    if kind == "gauge" and not cal:
+    try:
+        units = channel_units(t.get("units"), kind, len(channels))
+    except ValueError as e:
+        raise BadInput(path, f"force.units: {e}") from None
+    cal = _file(path, folder, t, "calibration", "force", required=False)
+    if kind == "gauge" and cal is None:
         raise BadInput(path, "force.kind = 'gauge' needs force.calibration (an ATI .cal file)")
     return ForceConfig(
-        file=_file(path, folder, t.get("file"), "force.file"),
-        time_column=str(t.get("time_column", "time")), time_unit=unit, kind=kind,
-        channels=channels, units=units,
-        calibration=_file(path, folder, cal, "force.calibration") if cal else None,
-        trigger_column=t.get("trigger_column"),
+        file=_file(path, folder, t, "file", "force"),
+        time_column=_str(path, t, "time_column", "time", table="force"), time_unit=unit,
+        kind=kind, channels=channels, units=units, calibration=cal,
+        trigger_column=_str(path, t, "trigger_column", table="force"),
     )
 
 
-def _table(path: Path, raw: dict, key: str) -> dict:
+def _table(path: Path, raw: dict, key: str, required: bool = True) -> dict | None:
+    """The ``[key]`` table; None when it is optional and absent."""
     t = raw.get(key)
+    if t is None and not required:
+        return None
     if not isinstance(t, dict):
-        raise BadInput(path, f"missing [{key}] table")
+        raise BadInput(path, f"missing [{key}] table" if t is None else
+                             f"{key} must be a [{key}] table, got {t!r}")
     return t
 
 
-def _names(path: Path, t: dict, key: str) -> list[str]:
+def _str(path: Path, t: dict, key: str, default: str | None = None,
+         table: str | None = None) -> str | None:
+    """An optional text value (``default`` when absent); anything but non-empty text is bad."""
+    v = t.get(key, default)
+    if v is not None and (not isinstance(v, str) or not v.strip()):
+        name = f"{table}.{key}" if table else key
+        raise BadInput(path, f"{name} must be a non-empty string, got {v!r}")
+    return v
+
+
+def _names(path: Path, t: dict, key: str, table: str = "mocap") -> list[str]:
     v = t.get(key)
-    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
-        raise BadInput(path, f"{key} must be a non-empty list of names")
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) and x for x in v):
+        raise BadInput(path, f"{table}.{key} must be a non-empty list of names")
     if len(set(v)) != len(v):
-        raise BadInput(path, f"{key} has duplicate names")
+        raise BadInput(path, f"{table}.{key} has duplicate names")
     return list(v)
 
 
-def _file(path: Path, folder: Path, name: object, key: str) -> Path:
-    if not isinstance(name, str) or not name:
-        raise BadInput(path, f"{key} must name a file")
+def _file(path: Path, folder: Path, t: dict, key: str, table: str,
+          required: bool = True) -> Path | None:
+    """The file ``t[key]`` names, relative to the folder; it must exist."""
+    name = _str(path, t, key, table=table)
+    if name is None:
+        if required:
+            raise BadInput(path, f"{table}.{key} must name a file")
+        return None
     f = folder / name
     if not f.is_file():
-        raise BadInput(path, f"{key} = {name!r}: no such file")
+        raise BadInput(path, f"{table}.{key} = {name!r}: no such file")
     return f

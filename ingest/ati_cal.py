@@ -4,7 +4,7 @@ ATI's own note in every file: build the calibration matrix from the six ``UserAx
 Fy, Fz, Tx, Ty, Tz); the ``Axis`` rows are scaled for ATI's internal use. Rows are converted to
 SI (N and N*m per volt) from the file's ``ForceUnits`` / ``TorqueUnits``, and so are the rated
 loads (``max``). ``write_ati_cal`` writes the inverse, in N and N-mm as ATI ships Nano17 files.
-``unit_to_si`` is the one table of force, torque and voltage units the readers share.
+Units come from :mod:`ingest.units` (``unit_to_si`` is re-exported here for callers).
 """
 
 from __future__ import annotations
@@ -17,43 +17,11 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ingest.series import AtiCalibration
+from ingest.units import unit_to_si
 from pipeline.atomic import atomic_output
 from pipeline.errors import BadInput
 
 AXES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
-_LBF = 4.4482216152605            # N per pound-force
-_INCH, _FOOT = 0.0254, 0.3048     # m
-_G = 9.80665                      # m/s^2, for gram- and kilogram-force
-_UNITS: dict[str, tuple[float, str]] = {
-    # force -> N
-    "N": (1.0, "N"), "kN": (1e3, "N"), "mN": (1e-3, "N"), "lbf": (_LBF, "N"),
-    "klbf": (1e3 * _LBF, "N"), "g": (1e-3 * _G, "N"), "gf": (1e-3 * _G, "N"),
-    "kg": (_G, "N"), "kgf": (_G, "N"),
-    # torque -> N*m
-    "N-m": (1.0, "N*m"), "N-mm": (1e-3, "N*m"), "kN-m": (1e3, "N*m"), "mN-m": (1e-3, "N*m"),
-    "lbf-in": (_LBF * _INCH, "N*m"), "lbf-ft": (_LBF * _FOOT, "N*m"),
-    "g-cm": (1e-5 * _G, "N*m"), "gf-cm": (1e-5 * _G, "N*m"), "kg-cm": (1e-2 * _G, "N*m"),
-    "kgf-cm": (1e-2 * _G, "N*m"),
-    # gauge outputs -> V
-    "V": (1.0, "V"), "mV": (1e-3, "V"),
-}
-
-
-def unit_to_si(unit: str) -> tuple[float, str]:
-    """``(factor, si_unit)`` with ``value_si = factor * value``; unknown units -> ValueError.
-
-    Spellings ``N*m``, ``N.m``, ``Nm``, ``N m``, ``N·m`` and ``N-m`` are the same unit.
-    """
-    u = unit.strip().replace("·", "-").replace("*", "-").replace(".", "-").replace(" ", "-")
-    if u not in _UNITS:
-        for prefix in ("kN", "mN", "N", "lbf", "kgf", "gf", "kg", "g"):   # Nm, Nmm, lbfin
-            rest = u[len(prefix):]
-            if u.startswith(prefix) and rest in ("m", "mm", "in", "ft", "cm"):
-                u = f"{prefix}-{rest}"
-                break
-    if u not in _UNITS:
-        raise ValueError(f"unknown unit {unit!r}")
-    return _UNITS[u]
 
 
 def _floats(text: str | None, path: str | Path, what: str) -> np.ndarray:
@@ -63,8 +31,23 @@ def _floats(text: str | None, path: str | Path, what: str) -> np.ndarray:
         raise BadInput(path, f"{what} is not a list of numbers: {text!r}") from None
 
 
+def _scale(path: str | Path, key: str, unit: str, si: str, what: str) -> float:
+    """SI factor of the file's force or torque unit; a unit of another kind is bad input."""
+    try:
+        factor, got = unit_to_si(unit)
+    except ValueError as e:
+        raise BadInput(path, f"Calibration {key}: {e}") from None
+    if got != si:
+        raise BadInput(path, f"Calibration {key} {unit!r} is not a {what} unit")
+    return factor
+
+
 def read_ati_cal(path: str | Path) -> AtiCalibration:
-    """Read an ATI .cal file: the 6x6 ``UserAxis`` matrix and rated loads, in SI units."""
+    """Read an ATI .cal file: the 6x6 ``UserAxis`` matrix and rated loads, in SI units.
+
+    Every row has six finite numbers and the units are a force and a torque unit, so the
+    matrix it returns is always a finite 6x6.
+    """
     try:
         root = ET.parse(path).getroot()
     except FileNotFoundError:
@@ -94,14 +77,12 @@ def read_ati_cal(path: str | Path) -> AtiCalibration:
         raise BadInput(path, f"calibration is not 6x6: no UserAxis row for {', '.join(absent)}")
     force_units = cal.get("ForceUnits", "N")
     torque_units = cal.get("TorqueUnits", "N-mm")
-    try:
-        f_scale, _ = unit_to_si(force_units)
-        t_scale, t_si = unit_to_si(torque_units)
-    except ValueError as e:
-        raise BadInput(path, f"Calibration units: {e}") from None
-    if t_si != "N*m":
-        raise BadInput(path, f"TorqueUnits {torque_units!r} is not a torque unit")
+    f_scale = _scale(path, "ForceUnits", force_units, "N", "force")
+    t_scale = _scale(path, "TorqueUnits", torque_units, "N*m", "torque")
     scale = np.array([f_scale] * 3 + [t_scale] * 3)
+    for a in AXES:
+        if not np.isfinite(rows[a][0]).all():
+            raise BadInput(path, f"UserAxis {a} has a non-finite value: {rows[a][0].tolist()}")
     matrix = np.array([rows[a][0] for a in AXES]) * scale[:, None]
     max_load = np.array([rows[a][1] for a in AXES]) * scale
     meta: dict[str, Any] = {

@@ -7,6 +7,7 @@ readers share, and ``check_last_line`` the shared test that a text export was no
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ingest.series import MarkerSeries
@@ -154,6 +155,8 @@ def _is_number(s: str) -> bool:
 def read_mocap(path: str | Path) -> MarkerSeries:
     """Read any 3D marker export (QTM TSV 3D, C3D, QTM MAT) into a ``MarkerSeries``."""
     fmt = detect_format(path)
+    if fmt == "qtm_tsv_6d":
+        raise BadInput(path, "is a QTM 6D (rigid body) export, not a 3D marker export")
     if fmt == "qtm_tsv_3d":
         from ingest.qtm_tsv import read_qtm_3d
 
@@ -175,8 +178,10 @@ def check_last_line(
     """A text export must not end in the middle of a row.
 
     A last line without a line break is accepted only when it has all ``n_fields`` fields and
-    its last number has as many decimals as the same field of ``reference`` (another row of
-    the file): exporters write a fixed number of decimals, so a shorter number was cut.
+    its last field, when a plain decimal number, has as many decimals as in the row before:
+    exporters write a fixed number of decimals, so a shorter number was cut. The rule applies
+    only where the file shows fixed decimals: the previous row and ``reference`` (another data
+    row) agree on them.
     """
     size = Path(path).stat().st_size
     with open(path, "rb") as f:
@@ -184,19 +189,29 @@ def check_last_line(
         tail = f.read()
     if not tail or tail.endswith(b"\n"):
         return
-    last = tail.rsplit(b"\n", 1)[-1].decode("utf-8", "replace").rstrip("\r").split(sep)
+    lines = tail.decode("utf-8", "replace").split("\n")
+    last = lines[-1].rstrip("\r").split(sep)
     where = f"line {line_no}"
     if len(last) != n_fields:
         raise BadInput(path, f"file ends in the middle of a row ({len(last)} of {n_fields} "
                              "fields): truncated", where=where)
-    if len(reference) == n_fields and _decimals(last[-1]) < _decimals(reference[-1]):
+    previous = lines[-2].rstrip("\r").split(sep) if len(lines) > 2 else []
+    fixed = _decimals(previous[-1]) if len(previous) == n_fields else None
+    if fixed is None or len(reference) != n_fields or _decimals(reference[-1]) != fixed:
+        return                                   # no fixed number of decimals to judge by
+    cut = _decimals(last[-1])
+    if cut is not None and cut < fixed:
         raise BadInput(path, f"file ends in the middle of a number ({last[-1].strip()!r}): "
                              "truncated", where=where)
 
 
-def _decimals(token: str) -> int:
-    """Digits after the decimal point of a plain number; -1 for anything else."""
-    token = token.strip()
-    if not _is_number(token) or token.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-        return -1
-    return len(token.split(".", 1)[1]) if "." in token else 0
+_PLAIN = re.compile(r"[+-]?\d+(?:\.(\d*))?")
+
+
+def _decimals(token: str) -> int | None:
+    """Digits after the decimal point of a plain decimal number (``-12.250``: 3); None for
+    anything else (gaps, ``NaN``, exponents, text)."""
+    m = _PLAIN.fullmatch(token.strip())
+    if m is None:
+        return None
+    return len(m.group(1) or "")

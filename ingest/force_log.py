@@ -8,6 +8,8 @@ NaN, time strictly increasing), time becomes int64 ns and channels SI units.
 
 from __future__ import annotations
 
+import re
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,16 +21,16 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import scipy.io
 
-from ingest.ati_cal import unit_to_si
 from ingest.detect import check_last_line, sniff
-from ingest.qtm_mat import mat73_text
-from ingest.series import ForceSeries
+from ingest.qtm_mat import MAT_ERRORS, mat73_text
+from ingest.series import ForceSeries, time_to_ns
+from ingest.units import TIME_UNITS, channel_units, unit_to_si
 from pipeline.errors import BadInput
 
-TIME_UNITS = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
 _NAME_VARS = ("columns", "names", "column_names")
 _MAT_SKIP = ("#refs#", "#subsystem#")
-_WRENCH_UNITS = ("N", "N", "N", "N*m", "N*m", "N*m")
+_READ_ERRORS = (*MAT_ERRORS, pa.ArrowException)    # any reader's failure on a damaged file
+_PANDAS_LINE = re.compile(r"in line (\d+)")
 
 Where = Callable[[int], str]      # row index -> "line 12" / "row 11"
 
@@ -45,7 +47,7 @@ def force_log_columns(path: str | Path) -> list[str]:
         if kind == "parquet":
             return list(pq.read_schema(path).names)
         return list(_mat_columns(path, kind, None))
-    except (OSError, ValueError, KeyError, TypeError, pa.ArrowException) as e:
+    except _READ_ERRORS as e:
         raise BadInput(path, f"cannot read force log ({e})") from None
 
 
@@ -62,25 +64,44 @@ def _kind(path: str | Path) -> str:
 
 
 def _csv_header(path: str | Path) -> tuple[list[str], str]:
+    """Column names of the first line and the separator (tab when the line has one, else ,)."""
     with open(path, encoding="utf-8-sig", errors="replace") as f:
         first = f.readline().rstrip("\r\n")
     sep = "\t" if "\t" in first else ","
-    return [c.strip().strip('"') for c in first.split(sep)], sep
+    names = [c.strip().strip('"') for c in first.split(sep)]
+    dups = sorted({n for n in names if names.count(n) > 1})
+    if dups:
+        raise BadInput(path, f"duplicate column name(s) in the header: {', '.join(dups)}",
+                       where="line 1")
+    return names, sep
 
 
 def _csv_columns(path: str | Path, wanted: list[str]) -> tuple[dict[str, pd.Series], Where]:
+    """The wanted columns of a CSV log. Every row must have the header's number of fields
+    (pandas' C parser checks; a trailing separator on every row is allowed)."""
     header, sep = _csv_header(path)
     _require(path, header, wanted)
     try:
-        df = pd.read_csv(path, sep=sep, header=0, names=header, usecols=wanted, engine="c",
-                         skipinitialspace=True, encoding="utf-8-sig")
+        with warnings.catch_warnings():
+            # "Length of header ... does not match length of data": an extra first-row field
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            df = pd.read_csv(path, sep=sep, header=0, index_col=False, engine="c",
+                             skipinitialspace=True, encoding="utf-8-sig")
+    except pd.errors.ParserWarning:
+        raise BadInput(path, f"row has more fields than the {len(header)} of the header",
+                       where="line 2") from None
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as e:
-        raise BadInput(path, f"cannot parse CSV ({e})") from None
+        line = _PANDAS_LINE.search(str(e))
+        raise BadInput(path, f"cannot parse CSV ({str(e).strip()})",
+                       where=f"line {line.group(1)}" if line else None) from None
+    if df.shape[1] != len(header):
+        raise BadInput(path, f"the header names {len(header)} columns, pandas found "
+                             f"{df.shape[1]} (quoted separators?)", where="line 1")
     with open(path, encoding="utf-8-sig", errors="replace") as f:
         f.readline()
         second = f.readline().rstrip("\r\n").split(sep)
     check_last_line(path, sep, len(header), second, len(df) + 1)
-    return {c: df[c] for c in wanted}, lambda i: f"line {i + 2}"
+    return {c: df.iloc[:, header.index(c)] for c in wanted}, lambda i: f"line {i + 2}"
 
 
 # ---------------------------------------------------------------------------- MAT
@@ -179,13 +200,7 @@ def _numbers(path: str | Path, name: str, values: Any, where: Where) -> np.ndarr
 
 
 def _time_ns(path: str | Path, t: np.ndarray, unit: str, where: Where) -> np.ndarray:
-    scale = TIME_UNITS[unit]
-    if t.dtype.kind == "i" and scale == int(scale):
-        if t.size and np.abs(t).max() > np.iinfo(np.int64).max // int(scale):
-            raise BadInput(path, f"time in {unit} overflows int64 nanoseconds")
-        ns = t * int(scale)
-    else:
-        ns = np.rint(t.astype(np.float64) * scale).astype(np.int64)
+    ns = time_to_ns(t, path, unit, where)
     bad = np.flatnonzero(np.diff(ns) <= 0)
     if bad.size:
         i = int(bad[0]) + 1
@@ -197,29 +212,12 @@ def _time_ns(path: str | Path, t: np.ndarray, unit: str, where: Where) -> np.nda
 def _units(path: str | Path, units: str | list[str] | None, kind: str,
            n: int) -> tuple[np.ndarray, list[str], list[str]]:
     """Per-channel SI factors, SI unit names and the units as given."""
-    if units is None:
-        given = ["V"] * n if kind == "gauge" else list(_WRENCH_UNITS[:n])
-    elif isinstance(units, str):
-        given = [u.strip() for u in units.split(",")]
-    else:
-        given = [str(u).strip() for u in units]
-    if len(given) == 1:
-        given = given * n
-    if len(given) != n:
-        raise BadInput(path, f"{len(given)} units given for {n} channels")
-    factors, si = [], []
-    for u in given:
-        try:
-            f, s = unit_to_si(u)
-        except ValueError as e:
-            raise BadInput(path, str(e)) from None
-        allowed = ("V",) if kind == "gauge" else ("N", "N*m")
-        if s not in allowed:
-            raise BadInput(path, f"unit {u!r} does not fit kind {kind!r} "
-                                 f"(expected {' or '.join(allowed)})")
-        factors.append(f)
-        si.append(s)
-    return np.array(factors), si, given
+    try:
+        given = channel_units(units, kind, n)
+    except ValueError as e:
+        raise BadInput(path, str(e)) from None
+    factors, si = zip(*(unit_to_si(u) for u in given), strict=True)
+    return np.array(factors), list(si), given
 
 
 # ---------------------------------------------------------------------------- reader
@@ -239,8 +237,6 @@ def read_force_log(
     ``kind`` is "gauge" (volts, calibrated later with an ATI matrix) or "wrench" (Fx..Tz);
     ``units`` is one unit for all channels or one per channel (default V, or N and N*m).
     """
-    if kind not in ("gauge", "wrench"):
-        raise BadInput(path, f"kind must be 'gauge' or 'wrench', got {kind!r}")
     if time_unit not in TIME_UNITS:
         raise BadInput(path, f"time_unit must be one of {', '.join(TIME_UNITS)}, "
                              f"got {time_unit!r}")
@@ -260,7 +256,7 @@ def read_force_log(
             where = _row
         else:
             cols, where = _mat_columns(path, fmt, wanted), _row
-    except (OSError, ValueError, KeyError, TypeError, pa.ArrowException) as e:
+    except _READ_ERRORS as e:
         raise BadInput(path, f"cannot read force log ({e})") from None
     lengths = {c: len(v) for c, v in cols.items()}
     if len(set(lengths.values())) != 1:

@@ -97,7 +97,12 @@ def read_raw_mcap(path: str | Path) -> RawSession:
             t, v = data[info.topic]
             t[start:start + times.shape[0]] = times
             v[start:start + times.shape[0]] = values
-    rec = index.records
+        return _session(index.records, data)   # inside the guard: a record may lack a key
+
+
+def _session(rec: dict[str, dict[str, Any]],
+             data: dict[str, tuple[np.ndarray, np.ndarray]]) -> RawSession:
+    """The session from the metadata records and the decoded channels."""
     s = rec["session"]
     force_t, force_v = data["/force/raw"]
     trigger = data.get("/force/trigger")

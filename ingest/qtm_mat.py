@@ -10,6 +10,8 @@ references to uint16 character arrays). ``write_qtm_mat`` writes both, for tests
 from __future__ import annotations
 
 import re
+import struct
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -18,56 +20,109 @@ import numpy as np
 import scipy.io
 
 from ingest.detect import sniff
-from ingest.series import MarkerSeries
+from ingest.series import MarkerSeries, frame_times_ns
 from pipeline.atomic import atomic_output
 from pipeline.errors import BadInput
 
 _SKIP = ("#refs#", "#subsystem#")
+# What scipy.io, h5py and the MAT header walk raise on a damaged file; every MAT reader
+# turns these into BadInput.
+MAT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, TypeError, KeyError, IndexError,
+                                           EOFError, NotImplementedError, zlib.error,
+                                           struct.error, scipy.io.matlab.MatReadError)
+_MI_COMPRESSED, _MX_STRUCT = 15, 2
+_HEAD_BYTES = 1 << 16          # of a variable, enough for its header and struct field names
 
 
 # ---------------------------------------------------------------------------- reading
 
 
 def is_qtm_mat(path: str | Path) -> bool:
-    """Whether a MAT file (v7 or v7.3) holds a QTM export struct (one with ``Trajectories``)."""
-    try:
-        return bool(_struct_names(path))
-    except BadInput:
-        return False
+    """Whether a MAT file (v7 or v7.3) holds a QTM export struct (one with ``Trajectories``).
+
+    Reads only the variable headers (a compressed variable is not inflated); a file that cannot
+    be read that far is bad input, not "some other MAT file".
+    """
+    return bool(_struct_names(path))
 
 
 def _struct_names(path: str | Path) -> list[str]:
+    """Names of the top-level structs with a ``Trajectories`` field."""
     kind = sniff(path)
+    if kind not in ("mat5", "mat73"):
+        raise BadInput(path, f"not a MAT file (found {kind})")
     try:
         if kind == "mat73":
             with h5py.File(path, "r") as f:
                 return [k for k in f if k not in _SKIP and isinstance(f[k], h5py.Group)
                         and "Trajectories" in f[k]]
-        if kind == "mat5":
-            structs = [name for name, _, cls in scipy.io.whosmat(path) if cls == "struct"]
-            if not structs:
-                return []
-            mat = scipy.io.loadmat(path, variable_names=structs)
-            return [n for n in structs if "Trajectories" in (mat[n].dtype.names or ())]
-    except (OSError, ValueError, TypeError, KeyError) as e:
+        return [name for name, fields in mat5_structs(path).items() if "Trajectories" in fields]
+    except MAT_ERRORS as e:
         raise BadInput(path, f"cannot read MAT file ({e})") from None
-    raise BadInput(path, f"not a MAT file (found {kind})")
 
 
-def _one_struct(path: str | Path) -> str:
-    names = _struct_names(path)
-    if len(names) != 1:
-        raise BadInput(path, "no QTM struct with Trajectories in this MAT file" if not names
-                       else f"several QTM structs in this MAT file: {', '.join(names)}")
-    return names[0]
+def mat5_structs(path: str | Path) -> dict[str, list[str]]:
+    """The top-level struct variables of a MAT v5/v7 file with their field names.
+
+    Walks the variable tags (MAT-File Format, "Data Element"), reading the first bytes of each
+    variable only: a compressed one is inflated just past its field names, so sniffing a large
+    QTM export costs microseconds, not a decompression. Damage -> the errors of MAT_ERRORS.
+    """
+    out: dict[str, list[str]] = {}
+    with open(path, "rb") as f:
+        head = f.read(128)
+        order = "<" if head[126:128] == b"IM" else ">"
+        size = Path(path).stat().st_size
+        while tag := f.read(8):
+            dtype, nbytes = struct.unpack(order + "II", tag)
+            start = f.tell()
+            if start + nbytes > size:
+                raise EOFError(f"variable at byte {start - 8} runs past the end of the file "
+                               "(truncated)")
+            if dtype == _MI_COMPRESSED:
+                z = zlib.decompressobj()
+                body = z.decompress(f.read(min(nbytes, _HEAD_BYTES)), _HEAD_BYTES)
+            else:
+                body = tag + f.read(min(nbytes, _HEAD_BYTES))
+            name, fields = _matrix_head(body, order)
+            if fields is not None:
+                out[name] = fields
+            f.seek(start + nbytes)
+    return out
+
+
+def _matrix_head(buf: bytes, order: str) -> tuple[str, list[str] | None]:
+    """Name and, for a struct, field names of one miMATRIX element (its first bytes)."""
+    def element(pos: int) -> tuple[bytes, int]:
+        kind, n = struct.unpack_from(order + "II", buf, pos)
+        if kind >> 16:                   # small element: size in the upper half, data inline
+            return buf[pos + 4:pos + 4 + (kind >> 16)], pos + 8
+        return buf[pos + 8:pos + 8 + n], pos + 8 + n + (-n % 8)
+
+    flags, pos = element(8)              # skip the miMATRIX tag itself
+    mclass = struct.unpack_from(order + "I", flags)[0] & 0xFF
+    _dims, pos = element(pos)
+    name, pos = element(pos)
+    if mclass != _MX_STRUCT:
+        return name.decode("latin-1"), None
+    length, pos = element(pos)
+    width = struct.unpack_from(order + "i", length)[0]
+    names, _ = element(pos)
+    fields = [names[i:i + width].split(b"\0", 1)[0].decode("latin-1")
+              for i in range(0, len(names), width)] if width > 0 else []
+    return name.decode("latin-1"), fields
 
 
 def read_qtm_mat(path: str | Path) -> MarkerSeries:
     """Read the labeled trajectories of a QTM MAT export (v7 or v7.3) in metres."""
-    name = _one_struct(path)
+    names = _struct_names(path)
+    if len(names) != 1:
+        raise BadInput(path, "no QTM struct with Trajectories in this MAT file" if not names
+                       else f"several QTM structs in this MAT file: {', '.join(names)}")
+    name = names[0]
     try:
         fields = _read73(path, name) if sniff(path) == "mat73" else _read7(path, name)
-    except (OSError, ValueError, TypeError, KeyError, IndexError) as e:
+    except MAT_ERRORS as e:
         raise BadInput(path, f"cannot read the QTM struct {name!r} ({e})") from None
     return _series(path, name, fields)
 
@@ -88,8 +143,7 @@ def _series(path: str | Path, name: str, f: dict[str, Any]) -> MarkerSeries:
     if f["frames"] is not None and f["frames"] != t:
         raise BadInput(path, f"{name}.Frames is {f['frames']} but Data has {t} frames")
     rate = f["rate"]
-    if not (np.isfinite(rate) and rate > 0):
-        raise BadInput(path, f"{name}.FrameRate {rate:g} is not a positive rate")
+    time_ns = frame_times_ns(t, rate, path, f"{name}.FrameRate")
     positions = data[:, :3, :].transpose(2, 0, 1) * 1e-3                # (T, M, 3) metres
     res = data[:, 3, :].T * 1e-3 if data.shape[1] == 4 else np.zeros((t, m))
     missing = np.isnan(positions).any(axis=2) | np.isnan(res) | (res < 0)
@@ -97,7 +151,6 @@ def _series(path: str | Path, name: str, f: dict[str, Any]) -> MarkerSeries:
     res[missing] = np.nan
     meta = {"format": "qtm_mat", "struct": name, "units_in_file": "mm",
             "start_frame": f["start_frame"], "timestamp": f["timestamp"] or None}
-    time_ns = np.rint(np.arange(t, dtype=np.float64) * 1e9 / rate).astype(np.int64)
     return MarkerSeries(source=str(path), time_ns=time_ns, labels=labels, positions=positions,
                         rate_hz=float(rate), residuals=res, meta=meta)
 

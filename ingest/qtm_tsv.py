@@ -22,14 +22,14 @@ import pyarrow as pa
 import pyarrow.csv as pcsv
 
 from ingest.detect import check_last_line
-from ingest.series import BodySeries, MarkerSeries
+from ingest.series import BodySeries, MarkerSeries, frame_times_ns, time_to_ns
+from ingest.units import length_scale
 from pipeline.errors import BadInput
 
 _KEY = re.compile(r"[A-Z][A-Z0-9_]*")
 _LIST_KEYS = ("MARKER_NAMES", "BODY_NAMES", "TRAJECTORY_TYPES")
 _GAPS = ["", "NaN", "nan", "NAN", "-nan", "-NaN", "null", "NULL", "Null"]
 _GAP_SET = frozenset(_GAPS)
-_LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 _UNIT_KEYS = ("MARKER_UNITS", "POSITION_UNITS", "LENGTH_UNITS", "UNITS")
 _FIRST_KEYS = ("NO_OF_FRAMES", "FILE_VERSION", "NO_OF_CAMERAS", "NO_OF_MARKERS", "NO_OF_BODIES",
                "FREQUENCY")
@@ -241,10 +241,10 @@ def _length_scale(head: _Head) -> tuple[float, str]:
         values = head.keys.get(key)
         if values:
             unit = values[0].strip()
-            if unit not in _LENGTH_UNITS:
-                raise head.bad(f"{key} {unit!r} is not a length unit (mm, cm, m)",
-                               _key_line(head, key))
-            return _LENGTH_UNITS[unit], unit
+            try:
+                return length_scale(unit), unit
+            except ValueError as e:
+                raise head.bad(f"{key} {e}", _key_line(head, key)) from None
     return 1e-3, "mm"
 
 
@@ -284,6 +284,10 @@ def _parse_block(
             )
             for batch in reader:
                 rows = np.asarray(batch.to_tensor(null_to_nan=True, row_major=True))
+                if np.isinf(rows).any():                  # QTM writes gaps as NaN, never inf
+                    r, j = np.argwhere(np.isinf(rows))[0]
+                    raise head.bad(f"{rows[r, j]} in column {wanted[j] + 1} is not a finite "
+                                   "number", head.first_line + n + int(r))
                 if n + len(rows) > len(values):
                     values, times = _grow(head, values, times, n + len(rows))
                 dst = values[n:n + len(rows)]
@@ -384,16 +388,17 @@ def _check_rows(head: _Head, n_rows: int, n_fields: int) -> None:
 def _time_ns(head: _Head, t: np.ndarray | None, n: int) -> tuple[np.ndarray, float]:
     """Time stamps (ns) from the Time column, else frame index / FREQUENCY; and the rate."""
     freq = head.number("FREQUENCY")
-    if freq is not None and not (np.isfinite(freq) and freq > 0):
-        raise head.bad(f"FREQUENCY {freq:g} is not a positive rate", _key_line(head, "FREQUENCY"))
+    line = f"line {_key_line(head, 'FREQUENCY')}"
     if t is None:
         if freq is None:
             raise head.bad("no Time column and no numeric FREQUENCY: cannot time the frames")
-        return np.rint(np.arange(n, dtype=np.float64) * 1e9 / freq).astype(np.int64), freq
-    bad = np.flatnonzero(~np.isfinite(t))
+        return frame_times_ns(n, freq, head.path, "FREQUENCY", line), freq
+    if freq is not None and not (np.isfinite(freq) and freq > 0):
+        raise head.bad(f"FREQUENCY {freq:g} is not a positive rate", _key_line(head, "FREQUENCY"))
+    bad = np.flatnonzero(np.isnan(t))
     if bad.size:
         raise head.bad("Time is missing", head.first_line + int(bad[0]))
-    ns = np.rint(t * 1e9).astype(np.int64)
+    ns = time_to_ns(t, head.path, where=lambda i: f"line {head.first_line + i}")
     steps = np.diff(ns)
     bad = np.flatnonzero(steps <= 0)
     if bad.size:
@@ -406,7 +411,8 @@ def _time_ns(head: _Head, t: np.ndarray | None, n: int) -> tuple[np.ndarray, flo
 
 
 def _events(head: _Head) -> list[tuple[str, int]]:
-    return [(label, int(round(t * 1e9))) for label, _, t in head.events]
+    ns = time_to_ns([t for _, _, t in head.events], head.path, where=lambda i: f"EVENT {i + 1}")
+    return [(label, int(t)) for (label, _, _), t in zip(head.events, ns, strict=True)]
 
 
 def _meta(head: _Head, fmt: str, unit: str) -> dict[str, Any]:

@@ -6,13 +6,62 @@ clock (0 at its first sample unless the file says otherwise). Missing samples ar
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ingest.units import TIME_UNITS
 from pipeline.errors import BadInput
+
+_NS_LIMIT = float(2**63 - 2**10)       # |ns| below this rounds and casts to int64 safely
+
+
+def time_to_ns(t: Any, source: str | Path, unit: str = "s",
+               where: Callable[[int], str] | None = None) -> np.ndarray:
+    """Times in ``unit`` (s, ms, us, ns) as int64 ns, rounded to the nearest nanosecond.
+
+    Integer times in a whole number of ns per unit are converted exactly. A missing, infinite
+    or out-of-range time (int64 ns spans +-292 years) is bad input; ``where(i)`` names the
+    place of sample ``i`` ("line 12").
+    """
+    t = np.asarray(t)
+    scale = TIME_UNITS[unit]
+    if t.dtype.kind in "iu" and scale == int(scale):
+        limit = np.iinfo(np.int64).max // int(scale)
+        bad = np.flatnonzero((t > limit) | (t < -limit))
+        ns = None if bad.size else t.astype(np.int64) * int(scale)
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            scaled = t.astype(np.float64) * scale
+        bad = np.flatnonzero(~(np.abs(scaled) < _NS_LIMIT))        # NaN fails too
+        ns = None if bad.size else np.rint(scaled).astype(np.int64)
+    if ns is None:
+        i = int(bad[0])
+        raise BadInput(source, f"time {t[i]} {unit} is missing, infinite or beyond the int64 "
+                               "nanosecond range (+-292 years)",
+                       where=None if where is None else where(i))
+    return ns
+
+
+def frame_times_ns(frames: int, rate_hz: float, source: str | Path, what: str = "frame rate",
+                   where: str | None = None) -> np.ndarray:
+    """The time of frame ``i``, ``i / rate_hz``, in int64 ns, for a file timed by its rate.
+
+    ``what`` names the rate in the file (``FREQUENCY``, ``POINT:RATE``). No frames, a rate that
+    is not positive, one too high for distinct nanoseconds or too low for int64 is bad input.
+    """
+    if frames < 1:
+        raise BadInput(source, "holds no frames")
+    if not (np.isfinite(rate_hz) and 0 < rate_hz <= 1e9):
+        raise BadInput(source, f"{what} {rate_hz:g} is not a frame rate (0 to 1e9 Hz)",
+                       where=where)
+    if not (frames - 1) * 1e9 / float(rate_hz) < _NS_LIMIT:
+        raise BadInput(source, f"{what} {rate_hz:g} is too low: {frames} frames last beyond "
+                               "the int64 nanosecond range", where=where)
+    return np.rint(np.arange(frames, dtype=np.float64) * 1e9 / rate_hz).astype(np.int64)
 
 
 def check_time(time_ns: np.ndarray, source: str | Path) -> None:

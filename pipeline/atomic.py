@@ -10,6 +10,13 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+from pipeline.errors import BadInput
+
+
+def same_path(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name the same file (after making them absolute, resolving links)."""
+    return Path(a).resolve() == Path(b).resolve()
+
 
 def _tmp_name(final: Path) -> Path:
     return final.with_name(f".{final.name}.tmp-{os.getpid()}")
@@ -20,13 +27,20 @@ def atomic_outputs(*paths: str | Path | None) -> Iterator[list[Path | None]]:
     """Yield temporary paths beside ``paths``; rename them all into place if the block succeeds.
 
     ``None`` entries stay ``None`` (an optional output that is switched off). On any exception
-    every temporary file is removed and no final path is touched.
+    every temporary file is removed and no final path is touched. Naming one path twice is a
+    programming error (ValueError): the second file would silently replace the first.
     """
     finals = [None if p is None else Path(p) for p in paths]
+    named = [f for f in finals if f is not None]
+    for i, f in enumerate(named):
+        if any(same_path(f, g) for g in named[:i]):
+            raise ValueError(f"atomic_outputs: {f} is named twice")
     tmps = [None if f is None else _tmp_name(f) for f in finals]
-    for f in finals:
-        if f is not None:
+    for f in named:
+        try:
             f.parent.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):
+            raise BadInput(f, "cannot create its folder: a file is in the way") from None
     try:
         yield tmps
         for f, t in zip(finals, tmps, strict=True):

@@ -1,19 +1,17 @@
 """``pipeline ingest``: a raw session folder (lab files + session.toml) into one MCAP file.
 
-Reads every file the session names with the lab readers, checks that the files agree with the
-session (every named marker present, no duplicate names, the force log's named columns, a 6x6
-calibration, increasing time), and writes the streams, each on its own device clock, to one
-MCAP file (:mod:`data_schema.raw_mcap`) and, optionally, a rerun recording. Nothing is written
-under the output names unless everything succeeds; inputs are only read.
+Reads every file the session names with the lab readers, which check each file on its own
+(unique names, numbers, increasing time, a finite 6x6 calibration); checks that the files agree
+with the session (every named marker, body, EVENT and force-log column present); and writes the
+streams, each on its own device clock, to one MCAP file (:mod:`data_schema.raw_mcap`) and,
+optionally, a rerun recording. Nothing is written under the output names unless everything
+succeeds; inputs are only read.
 """
 
 from __future__ import annotations
 
-from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-
-import numpy as np
 
 from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
 from data_schema.session import ForceConfig, SessionConfig, read_session
@@ -24,9 +22,8 @@ from ingest.series import (
     ForceSeries,
     MarkerSeries,
     RawSession,
-    check_time,
 )
-from pipeline.atomic import atomic_outputs
+from pipeline.atomic import atomic_outputs, same_path
 from pipeline.errors import BadInput
 from pipeline.progress import progress
 from pipeline.provenance import make_provenance
@@ -40,8 +37,9 @@ def ingest_session(folder: str | Path, out: str | Path, rrd: str | Path | None =
     """
     cfg = read_session(folder)
     inputs = session_inputs(cfg)
-    finals = {Path(p).resolve() for p in (out, rrd) if p is not None}
-    clash = [p for p in inputs if p.resolve() in finals]
+    if rrd is not None and same_path(out, rrd):
+        raise BadInput(out, "--rrd and --out name the same file")
+    clash = [p for p in inputs if any(same_path(p, o) for o in (out, rrd) if o is not None)]
     if clash:
         raise BadInput(clash[0], "output would overwrite an input file")
     params = {"session_dir": str(folder), "out": str(out),
@@ -91,29 +89,16 @@ def load_session(cfg: SessionConfig) -> RawSession:
     )
 
 
-def read_markers(path: Path) -> MarkerSeries:
-    """A 3D marker export (QTM TSV, C3D or QTM MAT), checked: frames, unique names, time."""
-    from ingest.detect import detect_format, read_mocap
-
-    fmt = detect_format(path)
-    if fmt == "qtm_tsv_6d":
-        raise BadInput(path, "is a QTM 6D (rigid body) export; a 3D marker export is needed here")
-    if fmt not in ("qtm_tsv_3d", "c3d", "qtm_mat"):
-        raise BadInput(path, f"is a {fmt} file, not a 3D marker export")
-    markers = read_mocap(path)
-    if markers.frames == 0:
-        raise BadInput(path, "holds no frames")
-    _no_duplicates(path, markers.labels, "marker")
-    check_time(markers.time_ns, path)
-    return markers
-
-
 def _read_mocap(cfg: SessionConfig) -> MarkerSeries:
-    return read_markers(cfg.mocap.file)
+    from ingest.detect import read_mocap  # QTM TSV 3D, C3D or QTM MAT, read once
+
+    return read_mocap(cfg.mocap.file)
 
 
 def _read_pivot(cfg: SessionConfig) -> MarkerSeries | None:
-    return read_markers(cfg.pivot_file) if cfg.pivot_file is not None else None
+    from ingest.detect import read_mocap
+
+    return read_mocap(cfg.pivot_file) if cfg.pivot_file is not None else None
 
 
 def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
@@ -126,8 +111,6 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
     if detect_format(path) != "qtm_tsv_6d":
         raise BadInput(path, "mocap.bodies_file must be a QTM 6D export")
     bodies = read_qtm_6d(path)
-    _no_duplicates(path, bodies.bodies, "body")
-    check_time(bodies.time_ns, path)
     body = cfg.mocap.indenter_body
     if body is not None and body not in bodies.bodies:
         raise BadInput(path, f"body {body!r} (session.toml indenter_body) not in file; it has "
@@ -136,24 +119,11 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
 
 
 def _read_force(cfg: SessionConfig) -> ForceSeries:
-    from ingest.force_log import force_log_columns, read_force_log
+    from ingest.force_log import read_force_log
 
     f: ForceConfig = cfg.force
-    columns = force_log_columns(f.file)
-    wanted = [f.time_column, *f.channels] + ([f.trigger_column] if f.trigger_column else [])
-    absent = [c for c in wanted if c not in columns]
-    if absent:
-        raise BadInput(f.file, f"column(s) named in session.toml not in file: "
-                               f"{', '.join(absent)} (it has {', '.join(map(str, columns))})")
-    force = read_force_log(f.file, f.time_column, f.channels, time_unit=f.time_unit,
-                           units=f.units, kind=f.kind, trigger_column=f.trigger_column)
-    if force.frames == 0:
-        raise BadInput(f.file, "holds no samples")
-    check_time(force.time_ns, f.file)
-    bad = np.flatnonzero(~np.isfinite(force.values).all(axis=1))
-    if bad.size:
-        raise BadInput(f.file, "missing or non-numeric value", where=f"sample {int(bad[0])}")
-    return force
+    return read_force_log(f.file, f.time_column, f.channels, time_unit=f.time_unit,
+                          units=f.units, kind=f.kind, trigger_column=f.trigger_column)
 
 
 def _read_calibration(cfg: SessionConfig) -> AtiCalibration | None:
@@ -162,13 +132,7 @@ def _read_calibration(cfg: SessionConfig) -> AtiCalibration | None:
         return None
     from ingest.ati_cal import read_ati_cal
 
-    cal = read_ati_cal(path)
-    matrix = np.asarray(cal.matrix, dtype=float)
-    if matrix.shape != (6, 6):
-        raise BadInput(path, f"calibration matrix is {matrix.shape}, expected 6x6")
-    if not np.isfinite(matrix).all():
-        raise BadInput(path, "calibration matrix has non-finite values")
-    return cal
+    return read_ati_cal(path)
 
 
 _READ = {"mocap": _read_mocap, "bodies": _read_bodies, "force": _read_force,
@@ -181,9 +145,3 @@ def _require_markers(markers: MarkerSeries, names: list[str]) -> None:
     if absent:
         raise BadInput(markers.source, f"marker(s) named in session.toml not in file: "
                                        f"{', '.join(absent)}")
-
-
-def _no_duplicates(path: Path, names: list[str], what: str) -> None:
-    dup = sorted(n for n, count in Counter(names).items() if count > 1)
-    if dup:
-        raise BadInput(path, f"duplicate {what} name(s) in file: {', '.join(dup)}")

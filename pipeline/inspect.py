@@ -6,11 +6,12 @@ so scripts can rely on them (``pipeline inspect FILE --json``):
 ``path``, ``format`` (the :func:`ingest.detect.detect_format` name, or ``rrd``), ``frames``,
 ``rate_hz``, ``duration_s`` (frames x mean sample interval), ``markers``, ``bodies``,
 ``channels`` (force-log channels), ``missing_samples`` (marker or body samples with no
-position; force samples with a non-finite value), ``units`` (quantity -> unit as stored in the
-file), ``events`` ([label, seconds]), ``schema``, ``schema_version``, ``provenance`` (the
-stored record), ``streams`` (MCAP topic -> frames, rate_hz, names), ``datasets`` (HDF5 path ->
-shape, dtype, units), ``entities`` (rerun entity -> archetypes), ``calibration`` (ATI serial,
-matrix etc.) and ``details`` (format-specific extras: header keys, validation result).
+position; None for a force log: one with a missing value is bad input), ``units`` (quantity ->
+unit as stored in the file), ``events`` ([label, seconds]), ``schema``, ``schema_version``,
+``provenance`` (the stored record), ``streams`` (MCAP topic -> frames, rate_hz, names),
+``datasets`` (HDF5 path -> shape, dtype, units), ``entities`` (rerun entity -> archetypes),
+``calibration`` (ATI serial, matrix etc.) and ``details`` (format-specific extras: header keys,
+validation result).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies"
         "streams", "datasets", "entities", "calibration", "details")
 _SHOWN = ("format", "units_in_file")      # details already shown by the text summary
 TIME_NAMES = ("time", "t", "timestamp", "time_s", "times")
+TRIGGER_NAMES = ("trigger", "sync")
 WRENCH_NAMES = ("fx", "fy", "fz", "tx", "ty", "tz", "mx", "my", "mz")
 
 
@@ -158,22 +160,24 @@ def _inspect_qtm_mat(path: Path) -> dict[str, Any]:
 
 
 def _inspect_force(path: Path) -> dict[str, Any]:
-    """A force log without its session.toml: time is the column named like time (in s)."""
+    """A force log without its session.toml: time is the column named like time (in s), a
+    column named trigger or sync is the trigger, every other column a channel."""
     from ingest.force_log import force_log_columns, read_force_log
 
     columns = [str(c) for c in force_log_columns(path)]
-    if len(columns) < 2:
-        raise BadInput(path, f"a force log needs a time column and channels, found {columns}")
     time_col = next((c for c in columns if c.lower() in TIME_NAMES), columns[0])
-    channels = [c for c in columns if c != time_col]
+    trigger = next((c for c in columns if c.lower() in TRIGGER_NAMES and c != time_col), None)
+    channels = [c for c in columns if c not in (time_col, trigger)]
+    if not channels:
+        raise BadInput(path, f"a force log needs a time column and channels, found {columns}")
     wrench = all(c.lower()[:2] in WRENCH_NAMES for c in channels)
-    f = read_force_log(path, time_col, channels, kind="wrench" if wrench else "gauge")
-    missing = int((~np.isfinite(f.values)).any(axis=1).sum())
-    trig = None if f.trigger is None else "trigger"
-    return {**_series(f), "channels": list(f.channels), "missing_samples": missing,
+    f = read_force_log(path, time_col, channels, kind="wrench" if wrench else "gauge",
+                       trigger_column=trigger)
+    return {**_series(f), "channels": list(f.channels),
             "units": {c: u for c, u in zip(f.channels, f.units, strict=True)},
             "details": {"time_column": time_col, "time_unit_assumed": "s", "kind": f.kind,
-                        "columns": columns, **({"trigger": trig} if trig else {})}}
+                        "columns": columns,
+                        **({"trigger_column": trigger} if trigger else {})}}
 
 
 def _inspect_cal(path: Path) -> dict[str, Any]:

@@ -8,6 +8,8 @@ from typing import Any
 
 import click
 
+from pipeline.atomic import same_path
+from pipeline.errors import BadInput
 from pipeline.recording import default_rrd_path
 
 
@@ -22,11 +24,33 @@ def rrd_option(f: Callable[..., Any]) -> Callable[..., Any]:
     )(f)
 
 
-def resolve_rrd(out: Path, rrd: Path | None, no_rrd: bool) -> Path | None:
-    """The recording path a stage writes, or None with ``--no-rrd``."""
+def resolve_rrd(out: Path, rrd: Path | None, no_rrd: bool,
+                folder: bool | None = None) -> Path | None:
+    """The recording path a stage writes, or None with ``--no-rrd``.
+
+    The default goes beside ``out`` (:func:`~pipeline.recording.default_rrd_path`), or inside
+    it when ``out`` is a folder: ``folder`` says so; None: when one exists there or the running
+    command declares ``out`` as one (``click.Path(file_okay=False)``, as synth's OUT_DIR). An
+    ``--rrd`` naming the ``--out`` file is bad input.
+    """
     if no_rrd:
         return None
-    return rrd if rrd is not None else default_rrd_path(out)
+    if folder is None:
+        folder = out.is_dir() or _declared_folder(out)
+    path = rrd if rrd is not None else default_rrd_path(out, folder)
+    if same_path(path, out):
+        raise BadInput(out, "--rrd and --out name the same file")
+    return path
+
+
+def _declared_folder(out: Path) -> bool:
+    """Whether the running click command takes ``out`` through a folder-only path parameter."""
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return False
+    return any(isinstance(p.type, click.Path) and not p.type.file_okay
+               and p.name is not None and ctx.params.get(p.name) == out
+               for p in ctx.command.params)
 
 
 def seed_option(f: Callable[..., Any]) -> Callable[..., Any]:

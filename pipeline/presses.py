@@ -34,21 +34,33 @@ def segment_presses(
     contact_n: float = 0.05,
     min_duration_s: float = 0.2,
     merge_s: float = 0.05,
-) -> list[Press]:
-    """Presses in a force-magnitude series (NaN = unknown, treated as unloaded).
+) -> tuple[list[Press], int]:
+    """Complete presses in a force-magnitude series (NaN = unknown), and how many were cut off.
 
     Runs above ``contact_n`` closer than ``merge_s`` are merged (noise flicker at the contact
     level); a press is a merged run that peaks above ``detect_n`` and lasts ``min_duration_s``.
+    A press that touches either end of the series or an unknown (NaN) sample was cut off by
+    the end of a recording: its onset or release is not known, so it is left out and only
+    counted (the second value).
     """
-    f = np.nan_to_num(np.asarray(force_magnitude, float), nan=0.0)
+    f = np.asarray(force_magnitude, float)
+    known = np.isfinite(f)
+    f = np.where(known, f, 0.0)
     spans: list[list[int]] = []
     for a, b in nan_runs(f > contact_n):
         if spans and a - spans[-1][1] < merge_s * rate_hz:
             spans[-1][1] = b
         else:
             spans.append([a, b])
-    return [Press(a, b, a + int(np.argmax(f[a:b]))) for a, b in spans
-            if f[a:b].max() > detect_n and (b - a) >= min_duration_s * rate_hz]
+    presses, cut = [], 0
+    for a, b in spans:
+        if f[a:b].max() <= detect_n or (b - a) < min_duration_s * rate_hz:
+            continue
+        if a == 0 or b == len(f) or not known[a - 1 : b + 1].all():
+            cut += 1
+            continue
+        presses.append(Press(a, b, a + int(np.argmax(f[a:b]))))
+    return presses, cut
 
 
 def assign_locations(

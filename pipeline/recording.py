@@ -18,10 +18,22 @@ import rerun.blueprint as rrb
 from pipeline.atomic import atomic_output
 
 
-def default_rrd_path(output: str | Path) -> Path:
-    """Where a stage puts its recording when ``--rrd`` is not given: beside the output."""
+def default_rrd_path(output: str | Path, folder: bool | None = None) -> Path:
+    """Where a stage puts its recording when ``--rrd`` is not given.
+
+    Beside an output file, with its suffix replaced by ``.rrd`` (``x.mcap`` -> ``x.rrd``) or,
+    when it has none or is itself ``.rrd``, added (``x`` -> ``x.rrd``), so the two never
+    collide; inside an output folder as ``recording.rrd``. ``folder`` says which ``output`` is;
+    None: a folder when one exists there.
+    """
     out = Path(output)
-    return out.with_name(out.name.split(".")[0] + ".rrd") if out.suffix else out / "recording.rrd"
+    if folder is None:
+        folder = out.is_dir()
+    if folder:
+        return out / "recording.rrd"
+    if out.suffix and out.suffix != ".rrd":
+        return out.with_suffix(".rrd")
+    return out.with_name(out.name + ".rrd")
 
 
 @contextlib.contextmanager

@@ -23,57 +23,73 @@ def sync_errors(synced: str | Path, truth: str | Path) -> dict[str, float]:
     """Absolute errors of a synced file against the twin's truth.
 
     ``tip_rms_mm`` and ``force_rms_n`` are over every frame of every press record (margins
-    included) where the value is present; ``tip_offset_mm`` maps our body frame onto the
-    twin's by the cluster shapes (an exact rigid fit) before comparing tip offsets;
-    ``presses_missed`` counts true presses no synced press overlaps, ``locations_mixed``
-    presses whose location id disagrees with the one-to-one mapping of the majority.
+    included) where the value is present, ``tip_coverage`` the fraction of those frames that
+    have a tip at all, and ``force_rms_loaded_n`` the force error from onset to release only;
+    ``tip_offset_mm`` maps our body frame onto the twin's by the cluster shapes (an exact rigid
+    fit) before comparing tip offsets. Presses are matched one to one by overlap (largest
+    first): ``presses_missed`` counts true presses left without a synced press,
+    ``presses_extra`` synced presses left without a true one, ``presses_merged`` synced presses
+    that overlap more than one true press, and ``locations_mixed`` matched presses whose
+    location id disagrees with the one-to-one mapping of the majority.
     """
     with h5py.File(synced, "r") as s, h5py.File(truth, "r") as t:
         cal = s["calibration"].attrs
         rate = float(t.attrs["rate_hz"])
         true_points = t["mocap/points"][:, -1]
         true_force = t["force/magnitude"][:]
-        tip_err, force_err, frames, ours = [], [], [], []
+        tip_err, force_err, loaded_err, frames, ours = [], [], [], [], []
         for name in sorted(s["presses"]):
             g = s["presses"][name]
             idx = np.round(g["time_ns"][:] * 1e-9 * rate).astype(np.int64)
+            on, off = g.attrs["onset_index"], g.attrs["release_index"]
             tip_err.append(g["points"][:, -1] - true_points[idx])
             force_err.append(g["force_magnitude"][:] - true_force[idx])
-            on, off = g.attrs["onset_index"], g.attrs["release_index"]
+            loaded_err.append(force_err[-1][on:off])
             frames.append((idx[on], idx[off - 1]))
             ours.append(int(g.attrs["location"]))
         tip = np.concatenate(tip_err)
         force = np.concatenate(force_err)
         to_truth = fit_rigid(s["calibration/cluster_body"][:], t["indenter/markers"][:][None])
         tip_offset = to_truth.apply(s["calibration/tip_body"][:])[0] - t["indenter/tip"][:]
-        missed, mixed = _press_match(frames, ours, t["presses/start_frame"][:],
-                                     t["presses/end_frame"][:], t["presses/location"][:])
+        match = match_presses(frames, ours, t["presses/start_frame"][:],
+                             t["presses/end_frame"][:], t["presses/location"][:])
         return {
             "clock_offset_ms": float(abs(cal["clock_offset_s"] - t["clock/offset_s"][()])) * 1e3,
             "clock_drift_ppm": float(abs(cal["clock_drift_ppm"] - t["clock/drift_ppm"][()])),
             "clock_offset_sd_ms": float(cal["clock_offset_sd_s"]) * 1e3,
             "clock_drift_sd_ppm": float(cal["clock_drift_sd_ppm"]),
             "tip_rms_mm": _rms(tip) * 1e3,
+            "tip_coverage": float(np.isfinite(tip).all(axis=1).mean()),
             "tip_offset_mm": float(np.linalg.norm(tip_offset)) * 1e3,
             "force_rms_n": _rms(force[:, None]),
+            "force_rms_loaded_n": _rms(np.concatenate(loaded_err)[:, None]),
             "presses": float(len(ours)),
-            "presses_missed": float(missed),
-            "locations_mixed": float(mixed),
+            **{k: float(v) for k, v in match.items()},
         }
 
 
 def _rms(err: np.ndarray) -> float:
+    """RMS length of the rows of ``err`` that are finite (NaN when none is)."""
     ok = np.isfinite(err).all(axis=1)
+    if not ok.any():
+        return float("nan")
     return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1))))
 
 
-def _press_match(frames: list[tuple[int, int]], ours: list[int], start: np.ndarray,
-                 end: np.ndarray, true_location: np.ndarray) -> tuple[int, int]:
+def match_presses(frames: list[tuple[int, int]], ours: list[int], start: np.ndarray,
+                 end: np.ndarray, true_location: np.ndarray) -> dict[str, int]:
+    """One-to-one matching of synced presses (first, last frame) to true ones by overlap."""
+    a = np.array([f[0] for f in frames], np.int64).reshape(-1, 1)
+    b = np.array([f[1] for f in frames], np.int64).reshape(-1, 1)
+    overlap = np.clip(np.minimum(b, end[None]) - np.maximum(a, start[None]) + 1, 0, None)
+    merged = int((((overlap > 0).sum(axis=1)) > 1).sum())
     pairs = []
-    for k, (a, b) in enumerate(zip(start, end, strict=True)):
-        hit = [j for j, (c, d) in enumerate(frames) if c <= b and d >= a]
-        if hit:
-            pairs.append((int(true_location[k]), ours[hit[0]]))
+    left = overlap.astype(float)
+    while left.size and left.max() > 0:
+        j, k = np.unravel_index(int(np.argmax(left)), left.shape)
+        pairs.append((int(true_location[k]), ours[j]))
+        left[j, :] = 0
+        left[:, k] = 0
     mapping: dict[int, int] = {}
     for true_loc in {p[0] for p in pairs}:
         found = [o for t, o in pairs if t == true_loc]
@@ -81,4 +97,5 @@ def _press_match(frames: list[tuple[int, int]], ours: list[int], start: np.ndarr
     mixed = sum(1 for t, o in pairs if mapping[t] != o)
     if len(set(mapping.values())) < len(mapping):
         mixed += len(mapping) - len(set(mapping.values()))
-    return len(start) - len(pairs), mixed
+    return {"presses_missed": len(start) - len(pairs), "presses_extra": len(ours) - len(pairs),
+            "presses_merged": merged, "locations_mixed": mixed}

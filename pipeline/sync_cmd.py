@@ -17,11 +17,12 @@ from pipeline.options import resolve_rrd, rrd_option
               show_default=True,
               help="Clock alignment: trigger pulses, the tip motion against the force (data), "
                    "or trigger when recorded (auto).")
-@click.option("--max-gap-ms", type=float, default=20.0, show_default=True,
+@click.option("--max-gap-ms", type=click.FloatRange(min=0), default=20.0, show_default=True,
               help="Fill marker gaps up to this long; longer ones stay NaN and flagged.")
-@click.option("--margin-s", type=float, default=0.5, show_default=True,
+@click.option("--margin-s", type=click.FloatRange(min=0), default=0.5, show_default=True,
               help="Unloaded frames kept before contact onset and after release.")
-@click.option("--location-radius-mm", type=float, default=10.0, show_default=True,
+@click.option("--location-radius-mm", type=click.FloatRange(min=0, min_open=True),
+              default=10.0, show_default=True,
               help="Presses whose contact points are closer share a location id.")
 @rrd_option
 def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
@@ -30,13 +31,16 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
 
     Reads MCAP (from `pipeline ingest`: mocap markers, pivot recording, force log, ATI
     calibration, trigger). Fits the indenter cluster in every frame and calibrates its tip from
-    the pivot recording, tares the force from the unloaded start of the log, aligns the logger
-    clock to the mocap clock (offset and drift, from the trigger or from the data), resamples
-    the force onto the mocap frames with an anti-aliasing filter, fills short marker gaps, and
-    splits the session into presses with location ids. Writes --out (HDF5: per press the time,
-    25 phantom markers + tip, force vector and magnitude, tip depth and quality flags; the
-    calibration results and their uncertainty; provenance) and a rerun recording of the
-    alignment and the tip (--rrd, default beside --out). Nothing is written on bad input.
+    the pivot recording, tares the force from the unloaded start of the log and re-tares it
+    from the rest next to every press (bias creep), aligns the logger clock to the mocap clock
+    (offset and drift, from the trigger or from the data; auto falls back to the data when the
+    trigger channel is dead), resamples the force onto the mocap frames with an anti-aliasing
+    filter, fills short marker gaps, and splits the session into presses with location ids
+    (presses cut off by the end of a recording are left out and counted). Writes --out (HDF5:
+    per press the time, 25 phantom markers + tip, force vector and magnitude, tip depth and
+    quality flags; the calibration results and their uncertainty; provenance) and a rerun
+    recording of the alignment and the tip (--rrd, default beside --out). Nothing is written
+    on bad input.
     """
     from pipeline.sync_stage import SyncParams, run_sync
 
@@ -46,7 +50,9 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     r = run_sync(mcap, out, rrd_path, params)
     c = r.clock
     locations = len({p.press.location for p in r.presses})
-    click.echo(f"{out}: {len(r.presses)} presses at {locations} locations; clock ({c.method}) "
+    cut = f" ({r.presses_cut_off} cut off by a recording's end, left out)" if \
+        r.presses_cut_off else ""
+    click.echo(f"{out}: {len(r.presses)} presses{cut} at {locations} locations; clock ({c.method}) "
                f"offset {c.offset_s * 1e3:.3f} +- {c.offset_sd_s * 1e3:.3f} ms, drift "
                f"{c.drift_ppm:.2f} +- {c.drift_sd_ppm:.2f} ppm; tip pivot RMS "
                f"{r.pivot.rms * 1e3:.3f} mm" + (f"; recording {rrd_path}" if rrd_path else ""))

@@ -7,11 +7,13 @@ Steps, each a function of :mod:`calib` or :mod:`pipeline.presses`:
    or ill-conditioned fits flagged and dropped) and the tip, the 26th point;
 3. short marker gaps filled, longer ones kept missing and flagged; the tip track low-passed
    (zero phase) against the lever arm's noise; the tip depth below the phantom's rest plane;
-4. the force tare from the unloaded start of the log and the 6x6 calibration matrix;
+4. the force tare from the unloaded start of the log and the 6x6 calibration matrix, then a
+   re-tare from the rest level next to every press (bias creep, tool weight);
 5. the clock: trigger pulses when recorded, otherwise the tip depth against the force;
 6. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock;
 7. presses from contact onset to release, each with its location id and repeat number, cut
-   out with a margin of unloaded frames on both sides.
+   out with a margin of unloaded frames on both sides; presses cut off by the end of either
+   recording are left out (and counted).
 
 Nothing is written unless everything succeeds; every bad input is one :class:`BadInput` line.
 """
@@ -19,6 +21,7 @@ Nothing is written unless everything succeeds; every bad input is one :class:`Ba
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +38,7 @@ from calib.clock import (
     rising_edges,
     stamp_resolution_s,
 )
-from calib.force import Tare, apply_calibration, unloaded_start
+from calib.force import RestBaseline, Tare, apply_calibration, rest_baseline, unloaded_start
 from calib.gaps import MISSING, fill_gaps
 from calib.pivot import PivotResult, pivot_calibrate
 from calib.resample import antialiased_interpolant
@@ -51,6 +54,8 @@ from pipeline.provenance import make_provenance
 
 POOR_FIT = np.uint8(QUALITY_BITS["poor_fit"])
 TIP = "tip"
+MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
+MIN_TRACKED = 0.05               # least fraction of frames with a usable indenter pose
 
 
 @dataclass
@@ -70,6 +75,7 @@ class SyncParams:
     tip_cutoff_hz: float = 15.0      # zero-phase low-pass of the tip track (0: off)
     min_pivot_rotation_deg: float = 5.0
     min_correlation: float = 0.5     # data-driven clock: force must follow the depth this well
+    retare: bool = True              # re-tare from the rest next to every press (False: start)
 
 
 @dataclass
@@ -85,6 +91,7 @@ class PressRecord:
     depth: np.ndarray
     quality: np.ndarray
     force_quality: np.ndarray
+    rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
 
 
 @dataclass
@@ -103,12 +110,14 @@ class SyncResult:
     location_centres: np.ndarray
     rate_hz: float
     calibration: dict[str, Any]
+    presses_cut_off: int = 0         # presses left out: cut off by the end of a recording
     session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
 
 
 def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResult:
     """Synchronise a raw session (see the module docstring for the steps)."""
     p = params or SyncParams()
+    check_params(p)
     mk = raw.markers
     rate = float(mk.rate_hz)
     t_m = mk.time_ns.astype(np.float64) * 1e-9
@@ -117,24 +126,29 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
 
     ref, pivot = _pivot(raw, p)
     pose = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m, robust_scale=p.robust_scale_m)
+    _check_tracked(raw, pose)
     tip = pose.apply(pivot.tip_body)
     tip[pose.poor] = np.nan
     points, quality = fill_gaps(t_m, np.concatenate([phantom, tip[:, None]], axis=1),
                                 p.max_gap_s)
     points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
     quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
-    shaft = np.nanmean(cluster, axis=1) - tip
+    shaft = _mean_seen(cluster) - tip
     surface_point, normal = rest_plane(phantom, shaft, mk.source)
     depth = (surface_point - points[:, -1]) @ normal
 
-    tare, wrench = _force(raw, p.detect_n)
+    tare, wrench, noise = _force(raw, p)
+    contact = max(p.contact_n, 5 * noise)
     t_f = _force_times(raw)
+    rest = (rest_baseline(t_f, wrench, contact, max(contact, 0.5 * p.detect_n)) if p.retare
+            else RestBaseline(np.empty(0), np.empty((0, wrench.shape[1]))))
+    wrench = wrench - rest.at(t_f)
     force_at = antialiased_interpolant(t_f, wrench, rate, p.passband)
 
     def magnitude_at(t: np.ndarray) -> np.ndarray:
         return np.linalg.norm(force_at(t)[:, :3], axis=1)
 
-    clock = estimate_clock(raw, p, t_m, depth, t_f, magnitude_at)
+    clock, clock_note = estimate_clock(raw, p, t_m, depth, t_f, magnitude_at)
     _check_overlap(raw, clock, t_m, t_f)
 
     sampled = force_at(clock.to_logger(t_m))
@@ -144,12 +158,13 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     force, torque = sampled[:, :3], sampled[:, 3:]
     magnitude = np.linalg.norm(force, axis=1)
 
-    noise = _noise_level(wrench, tare)
-    presses = segment_presses(magnitude, rate, p.detect_n, max(p.contact_n, 5 * noise))
+    presses, cut_off = segment_presses(magnitude, rate, p.detect_n, contact)
     if not presses:
-        raise BadInput(raw.force.source, f"no press found (force never rises above "
-                                         f"{p.detect_n:g} N)")
-    _check_cluster(raw, pose, presses, mk.time_ns)
+        whole = "" if not cut_off else (f"; {cut_off} cut off by the end of a recording "
+                                         "left out")
+        raise BadInput(raw.force.source, f"no complete press found (force never rises above "
+                                         f"{p.detect_n:g} N{whole})")
+    _check_cluster(raw, pose, presses)
     centres = _contact_points(points[:, -1], presses, surface_point, normal)
     loc, rep, loc_centres = assign_locations(centres, p.location_radius_m)
     for pr, lo, re in zip(presses, loc, rep, strict=True):
@@ -158,7 +173,10 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
               "torque": torque, "force_magnitude": magnitude, "depth": depth,
               "force_quality": force_q}
     records = cut_presses(presses, series, int(round(p.margin_s * rate)))
-    calibration = _calibration_record(raw, pivot, tare, clock, p, noise)
+    for rec in records:
+        ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
+        rec.rest = rest.at(clock.to_logger(ends))
+    calibration = _calibration_record(raw, pivot, tare, clock, p, noise, rest, clock_note)
     session = {"time_ns": mk.time_ns, "tip": points[:, -1], "depth": depth,
                "force_magnitude": magnitude, "cluster": cluster,
                "force_magnitude_unaligned": magnitude_at(IDENTITY.to_logger(t_m)),
@@ -167,8 +185,27 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
         name=raw.name, point_names=list(raw.phantom_markers) + [TIP], presses=records,
         clock=clock, pivot=pivot, tare=tare, cluster_body=ref, surface_point=surface_point,
         surface_normal=normal, location_centres=loc_centres, rate_hz=rate,
-        calibration=calibration, session=session,
+        calibration=calibration, presses_cut_off=cut_off, session=session,
     )
+
+
+def check_params(p: SyncParams) -> None:
+    """Refuse settings outside their meaning (the CLI checks its options the same way)."""
+    if p.clock not in ("auto", "trigger", "data"):
+        raise BadInput(None, f"--clock must be auto, trigger or data, got {p.clock!r}")
+    for name, value, strict in (("max_gap_s", p.max_gap_s, False),
+                                ("margin_s", p.margin_s, False),
+                                ("location_radius_m", p.location_radius_m, True),
+                                ("detect_n", p.detect_n, True), ("contact_n", p.contact_n, True),
+                                ("max_offset_s", p.max_offset_s, True),
+                                ("max_fit_rms_m", p.max_fit_rms_m, True),
+                                ("robust_scale_m", p.robust_scale_m, False),
+                                ("tip_cutoff_hz", p.tip_cutoff_hz, False)):
+        if not (value > 0 if strict else value >= 0):
+            raise BadInput(None, f"sync parameter {name} must be "
+                                 f"{'positive' if strict else 'zero or more'}, got {value:g}")
+    if not 0 < p.passband < 1:
+        raise BadInput(None, f"sync parameter passband must be in (0, 1), got {p.passband:g}")
 
 
 # --- steps ------------------------------------------------------------------------------------
@@ -196,19 +233,39 @@ def rest_plane(phantom: np.ndarray, up: np.ndarray, source: str | Path
     (T, 3): the indenter's shaft, from the tip to its marker cluster, which always stands
     above the surface.
     """
-    rest = np.nanmedian(phantom, axis=0)
+    with warnings.catch_warnings():          # a marker never seen has no rest position: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        rest = np.nanmedian(phantom, axis=0)
     ok = np.isfinite(rest).all(axis=1)
     if ok.sum() < 3:
         raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
     centre = rest[ok].mean(axis=0)
     normal = np.linalg.svd(rest[ok] - centre)[2][2]
-    if np.nanmedian(up @ normal) < 0:
+    along = up @ normal
+    along = along[np.isfinite(along)]
+    if along.size == 0:
+        raise BadInput(source, "the indenter is never tracked: no side of the surface is up")
+    if np.median(along) < 0:
         normal = -normal
     return centre, normal
 
 
-def _force(raw: RawSession, detect_n: float) -> tuple[Tare, np.ndarray]:
-    """Tare and calibrate the log; a start under load shows as force left between presses."""
+def _mean_seen(points: np.ndarray) -> np.ndarray:
+    """Mean over axis 1 of (T, M, 3) points, NaN ones left out (NaN where none is seen)."""
+    seen = np.isfinite(points).all(axis=2)
+    n = seen.sum(axis=1)[:, None]
+    total = np.where(seen[..., None], points, 0.0).sum(axis=1)
+    return np.where(n > 0, total / np.maximum(n, 1), np.nan)
+
+
+def _force(raw: RawSession, p: SyncParams) -> tuple[Tare, np.ndarray, float]:
+    """Tare and calibrate the log: (tare, wrench, noise of the tared force in N).
+
+    A start under load passes the tare's flatness test when it is held steady, but then the
+    force does not come back to zero after the first press: the rest it returns to is
+    compared with the contact level (5 noise widths at least), well above the creep of the
+    bias over one press cycle.
+    """
     f = raw.force
     if f.kind == "gauge" and raw.calibration is None:
         raise BadInput(f.source, "gauge voltages but no ATI calibration in the session")
@@ -218,12 +275,35 @@ def _force(raw: RawSession, detect_n: float) -> tuple[Tare, np.ndarray]:
     tare = unloaded_start(f.values, f.rate_hz, f.source)
     matrix = raw.calibration.matrix if f.kind == "gauge" else None
     wrench = apply_calibration(f.values, tare.bias, matrix)
-    rest = float(np.percentile(np.linalg.norm(wrench[:, :3], axis=1), 10))
-    if rest > detect_n:
+    noise = _noise_level(wrench, tare)
+    contact = max(p.contact_n, 5 * noise)
+    rest = rest_after_first_press(np.linalg.norm(wrench[:, :3], axis=1), p.detect_n)
+    if rest is not None and rest > contact:
         raise BadInput(f.source, f"force log did not start unloaded: after taring its start, "
-                                 f"the force between presses is {rest:.2f} N, not 0 (no "
-                                 "unloaded interval to tare from)", where="sample 0")
-    return tare, wrench
+                                 f"the force between presses is {rest:.2f} N, not 0 (more "
+                                 f"than the contact level {contact:.2f} N; no unloaded "
+                                 "interval to tare from)", where="sample 0")
+    return tare, wrench, noise
+
+
+def rest_after_first_press(magnitude: np.ndarray, detect_n: float) -> float | None:
+    """Median force magnitude between the first press's release and the next press.
+
+    The first press is the first rise above ``detect_n``; it is released where the magnitude
+    falls below half of that, and the rest lasts until the next rise above ``detect_n`` (or
+    the end). None when nothing rises above ``detect_n`` or the first press never ends.
+    """
+    m = np.asarray(magnitude, float)
+    above = np.flatnonzero(m > detect_n)
+    if above.size == 0:
+        return None
+    below = np.flatnonzero(m[above[0]:] < 0.5 * detect_n)
+    if below.size == 0:
+        return None
+    start = int(above[0] + below[0])
+    again = np.flatnonzero(m[start:] > detect_n)
+    stop = start + int(again[0]) if again.size else len(m)
+    return float(np.median(m[start:stop]))
 
 
 def _force_times(raw: RawSession) -> np.ndarray:
@@ -239,25 +319,36 @@ def _force_times(raw: RawSession) -> np.ndarray:
 
 
 def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
-                   t_f: np.ndarray, magnitude_at: Any) -> ClockFit:
-    """The logger-vs-mocap clock: trigger pulses when recorded (and asked for), else data."""
+                   t_f: np.ndarray, magnitude_at: Any) -> tuple[ClockFit, str | None]:
+    """The logger-vs-mocap clock: trigger pulses when recorded (and asked for), else data.
+
+    With ``--clock auto`` a trigger channel that shows fewer than :data:`MIN_PULSES` edges
+    (a dead or unplugged line) or a mocap file with fewer trigger events falls back to the
+    data; the second value then says why (None otherwise).
+    """
     edges, events = _trigger(raw)
-    use_trigger = p.clock == "trigger" or (p.clock == "auto" and edges is not None)
-    if use_trigger and edges is None:
+    if p.clock == "trigger" and edges is None:
         raise BadInput(raw.force.source, "--clock trigger, but the session has no trigger "
                                          "channel with matching mocap events")
-    if use_trigger:
-        # both stamps are rounded: the logger's edge to its sample, the EVENT to its decimals
-        step = np.median(np.diff(t_f))
-        sd = float(np.sqrt((step**2 + stamp_resolution_s(np.round(events * 1e9)) ** 2) / 12))
-        try:
-            return match_trigger(edges, events, raw.force.source, timing_sd_s=sd)
-        except BadInput as e:
-            if "ambiguous" not in e.what:
-                raise
-            prior = _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
-            return match_trigger(edges, events, raw.force.source, prior=prior, timing_sd_s=sd)
-    return _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
+    note = None
+    if p.clock == "auto" and edges is not None and min(len(edges), len(events)) < MIN_PULSES:
+        note = (f"trigger unusable ({len(edges)} pulse edges in the force log, {len(events)} "
+                "trigger events in the mocap file): clock from the data")
+        edges = None
+    if p.clock == "data" or edges is None:
+        return _data_clock(raw, p, t_m, depth, t_f, magnitude_at), note
+    # both stamps are rounded: the logger's edge to its sample, the EVENT to its decimals
+    step = np.median(np.diff(t_f))
+    sd = float(np.sqrt((step**2 + stamp_resolution_s(np.round(events * 1e9)) ** 2) / 12))
+    try:
+        return match_trigger(edges, events, raw.force.source, timing_sd_s=sd,
+                             min_pulses=MIN_PULSES), None
+    except BadInput as e:
+        if "ambiguous" not in e.what:
+            raise
+    prior = _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
+    return match_trigger(edges, events, raw.force.source, prior=prior, timing_sd_s=sd,
+                         min_pulses=MIN_PULSES), None
 
 
 def _trigger(raw: RawSession) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -282,7 +373,7 @@ def _data_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarr
         raise BadInput(src, f"clock: force log and mocap recording do not overlap in time "
                             f"for any clock offset within +-{p.max_offset_s:g} s") from None
     mag = magnitude_at(t_m + lag0)
-    loaded = segment_presses(mag, raw.markers.rate_hz, p.detect_n, max(p.contact_n, 0.1))
+    loaded, _ = segment_presses(mag, raw.markers.rate_hz, p.detect_n, max(p.contact_n, 0.1))
     windows = [(t_m[pr.onset:pr.release], depth[pr.onset:pr.release]) for pr in loaded]
     fit = clock_from_data(windows, magnitude_at, lag0, src)
     f = magnitude_at(fit.to_logger(t_m))
@@ -317,13 +408,27 @@ def _noise_level(wrench: np.ndarray, tare: Tare) -> float:
     return float(np.max(wrench[tare.start:tare.stop, :3].std(axis=0)))
 
 
-def _check_cluster(raw: RawSession, pose: RigidFit, presses: list[Press],
-                   time_ns: np.ndarray) -> None:
+def _check_tracked(raw: RawSession, pose: RigidFit) -> None:
+    """Refuse a session whose indenter has a usable pose in almost no frame."""
+    usable = pose.valid & ~pose.poor
+    if usable.mean() < MIN_TRACKED:
+        raise BadInput(raw.markers.source, f"the indenter has a usable pose in only "
+                                           f"{int(usable.sum())} of {len(usable)} frames "
+                                           f"({int(pose.poor.sum())} fits poor): are its "
+                                           "markers labelled as in the pivot recording?")
+
+
+def _check_cluster(raw: RawSession, pose: RigidFit, presses: list[Press]) -> None:
+    """Every press needs a usable pose (3 markers seen and a fit that is not poor)."""
     for k, pr in enumerate(presses):
-        if (pose.n_markers[pr.onset:pr.release] < 3).all():
-            raise BadInput(raw.markers.source, f"press {k}: fewer than 3 indenter markers seen "
-                                               "through the whole press, so the tip is unknown",
-                           where=f"frames {pr.onset}-{pr.release - 1}")
+        span = slice(pr.onset, pr.release)
+        if (pose.valid[span] & ~pose.poor[span]).any():
+            continue
+        what = ("fewer than 3 indenter markers seen through the whole press" if
+                not pose.valid[span].any() else "every indenter fit through the whole press "
+                "is poor (markers mislabelled, or a ghost marker?)")
+        raise BadInput(raw.markers.source, f"press {k}: {what}, so the tip is unknown",
+                       where=f"frames {pr.onset}-{pr.release - 1}")
 
 
 def _contact_points(tip: np.ndarray, presses: list[Press], point: np.ndarray,
@@ -354,13 +459,16 @@ def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
         lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
         hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else n)
         local = Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat)
-        out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()}))
+        out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
+                               rest=np.zeros((2, 6))))
     return out
 
 
 def _calibration_record(raw: RawSession, pivot: PivotResult, tare: Tare, clock: ClockFit,
-                        p: SyncParams, noise: float) -> dict[str, Any]:
+                        p: SyncParams, noise: float, rest: RestBaseline,
+                        clock_note: str | None) -> dict[str, Any]:
     f = raw.force
+    moved = np.linalg.norm(rest.level[:, :3], axis=1) if len(rest.time_s) else np.zeros(1)
     return {
         "tip": {"tip_body_m": pivot.tip_body.tolist(), "rms_m": pivot.rms,
                 "n_poses": pivot.n_poses, "rotation_spread_deg": pivot.rotation_spread_deg,
@@ -370,8 +478,9 @@ def _calibration_record(raw: RawSession, pivot: PivotResult, tare: Tare, clock: 
                   "noise": tare.noise.tolist(), "noise_force_n": noise,
                   "tare_interval_s": [tare.start / f.rate_hz, tare.stop / f.rate_hz],
                   "matrix_source": None if raw.calibration is None else
-                  str(raw.calibration.source), "source": str(f.source)},
-        "clock": clock.as_dict(),
+                  str(raw.calibration.source), "source": str(f.source),
+                  "retare_anchors": len(rest.time_s), "retare_max_n": float(moved.max())},
+        "clock": {**clock.as_dict(), "note": clock_note},
         "params": asdict(p),
     }
 
@@ -409,6 +518,7 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
         })
         _put(h.require_group("locations"), "centre", result.location_centres.reshape(-1, 3), "m")
         presses = h.create_group("presses")
+        presses.attrs["cut_off"] = result.presses_cut_off
         for k, rec in enumerate(result.presses):
             g = presses.create_group(f"{k:03d}")
             _put(g, "time_ns", rec.time_ns.astype(np.int64), "ns")
@@ -425,6 +535,7 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
                 "peak_index": pr.peak, "release_index": pr.release,
                 "onset_ns": int(rec.time_ns[pr.onset]),
                 "release_ns": int(rec.time_ns[pr.release - 1]),
+                "rest_force_n": rec.rest[:, :3], "rest_torque_nm": rec.rest[:, 3:],
                 "points_missing_throughout": np.flatnonzero(
                     (rec.quality[pr.onset:pr.release] & MISSING).all(axis=0)).astype(np.int64),
             })
@@ -444,8 +555,7 @@ def run_sync(mcap: str | Path, out: str | Path, rrd: str | Path | None = None,
     from ingest.mcap_io import read_raw_mcap
 
     p = params or SyncParams()
-    if p.clock not in ("auto", "trigger", "data"):
-        raise BadInput(None, f"--clock must be auto, trigger or data, got {p.clock!r}")
+    check_params(p)
     finals = {Path(x).resolve() for x in (out, rrd) if x is not None}
     if Path(mcap).resolve() in finals:
         raise BadInput(mcap, "output would overwrite the input file")

@@ -23,9 +23,11 @@ from pipeline.options import resolve_rrd, rrd_option, seed_option
 @click.option("--trigger/--no-trigger", default=True, show_default=True,
               help="Record sync pulses (force-log column 'trigger', QTM EVENT 'Trigger').")
 @click.option("--offset", "offset_s", type=float, default=None,
-              help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign).")
+              help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign; "
+                   "giving it changes no other random choice).")
 @click.option("--drift", "drift_ppm", type=float, default=None,
-              help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign).")
+              help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign; "
+                   "giving it changes no other random choice).")
 @click.option("--force-file", type=click.Choice(["csv", "mat"]), default="csv",
               show_default=True, help="The force log session.toml names (both are written).")
 @click.option("--view-press", type=click.IntRange(0), default=0, show_default=True,
@@ -38,15 +40,17 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
           no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
-    Reads nothing. Writes OUT_DIR (new, empty, or an earlier synth session): session.toml;
-    indentation.tsv and indentation_6D.tsv (QTM TSV 3D of 25 phantom + 4 indenter markers and
-    6D of the body 'Indenter', 500 Hz, noise and gaps); pivot.tsv (QTM TSV 3D, the tip in a
-    divot); force.csv and force.mat (Speedgoat log at 1 kHz on its own clock: six Nano17
-    gauge voltages with bias, and the trigger); FT<serial>.cal (ATI calibration, SI-12-0.12);
-    truth.h5 (noise-free markers and tip on the mocap clock, true force, clock offset and
-    drift, tip offset, static states every 0.5 N); and a rerun recording of one press beside
-    its truth (--rrd, default OUT_DIR/recording.rrd). The same seed gives the same bytes of
-    data. `pipeline ingest OUT_DIR` reads the folder as it is.
+    Reads nothing. Writes OUT_DIR: session.toml; indentation.tsv and indentation_6D.tsv (QTM
+    TSV 3D of 25 phantom + 4 indenter markers and 6D of the body 'Indenter', 500 Hz, noise and
+    gaps); pivot.tsv (QTM TSV 3D, the tip in a divot); force.csv and force.mat (Speedgoat log
+    at 1 kHz on its own clock: six Nano17 gauge voltages with bias, and the trigger);
+    FT<serial>.cal (ATI calibration, SI-12-0.12); truth.h5 (noise-free markers and tip on the
+    mocap clock, true force, clock offset and drift, tip offset, static states every 0.5 N);
+    and a rerun recording of one press beside its truth (--rrd, default
+    OUT_DIR/recording.rrd). OUT_DIR is new, empty, or an earlier synth session: then the files
+    of that session this run does not rewrite (another FT<serial>.cal, a recording.rrd) are
+    removed, and files the twin does not write are left alone. The same seed gives the same
+    bytes of data. `pipeline ingest OUT_DIR` reads the folder as it is.
     """
     from sim.twin import synthesize_session
 

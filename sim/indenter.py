@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from sim.cone import cone_directions
+
 # marker positions on the handle (mm, before centring), deliberately irregular so that every
 # inter-marker distance differs (QTM identifies the body by them)
 _HANDLE_MM = np.array([[32.0, 4.0, 0.0], [-14.0, 28.0, 10.0], [-18.0, -26.0, -6.0],
@@ -244,9 +246,9 @@ class HandStyle:
     release: tuple[float, float] = (0.7, 1.2)
     retract: tuple[float, float] = (0.4, 0.6)
     max_tilt_deg: float = 20.0
-    fmax_mean: float = 6.2
+    fmax_mean: float = 6.2          # N: peak force, normal 6.2 +- 1.4 N (the paper's) ...
     fmax_sd: float = 1.4
-    fmax_range: tuple[float, float] = (2.5, 8.0)
+    fmax_range: tuple[float, float] = (2.5, 8.0)   # ... truncated here (mean 5.95, sd 1.2 N)
     scale: float = 1.0              # all durations are multiplied by it
 
     @property
@@ -267,21 +269,17 @@ def plan_hand(
     """A hand pressing each ``(location, repeat, contact point)`` in order, timed from 0.
 
     Press directions are uniform over the cap within ``max_tilt_deg`` of the surface normal
-    (lab -z); ``fmax`` is normal, clipped to ``fmax_range``.
+    (lab -z); ``fmax`` is normal, truncated to ``fmax_range`` (redrawn until inside it).
     """
     presses = []
     t = lead_in
-    cos_max = np.cos(np.radians(style.max_tilt_deg))
 
     def span(r: tuple[float, float]) -> float:
         return style.scale * float(rng.uniform(*r))
 
     for loc, rep, contact in targets:
-        cos_t = rng.uniform(cos_max, 1.0)
-        az = rng.uniform(0, 2 * np.pi)
-        sin_t = np.sqrt(1.0 - cos_t**2)
-        direction = np.array([sin_t * np.cos(az), sin_t * np.sin(az), -cos_t])
-        fmax = float(np.clip(rng.normal(style.fmax_mean, style.fmax_sd), *style.fmax_range))
+        direction = cone_directions(rng, style.max_tilt_deg)
+        fmax = draw_fmax(rng, style)
         p = Press(location=loc, repeat=rep, contact=np.asarray(contact, dtype=np.float64),
                   direction=direction, fmax=fmax, roll=float(rng.uniform(-0.4, 0.4)),
                   hover_height=float(rng.uniform(0.02, 0.035)),
@@ -301,6 +299,15 @@ def plan_hand(
         rotation_tremor=Tremor.draw(rng, np.radians(0.15), (6.0, 11.0)),
         force_tremor=Tremor.draw(rng, 0.03, (4.0, 9.0), axes=1),
     )
+
+
+def draw_fmax(rng: np.random.Generator, style: HandStyle) -> float:
+    """A peak force from the normal distribution truncated to ``style.fmax_range``."""
+    lo, hi = style.fmax_range
+    while True:
+        fmax = float(rng.normal(style.fmax_mean, style.fmax_sd))
+        if lo <= fmax <= hi:
+            return fmax
 
 
 def pivot_motion(

@@ -6,9 +6,9 @@ gamma distribution whose mean and standard deviation are the paper's residual, 0
 a few are off by a millimetre. Samples are independent from frame to frame.
 
 Gaps: each marker loses sight in bursts that start at random (a Poisson process) and last
-6-50 ms, one in seven 0.1-0.4 s. Bursts start far more often when the hand is near: on the
-indenter's markers when the tip is within 40 mm of the surface, and on the phantom markers
-within 25 mm of the tip when it is that close.
+6-50 ms, 15 % of them (``long_share``) 0.1-0.4 s. Bursts start far more often when the hand
+is near: on the indenter's markers when the tip is within 40 mm of the surface, and on the
+phantom markers within 25 mm of the tip when it is that close.
 """
 
 from __future__ import annotations

@@ -172,33 +172,51 @@ class MSM:
             out[fam] = k
         return out
 
-    def stiffness_matrix(self, x: np.ndarray | None = None, clamp: bool = False
-                         ) -> sp.csr_matrix:
-        """Sparse (3N, 3N) tangent stiffness at ``x`` (rest state when None)."""
+    @property
+    def band_width(self) -> int:
+        """Half-bandwidth of the tangent stiffness: masses row-major, three unknowns each."""
+        return 3 * (self.n + 1) + 2
+
+    def stiffness_band(self, x: np.ndarray | None = None, clamp: bool = False) -> np.ndarray:
+        """Tangent stiffness at ``x`` (rest when None) in LAPACK upper band storage.
+
+        ``ab[bw + i - j, j] = K[i, j]`` for ``j - bw <= i <= j`` (``bw`` = :attr:`band_width`):
+        the springs' blocks (:meth:`edge_stiffness`) plus ``k_fixed`` on the diagonal.
+        """
         x = self.rest if x is None else x
-        n = self.n
-        idx = np.arange(self.N).reshape(n, n)
-        rows, cols, vals = [], [], []
+        n, N, bw = self.n, self.N, self.band_width
+        ab = np.zeros((bw + 1, 3 * N))
+        diag = np.zeros((n, n, 3, 3))
+        diag[..., [0, 1, 2], [0, 1, 2]] = self.params.k_fixed
         for (di, dj), k in self.edge_stiffness(x, clamp).items():
-            a = idx[: n - di, : n - dj].ravel()
-            b = idx[di:, dj:].ravel()
-            kk = k.reshape(-1, 3, 3)
-            for p, q, s in ((a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)):
-                r = (3 * p[:, None, None] + np.arange(3)[None, :, None]).repeat(3, 2)
-                c = (3 * q[:, None, None] + np.arange(3)[None, None, :]).repeat(3, 1)
-                rows.append(r.ravel())
-                cols.append(c.ravel())
-                vals.append(s * kk.ravel())
-        k_total = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                 np.concatenate(cols))), shape=(3 * self.N, 3 * self.N))
-        return (k_total + self.params.k_fixed * sp.identity(3 * self.N)).tocsr()
+            diag[: n - di, : n - dj] += k
+            diag[di:, dj:] += k
+            by_target = np.zeros((n, n, 3, 3))
+            by_target[di:, dj:] = k
+            by_target = by_target.reshape(N, 3, 3)
+            off = di * n + dj
+            for r in range(3):
+                for c in range(3):
+                    ab[bw - 3 * off + r - c, 3 * off + c::3] = -by_target[off:, r, c]
+        diag = diag.reshape(N, 3, 3)
+        for r in range(3):
+            for c in range(r, 3):
+                ab[bw + r - c, c::3] = diag[:, r, c]
+        return ab
 
 
 # -- explicit integration (the paper's reference) ----------------------------------------------
 
 def max_eigenfrequency(model: MSM, x: np.ndarray | None = None) -> float:
-    """Largest angular eigenfrequency sqrt(lambda_max(K) / m) (rad/s) of the model at ``x``."""
-    k = model.stiffness_matrix(x)
+    """Largest angular eigenfrequency sqrt(lambda_max(K) / m) (rad/s) of the model at ``x``.
+
+    Lanczos (``eigsh``) on the band of :meth:`MSM.stiffness_band` viewed as a sparse matrix:
+    ~0.05 s, where LAPACK's banded eigensolver agrees to 1e-15 but takes ~0.6 s.
+    """
+    ab = model.stiffness_band(x)
+    size, bw = ab.shape[1], model.band_width
+    upper = sp.dia_matrix((ab, np.arange(bw, -1, -1)), shape=(size, size))
+    k = (upper + sp.triu(upper, 1).T).tocsr()          # the band's symmetric whole
     lam = spla.eigsh(k, k=1, which="LA", return_eigenvectors=False, tol=1e-8)[0]
     return math.sqrt(lam / model.params.mass)
 
@@ -260,14 +278,14 @@ def relax_explicit(
                                f"{stability_limit(model, start):.4g} s at the start state")
         else:
             f = model.forces(x, f_ext)
-        if step > 0 and _max_norm(v) < v_tol and _max_norm(f) < f_tol:
+        if step > 0 and max_norm(v) < v_tol and max_norm(f) < f_tol:
             return x, v, step
         if step == max_steps:
             break
         v += (dt / m) * (f - c * v)
         x += dt * v
     raise MSMError(f"explicit integration not static after {max_steps} steps of {dt:g} s "
-                   f"(max |v| {_max_norm(v):.3g} m/s, max |f| {_max_norm(f):.3g} N)")
+                   f"(max |v| {max_norm(v):.3g} m/s, max |f| {max_norm(f):.3g} N)")
 
 
 def simulate_reference(
@@ -303,6 +321,7 @@ def unit(direction: np.ndarray) -> np.ndarray:
     return d / norm
 
 
-def _max_norm(a: np.ndarray) -> float:
-    """Largest per-mass vector norm of an (N, 3) array."""
-    return float(np.sqrt(np.einsum("ij,ij->i", a, a).max()))
+def max_norm(a: np.ndarray) -> float:
+    """Largest per-mass vector norm of an (N, 3) or flat (3N,) array."""
+    a3 = a.reshape(-1, 3)
+    return float(np.sqrt(np.einsum("ij,ij->i", a3, a3).max()))

@@ -37,7 +37,8 @@ from pipeline.atomic import atomic_output
 from pipeline.errors import BadInput
 from pipeline.progress import progress
 from pipeline.provenance import make_provenance
-from sim.msm import MSM, MSMError, MSMParams
+from sim.cone import cone_directions
+from sim.msm import MSM, MSMError, MSMParams, unit
 from sim.msm_static import (
     DEFAULT_TOL,
     StaticSolver,
@@ -99,13 +100,9 @@ def draw_plan(protocol: Protocol, n_masses: int) -> Plan:
     p = protocol
     rng = np.random.default_rng(p.seed)
     nodes = rng.choice(n_masses, size=p.locations, replace=False)
-    cos_max = math.cos(math.radians(p.max_angle_deg))
-    cos_t = rng.uniform(cos_max, 1.0, size=(p.locations, p.directions - 1))
-    phi = rng.uniform(0.0, 2 * math.pi, size=(p.locations, p.directions - 1))
-    sin_t = np.sqrt(1.0 - cos_t ** 2)
     dirs = np.empty((p.locations, p.directions, 3))
     dirs[:, 0] = (0.0, 0.0, -1.0)
-    dirs[:, 1:] = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), -cos_t], -1)
+    dirs[:, 1:] = cone_directions(rng, p.max_angle_deg, (p.locations, p.directions - 1))
     pairs = np.array([(s, e) for s in range(p.steps + 1) for e in range(s + 2, p.steps + 1)],
                      dtype=np.int64).reshape(-1, 2)
     multi = np.empty((p.sequences, p.multi_per_sequence, 2), dtype=np.int64)
@@ -143,27 +140,32 @@ class Simulated:
     locations: np.ndarray    # (l,) location indices
     points: np.ndarray       # (l * D * (steps + 1), N, 3) float32
     max_residual: float      # N, largest force on any mass of any state (float64 solution)
+    stored_residual: float   # N, the same of the states as stored (cast to float32)
     iterations: int
     factorizations: int
     cpu_s: float             # CPU seconds of the solves, summed over worker processes
 
 
-def _simulate_location(args: tuple) -> tuple[np.ndarray, float, int, int, float]:
-    """One location, all its directions: (D, steps + 1, N, 3) float32 and solver counts."""
+def _simulate_location(args: tuple) -> tuple[np.ndarray, float, float, int, int, float]:
+    """One location, all its directions: (D, steps + 1, N, 3) float32, the worst residuals of
+    the float64 and of the stored float32 states, and solver counts."""
     cpu = time.process_time()
     params, node, directions, steps, fmax, tol = args
     model = MSM(params)
     solver = StaticSolver(model, tol)
     out = np.empty((len(directions), steps + 1, model.N, 3), dtype=np.float32)
-    worst = 0.0
+    stored = 0.0
     for d, direction in enumerate(directions):
-        states = simulate_sequence(model, int(node), direction, steps, fmax, solver=solver)
+        states = simulate_sequence(model, int(node), direction, steps, fmax, tol, solver)
         if not np.isfinite(states).all():
             raise MSMError(f"non-finite state at mass {node}, direction {d}")
-        worst = max(worst, residual(model, states[-1], model.load(int(node), direction * fmax)))
         out[d] = states
-    stats = solver.stats
-    return out, worst, stats.iterations, stats.factorizations, time.process_time() - cpu
+        for t in range(1, steps + 1):
+            load = model.load(int(node), unit(direction) * fmax * t / steps)
+            stored = max(stored, residual(model, out[d, t].astype(np.float64), load))
+    stats = solver.stats           # max_residual: of every solve, i.e. every float64 state
+    return (out, stats.max_residual, stored, stats.iterations, stats.factorizations,
+            time.process_time() - cpu)
 
 
 def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
@@ -178,20 +180,22 @@ def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = No
             for loc in locs]
     per_loc = p.directions * (p.steps + 1)
     points = np.empty((len(locs) * per_loc, params.n * params.n, 3), dtype=np.float32)
-    worst, its, facts, cpu = 0.0, 0, 0, 0.0
+    worst = stored = cpu = 0.0
+    its = facts = 0
     workers = max(1, min(workers, len(jobs)))
     pool = _pool(workers) if workers > 1 else None
     try:
         results = pool.imap(_simulate_location, jobs) if pool else map(_simulate_location, jobs)
         with progress(results, "simulating MSM locations", length=len(jobs)) as bar:
-            for k, (states, w, i, f, c) in enumerate(bar):
+            for k, (states, w, s, i, f, c) in enumerate(bar):
                 points[k * per_loc:(k + 1) * per_loc] = states.reshape(per_loc, -1, 3)
-                worst, its, facts, cpu = max(worst, w), its + i, facts + f, cpu + c
+                worst, stored = max(worst, w), max(stored, s)
+                its, facts, cpu = its + i, facts + f, cpu + c
     finally:
         if pool:
             pool.terminate()
             pool.join()
-    return Simulated(locs, points, worst, its, facts, cpu)
+    return Simulated(locs, points, worst, stored, its, facts, cpu)
 
 
 def _pool(workers: int) -> multiprocessing.pool.Pool:
@@ -261,8 +265,14 @@ def write_states(path: str | Path, arrays: dict[str, np.ndarray], attrs: dict) -
 
 
 def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
-               shard: tuple[int, int] | None) -> dict:
-    """Root attributes of an MSM states file (shards add ``shard = "I/N"``)."""
+               shard: tuple[int, int] | None, sim: Simulated | None = None) -> dict:
+    """Root attributes of an MSM states file (shards add ``shard = "I/N"``).
+
+    With ``sim``: ``max_residual_N``, the largest force left on any mass of any state as
+    solved (float64, below ``tol``), and ``stored_residual_N``, the same of the states as
+    stored: float32 rounds positions by up to ~4e-9 m at 0.1 m, which leaves ~1e-6 to 1e-5 N
+    of spring force whatever ``tol`` was.
+    """
     attrs = {
         "provenance": json.dumps(provenance),
         "source": "msm",
@@ -275,6 +285,9 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
         "k_between": params.k_between,
         "k_fixed": params.k_fixed,
     }
+    if sim is not None:
+        attrs[RESIDUAL_ATTRS[0]] = sim.max_residual
+        attrs[RESIDUAL_ATTRS[1]] = sim.stored_residual
     if shard is not None:
         attrs["shard"] = f"{shard[0]}/{shard[1]}"
     return attrs
@@ -293,13 +306,14 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
     prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
                            schema=STATES.name, schema_version=STATES.version)
     arrays = states_arrays(plan, sim)
-    write_states(out, arrays, file_attrs(plan, params, tol, prov, shard))
+    write_states(out, arrays, file_attrs(plan, params, tol, prov, shard, sim))
     return sim, arrays
 
 
 # -- merge -----------------------------------------------------------------------------------
 
 SAME_ATTRS = ("msm_params", "protocol", "solver")
+RESIDUAL_ATTRS = ("max_residual_N", "stored_residual_N")     # merged: the largest of any shard
 
 
 def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.ndarray]:
@@ -312,7 +326,7 @@ def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.n
     for path in map(Path, paths):
         validate_h5(path, STATES)
         with h5py.File(path, "r") as f:
-            attrs = {k: _text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
+            attrs = {k: attr_text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
         if attrs["source"] != "msm" or not attrs["shard"]:
             raise BadInput(path, "not an MSM shard (no 'shard' attribute from simulate --shard)")
         i, n = parse_shard(attrs["shard"])
@@ -347,6 +361,10 @@ def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.n
                            schema=STATES.name, schema_version=STATES.version)
     attrs = {k: v for k, v in _root_attrs(shards[0]).items()
              if k not in ("shard", "provenance", "schema", "schema_version")}
+    for key in RESIDUAL_ATTRS:
+        values = [_root_attrs(shards[i]).get(key) for i in range(count)]
+        if all(v is not None for v in values):
+            attrs[key] = float(max(values))
     attrs["provenance"] = json.dumps(prov)
     write_states(out, arrays, attrs)
     return arrays
@@ -363,5 +381,6 @@ def _root_attrs(path: Path) -> dict:
         return dict(f.attrs.items())
 
 
-def _text(v: object) -> str:
+def attr_text(v: object) -> str:
+    """An HDF5 string attribute as text (h5py gives ``bytes`` or ``str``)."""
     return v.decode() if isinstance(v, bytes) else str(v)

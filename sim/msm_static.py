@@ -23,7 +23,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from sim.blas_threads import blas_threads
-from sim.msm import MSM, MSMError, unit
+from sim.msm import MSM, MSMError, max_norm, unit
 
 DEFAULT_TOL = 1e-6        # N: largest force on any mass at an accepted equilibrium
 MEMORY = 8                # L-BFGS pairs kept
@@ -42,37 +42,15 @@ class SolveStats:
     factorizations: int = 0
     evaluations: int = 0
     per_step: list[int] = field(default_factory=list)
+    max_residual: float = 0.0      # N, largest per-mass force left by any accepted solve
 
 
 class BandedTangent:
-    """Banded (upper) storage layout of the tangent stiffness of one grid size."""
+    """Cholesky factors of the tangent stiffness in band storage (:meth:`MSM.stiffness_band`)."""
 
     def __init__(self, model: MSM) -> None:
         self.model = model
-        self.n, self.N = model.n, model.N
-        self.bw = 3 * (model.n + 1) + 2
-
-    def matrix(self, x: np.ndarray, clamp: bool = False) -> np.ndarray:
-        """LAPACK upper band storage ``ab[bw + i - j, j] = K[i, j]`` of the tangent at ``x``."""
-        n, N, bw = self.n, self.N, self.bw
-        ab = np.zeros((bw + 1, 3 * N))
-        diag = np.zeros((n, n, 3, 3))
-        diag[..., [0, 1, 2], [0, 1, 2]] = self.model.params.k_fixed
-        for (di, dj), k in self.model.edge_stiffness(x, clamp).items():
-            diag[: n - di, : n - dj] += k
-            diag[di:, dj:] += k
-            by_target = np.zeros((n, n, 3, 3))
-            by_target[di:, dj:] = k
-            by_target = by_target.reshape(N, 3, 3)
-            off = di * n + dj
-            for r in range(3):
-                for c in range(3):
-                    ab[bw - 3 * off + r - c, 3 * off + c::3] = -by_target[off:, r, c]
-        diag = diag.reshape(N, 3, 3)
-        for r in range(3):
-            for c in range(r, 3):
-                ab[bw + r - c, c::3] = diag[:, r, c]
-        return ab
+        self.bw = model.band_width
 
     def factor(self, x: np.ndarray, convex: bool = False) -> np.ndarray:
         """Cholesky factor (band storage) of the tangent at ``x``, for use as a preconditioner.
@@ -85,7 +63,7 @@ class BandedTangent:
         positive definite).
         """
         for clamp in ((True,) if convex else (False, True)):
-            ab = self.matrix(x, clamp)
+            ab = self.model.stiffness_band(x, clamp)
             chol, info = lapack.spbtrf(ab.astype(np.float32), lower=0, overwrite_ab=1)
             if info == 0:
                 return chol
@@ -122,10 +100,12 @@ class StaticSolver:
         on_factor = 0
         short = False
         for it in range(self.max_iter):
-            if _max_norm(g) < self.tol:
+            left = max_norm(g)
+            if left < self.tol:
                 self._last_iterations = it
                 self.stats.iterations += it
                 self.stats.per_step.append(it)
+                self.stats.max_residual = max(self.stats.max_residual, left)
                 return x.reshape(-1, 3)
             if stale or on_factor >= REFACTOR_EVERY:
                 self._refactor(x, convex=short)
@@ -153,7 +133,7 @@ class StaticSolver:
                     y_mem.pop(0)
             x, energy, g = x_new, e_new, g_new
         raise MSMError(f"static solve did not converge in {self.max_iter} iterations "
-                       f"(max |f| {_max_norm(g):.3g} N > tol {self.tol:g} N)")
+                       f"(max |f| {max_norm(g):.3g} N > tol {self.tol:g} N)")
 
     def _refactor(self, x: np.ndarray, convex: bool = False) -> None:
         x = x.reshape(-1, 3)
@@ -170,8 +150,9 @@ class StaticSolver:
         """Energy and its gradient (minus the forces), flat; refuses non-finite values."""
         energy, f = self.model.energy_forces(x.reshape(-1, 3), f_ext)
         self.stats.evaluations += 1
-        if not math.isfinite(energy):
-            raise MSMError("static solve produced non-finite forces (load or springs extreme)")
+        if not (math.isfinite(energy) and np.isfinite(f).all()):
+            raise MSMError("static solve produced non-finite energy or forces (load or "
+                           "springs extreme)")
         return energy, -f.ravel()
 
     def _direction(self, g: np.ndarray, s_mem: list, y_mem: list) -> np.ndarray:
@@ -216,9 +197,14 @@ def simulate_sequence(
     """The paper's protocol for one sequence by static solves: states (steps + 1, N, 3).
 
     Force step t puts ``t * fmax / steps`` along ``direction`` on mass ``node``; each solve
-    starts from the extrapolation of the two previous equilibria.
+    starts from the extrapolation of the two previous equilibria. A ``solver`` passed in (to
+    reuse its rest factor across sequences) must be of ``model`` and have tolerance ``tol``.
     """
-    solver = solver or StaticSolver(model, tol)
+    if solver is None:
+        solver = StaticSolver(model, tol)
+    elif solver.model is not model or solver.tol != tol:
+        raise ValueError(f"solver of another model or tolerance (tol {solver.tol:g} N, "
+                         f"asked {tol:g} N)")
     solver.reset()
     direction = unit(direction)
     states = np.empty((steps + 1, model.N, 3))
@@ -243,10 +229,5 @@ def check_tol(tol: float) -> None:
 
 def residual(model: MSM, x: np.ndarray, f_ext: np.ndarray) -> float:
     """Largest per-mass force (N) at ``x``: zero at an exact equilibrium."""
-    return _max_norm(model.forces(x, f_ext).ravel())
+    return max_norm(model.forces(x, f_ext).ravel())
 
-
-def _max_norm(g: np.ndarray) -> float:
-    """Largest per-mass vector norm of a flat (3N,) array."""
-    g3 = g.reshape(-1, 3)
-    return float(np.sqrt(np.einsum("ij,ij->i", g3, g3).max()))

@@ -73,6 +73,15 @@ class Nano17:
             raise RuntimeError("twin gauge voltage beyond the logger's +-10 V input")
         return v
 
+    def wrench(self, volts: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`volts` with the true bias: (T, 6) Fx..Tz in N and N*m.
+
+        ``calibration.matrix @ (volts - bias(t))``, the bias creeping linearly with the logger
+        time ``time_s``; what is left is the logger's noise and quantisation.
+        """
+        bias = self.bias + np.outer(time_s, self.bias_drift)
+        return (np.asarray(volts) - bias) @ self.calibration.matrix.T
+
 
 def make_nano17(rng: np.random.Generator, serial: str) -> Nano17:
     """A plausible SI-12-0.12 sensor: the pattern scaled to its range, perturbed a few %."""

@@ -48,7 +48,8 @@ class PhantomSpec:
     marker_pitch: float = 0.020      # ... 20 mm apart, centred on the block
     marker_radius: float = 0.0015    # 3 mm spheres: centre 1.5 mm above the surface
     tip_share: float = 0.6           # share of the load on the contact node (rest: neighbours)
-    tol: float = 1e-4                # N: largest nodal force left unbalanced (positions ~1 um)
+    tol: float = 1e-4                # N: largest force component left unbalanced on any node
+    #                                  (x, y or z; positions ~1 um)
 
 
 @dataclass

@@ -16,6 +16,10 @@ Session folder::
     force.csv, force.mat  the Speedgoat log: time (s, logger clock), G0..G5 (V), trigger (V)
     FT<serial>.cal        ATI calibration (SI-12-0.12)
     truth.h5              the truth (data_schema.truth)
+    recording.rrd         the rerun recording of one press (when asked for)
+
+Writing over an earlier session removes its files that the new one does not write (another
+sensor's ``FT<serial>.cal``, a recording) and leaves every other file alone.
 
 Clock convention: an event at mocap time ``t_m`` (0 at the first frame) is stamped by the
 logger at ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``; the log starts before the mocap
@@ -25,6 +29,7 @@ logger at ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``; the log starts befo
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
@@ -71,6 +76,7 @@ PHANTOM_MARKERS = tuple(f"P{k:02d}" for k in range(25))
 GAUGES = tuple(f"G{k}" for k in range(6))
 TRIGGER_EVENT, TRIGGER_COLUMN = "Trigger", "trigger"
 STEP_N = 0.5                        # static states every 0.5 N
+RECORDING = "recording.rrd"         # the recording's default name in the folder
 
 
 @dataclass(frozen=True)
@@ -333,8 +339,7 @@ def _mocap(p: TwinParams, phantom: Phantom, lab: Lab, hand: Hand, paths: list[Lo
     cluster = tip[:, None] + np.einsum("tij,mj->tmi", st.rotation,
                                        indenter.markers - indenter.tip)
     origin = tip - st.rotation @ indenter.tip
-    force_sensor = -np.einsum("tji,tj->ti", st.rotation, force_lab)
-    torque = np.cross(indenter.tip - indenter.sensor, force_sensor)
+    force_sensor, torque = _contact_wrench(indenter, st.rotation, force_lab)
 
     truth = np.concatenate([markers, cluster], axis=1)
     top = lab(np.array([0.0, 0.0, p.phantom.size[2]]))[2]
@@ -357,10 +362,16 @@ def _mocap(p: TwinParams, phantom: Phantom, lab: Lab, hand: Hand, paths: list[Lo
 def _force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor: Nano17,
                last_frame_s: float, g_force: np.random.Generator,
                g_clock: np.random.Generator) -> ForceLog:
-    """Logger samples on its own clock, covering the mocap with an unloaded lead."""
+    """Logger samples on its own clock, covering the mocap with an unloaded lead.
+
+    The clock's offset and drift are always drawn, then replaced by ``p.offset_s`` and
+    ``p.drift_ppm`` where given: setting them changes no other random choice.
+    """
     sign = g_clock.choice([-1.0, 1.0], 2)
-    offset = p.offset_s if p.offset_s is not None else sign[0] * g_clock.uniform(0.3, 3.0)
-    drift = p.drift_ppm if p.drift_ppm is not None else sign[1] * g_clock.uniform(10.0, 60.0)
+    offset = sign[0] * g_clock.uniform(0.3, 3.0)
+    drift = sign[1] * g_clock.uniform(10.0, 60.0)
+    offset = offset if p.offset_s is None else p.offset_s
+    drift = drift if p.drift_ppm is None else p.drift_ppm
     lead, tail = g_clock.uniform(1.5, 3.0), g_clock.uniform(0.5, 2.0)
     scale = 1.0 + drift * 1e-6
     first = int(np.ceil((offset - scale * lead) * p.logger_hz))
@@ -370,9 +381,8 @@ def _force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor: Na
 
     st = hand.state(t_m)
     directions = np.vstack([np.zeros(3), *(q.direction for q in hand.presses)])
-    on_tip = -st.force[:, None] * directions[st.press + 1]
-    force = np.einsum("tji,tj->ti", st.rotation, on_tip)
-    torque = np.cross(indenter.tip - indenter.sensor, force)
+    force, torque = _contact_wrench(indenter, st.rotation,
+                                    st.force[:, None] * directions[st.press + 1])
     tool = np.einsum("tji,j->ti", st.rotation, indenter.tool_mass * GRAVITY)
     tool_torque = np.cross(indenter.tool_centre - indenter.sensor, tool)
     volts = sensor.volts(g_force, force + tool, torque + tool_torque, t_f)
@@ -387,6 +397,18 @@ def _force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor: Na
     return ForceLog(time_s=t_f, mocap_time_s=t_m, force=force, torque=torque, tool_force=tool,
                     volts=volts, trigger=trigger, offset_s=float(offset),
                     drift_ppm=float(drift), pulses=pulses)
+
+
+def _contact_wrench(indenter: IndenterGeometry, rotation: np.ndarray, force_lab: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Force and torque (T, 3) the sensor feels from the contact, in its own frame.
+
+    ``force_lab`` (T, 3) is the force the indenter exerts on the phantom; the phantom pushes
+    back on the tip with its opposite, applied at the tip, taken about the sensor's origin.
+    ``rotation`` (T, 3, 3) is body (= sensor axes) to lab.
+    """
+    force = -np.einsum("tji,tj->ti", rotation, force_lab)
+    return force, np.cross(indenter.tip - indenter.sensor, force)
 
 
 def _pulse_times(rng: np.random.Generator, end_s: float) -> np.ndarray:
@@ -464,8 +486,14 @@ def _stamp(seed: int, minutes_before: int = 0) -> tuple[str, str]:
 
 def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
                view_press: int = 0) -> None:
-    """Write every file of the session folder (atomically: all or nothing)."""
+    """Write every file of the session folder (atomically: all or nothing).
+
+    Over an earlier session (the folder holds a ``truth.h5``), the files that session wrote
+    and this one does not (another sensor's ``FT<serial>.cal``, a ``recording.rrd`` this run
+    skips) are removed once the new files are in place; no other file is touched.
+    """
     p, folder = twin.params, Path(folder)
+    earlier = (folder / FILES["truth"]).is_file()
     cal_name = f"{twin.sensor.serial}.cal"
     names = [*PHANTOM_MARKERS, *twin.indenter.names]
     finals = [folder / FILES[k] for k in ("trial", "bodies", "pivot", "csv", "mat", "session",
@@ -493,6 +521,22 @@ def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
             from sim.twin_view import write_twin_recording
 
             write_twin_recording(twin, tmp_rrd, view_press)
+    if earlier:
+        _remove_stale(folder, [*finals, rrd])
+
+
+def _remove_stale(folder: Path, written: list[Path | str | None]) -> None:
+    """Remove the files of an earlier session in ``folder`` that this one did not write."""
+    keep = {Path(f).resolve() for f in written if f is not None}
+    for f in folder.iterdir():
+        if f.is_file() and _twin_file(f.name) and f.resolve() not in keep:
+            f.unlink()
+
+
+def _twin_file(name: str) -> bool:
+    """Whether a session folder's file named ``name`` is one the twin writes."""
+    return (name in FILES.values() or name == RECORDING
+            or re.fullmatch(r"FT\d{5}\.cal", name) is not None)
 
 
 def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:

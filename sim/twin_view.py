@@ -114,9 +114,7 @@ def _log_force(rec: rr.RecordingStream, twin: Twin, window: np.ndarray,
                      columns=rr.Scalars.columns(scalars=m.force[window]))
     t0, t1 = m.time_s[window[0]], m.time_s[window[-1]]
     rows = np.flatnonzero((log.mocap_time_s >= t0) & (log.mocap_time_s <= t1))
-    bias = sensor.bias + np.outer(log.time_s[rows], sensor.bias_drift)
-    wrench = (log.volts[rows] - bias) @ sensor.calibration.matrix.T
-    measured = np.linalg.norm(wrench[:, :3], axis=1)
+    measured = np.linalg.norm(sensor.wrench(log.volts[rows], log.time_s[rows])[:, :3], axis=1)
     rec.send_columns("force/measured", indexes=[time_column(TIMELINE, _ns(log.mocap_time_s[rows]))],
                      columns=rr.Scalars.columns(scalars=measured))
     st = twin.states

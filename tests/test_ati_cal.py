@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ingest.ati_cal import read_ati_cal, unit_to_si, write_ati_cal
+from ingest.ati_cal import read_ati_cal, write_ati_cal
 from ingest.series import AtiCalibration
+from ingest.units import channel_units, length_scale, unit_to_si
 from pipeline.errors import BadInput
 
 CAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "ati" / \
@@ -88,6 +89,11 @@ def test_imperial_units_convert_rows_and_max(tmp_path):
     ({**SIX, "Fz": "1 2 x 4 5 6"}, ("N", "N-mm"), "not a list of numbers"),
     (SIX, ("N", "N"), "not a torque unit"),
     (SIX, ("stone", "N-mm"), "unknown unit"),
+    (SIX, ("mV", "N-mm"), "ForceUnits 'mV' is not a force unit"),
+    (SIX, ("N-mm", "N-mm"), "ForceUnits 'N-mm' is not a force unit"),
+    (SIX, ("N", "V"), "TorqueUnits 'V' is not a torque unit"),
+    ({**SIX, "Ty": "1 2 nan 4 5 6"}, ("N", "N-mm"), "UserAxis Ty has a non-finite value"),
+    ({**SIX, "Fx": "1 2 3 inf 5 6"}, ("N", "N-mm"), "UserAxis Fx has a non-finite value"),
 ])
 def test_bad_calibration_files(tmp_path, rows, units, message):
     p = tmp_path / "bad.cal"
@@ -102,6 +108,21 @@ def test_bad_not_an_ati_file(tmp_path):
         (tmp_path / name).write_text(text)
         with pytest.raises(BadInput, match=name):
             read_ati_cal(tmp_path / name)
+
+
+def test_channel_units():
+    assert channel_units(None, "gauge", 6) == ["V"] * 6
+    assert channel_units(None, "wrench", 6) == ["N", "N", "N", "N*m", "N*m", "N*m"]
+    assert channel_units("mV", "gauge", 2) == ["mV", "mV"]
+    assert channel_units("N, lbf-in", "wrench", 2) == ["N", "lbf-in"]
+    for units, kind, words in ((5, "gauge", "a unit or a list"), (["V", 3], "gauge", "list"),
+                               ("N", "gauge", "does not fit"), ("V,V", "gauge", "2 units"),
+                               ("V", "volts", "kind must be")):
+        with pytest.raises(ValueError, match=words):
+            channel_units(units, kind, 6)
+    assert length_scale("cm") == 1e-2
+    with pytest.raises(ValueError, match="not a length unit"):
+        length_scale("in")
 
 
 def test_unit_spellings():

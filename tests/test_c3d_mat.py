@@ -91,6 +91,37 @@ def test_c3d_bad_input(tmp_path):
         read_c3d(feet)
 
 
+@pytest.mark.parametrize("size", [512, 520, 600, 5780, 14000])
+def test_c3d_cut_before_its_data_is_refused_before_ezc3d_reads_it(tmp_path, size):
+    """ezc3d segfaulted (520 bytes) or hung (5780) on these: the header's sizes are checked
+    first (parameter section from byte 512, 27 blocks; data from block 29)."""
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(C3D.read_bytes()[:size])
+    with pytest.raises(BadInput, match="truncated: .* before the parameter section|truncated: "
+                                       ".* inside the parameter section"):
+        read_c3d(cut)
+
+
+@pytest.mark.parametrize("offset, value", [(5571, 184), (5730, 243), (11518, 136)])
+def test_c3d_damaged_parameter_record_is_refused(tmp_path, offset, value):
+    """One byte of a record's link to the next (or of a description length) changed: ezc3d
+    crashed or looped on these; the parameter walk refuses them."""
+    data = bytearray(C3D.read_bytes())
+    data[offset] = value
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(BadInput, match="damaged parameter section") as e:
+        read_c3d(bad)
+    assert e.value.where.startswith("byte ")
+
+
+def test_c3d_files_ezc3d_writes_pass_the_parameter_walk(tmp_path):
+    pts = np.zeros((3, 300, 2))                       # 300 points: LABELS and LABELS2
+    s = read_c3d(_c3d(tmp_path / "many.c3d", pts, np.zeros((1, 300, 2)),
+                      labels=[f"M{i}" for i in range(300)]))
+    assert len(s.labels) == 300 and s.labels[299] == "M299"
+
+
 # ---------------------------------------------------------------------------- QTM MAT
 
 
@@ -197,6 +228,7 @@ def test_qtm_mat_bad_input(tmp_path):
         "force.mat": ({"time": np.arange(5.0), "Fx": np.zeros(5)}, "no QTM struct"),
         "two.mat": ({"A": good, "B": good}, "several QTM structs"),
     }
+    cases["rate.mat"] = ({"M": {**good, "FrameRate": 0.0}}, "M.FrameRate 0 is not a frame rate")
     for name, (content, message) in cases.items():
         scipy.io.savemat(tmp_path / name, content)
         with pytest.raises(BadInput, match=message) as e:
@@ -208,3 +240,16 @@ def test_qtm_mat_bad_input(tmp_path):
     (tmp_path / "cut.mat").write_bytes(raw[: len(raw) // 2])
     with pytest.raises(BadInput, match="cut.mat"):
         read_qtm_mat(tmp_path / "cut.mat")
+
+
+def test_qtm_mat_v7_damaged_compressed_data(tmp_path):
+    data, labels = _known(m=3, t=4000)
+    s = MarkerSeries(source="x", time_ns=np.arange(4000) * 2_000_000, labels=labels,
+                     positions=data[:, :3].transpose(2, 0, 1) / 1000, rate_hz=500.0)
+    p = tmp_path / "trial.mat"
+    write_qtm_mat(p, s, version="7")
+    raw = bytearray(p.read_bytes())
+    raw[len(raw) // 2:len(raw) // 2 + 64] = bytes(64)
+    p.write_bytes(bytes(raw))
+    with pytest.raises(BadInput, match="trial.mat: cannot read the QTM struct 'trial'"):
+        read_qtm_mat(p)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -65,6 +67,20 @@ def test_trigger_matching_with_missing_and_extra_pulses() -> None:
     assert abs(fit.drift_ppm - DRIFT) < 5
     assert abs(fit.offset_s - OFFSET) < 4 * fit.offset_sd_s
     assert abs(fit.drift_ppm - DRIFT) < 4 * fit.drift_sd_ppm
+
+
+def test_trigger_matching_scales_to_a_long_session() -> None:
+    """1,200 pulses (half an hour): every (edge, event) pair is a proposal, 1.4 million of
+    them, counted at once (a loop over proposals took seconds)."""
+    rng = np.random.default_rng(5)
+    events = np.cumsum(rng.uniform(0.7, 2.3, 1200))
+    edges = _to_logger(events) + rng.uniform(-5e-4, 5e-4, len(events))
+    edges = np.delete(edges, np.arange(0, 1200, 97))                      # missed edges
+    start = time.perf_counter()
+    fit = match_trigger(edges, events, source="force.csv")
+    assert time.perf_counter() - start < 2.0
+    assert fit.n == len(edges)
+    assert abs(fit.offset_s - OFFSET) < 1e-4 and abs(fit.drift_ppm - DRIFT) < 0.5
 
 
 def test_periodic_trigger_needs_a_prior() -> None:
@@ -140,6 +156,20 @@ def test_data_driven_clock_reports_honest_uncertainty(seed: int) -> None:
     assert abs(fit.offset_s - OFFSET) < 4 * fit.offset_sd_s
     assert abs(fit.drift_ppm - DRIFT) < 4 * fit.drift_sd_ppm
     assert fit.offset_sd_s < 1.5e-3
+
+
+def test_data_driven_clock_walks_from_a_poor_seed() -> None:
+    """A seed lag 0.12 s off (more than twice the scan's reach, inside the cost's basin,
+    which is a few tenths of the press's rise time wide): each press's scan moves on."""
+    s = _session(3, depth_noise=0.0)
+    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0)
+    lag = OFFSET + DRIFT * 1e-6 * s["t_m"].mean()
+    loaded = force_at(s["t_m"] + lag) > 0.3
+    runs = np.flatnonzero(np.diff(loaded.astype(int)))
+    presses = [(s["t_m"][a:b], s["depth"][a:b]) for a, b in zip(runs[::2] + 1, runs[1::2] + 1,
+                                                                 strict=True)]
+    fit = clock_from_data(presses, force_at, lag - 0.12)
+    assert fit.n == 6 and abs(fit.offset_s - OFFSET) < 0.1e-3
 
 
 def test_data_driven_without_tracked_presses_is_bad_input() -> None:

@@ -105,3 +105,53 @@ def test_read_mocap_dispatch(tmp_path):
     for path in (REAL / "qtm" / "qtm2010_6d_3bodies.tsv", files["force_csv"]):
         with pytest.raises(BadInput, match="not a 3D marker export"):
             read_mocap(path)
+
+
+def _qtm_mat(tmp: Path, compress: bool = True) -> Path:
+    from ingest.qtm_mat import _struct_name, write_qtm_mat
+
+    path = tmp / "trial.mat"
+    series = read_qtm_3d(REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv")
+    write_qtm_mat(path, series, version="7")
+    if not compress:                                      # the same struct, uncompressed
+        struct = scipy.io.loadmat(path, squeeze_me=False)[_struct_name(path)]
+        scipy.io.savemat(path, {"trial": struct}, do_compression=False)
+    return path
+
+
+def test_mat_struct_names_are_sniffed_without_inflating_the_data(tmp_path):
+    """Detection reads only variable headers: a QTM export damaged in the middle of its
+    compressed data is still a QTM export, and reading it is bad input naming the struct."""
+    path = _qtm_mat(tmp_path)
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2:len(raw) // 2 + 64] = bytes(64)
+    path.write_bytes(bytes(raw))
+    assert detect_format(path) == "qtm_mat"
+    with pytest.raises(BadInput, match="cannot read the QTM struct 'trial'"):
+        read_mocap(path)
+
+
+def test_uncompressed_qtm_mat_and_force_mat_with_a_struct(tmp_path):
+    assert detect_format(_qtm_mat(tmp_path, compress=False)) == "qtm_mat"
+    assert read_mocap(tmp_path / "trial.mat").frames == 2000
+    log = tmp_path / "log.mat"
+    scipy.io.savemat(log, {"time": np.arange(3.0), "G0": np.zeros(3),
+                           "meta": {"sensor": "FT14048", "rate": 1000.0}})
+    assert detect_format(log) == "force_mat"
+
+
+@pytest.mark.parametrize("version", ["7", "7.3"])
+def test_truncated_mat_is_unreadable_not_a_force_log(tmp_path, version):
+    from ingest.qtm_mat import write_qtm_mat
+
+    path = tmp_path / "trial.mat"
+    write_qtm_mat(path, read_qtm_3d(REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv"), version)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(BadInput, match="cannot read MAT file") as e:
+        detect_format(path)
+    assert str(path) in str(e.value)
+
+
+def test_read_mocap_names_a_6d_export():
+    with pytest.raises(BadInput, match="is a QTM 6D .* not a 3D marker export"):
+        read_mocap(REAL / "qtm" / "qtm2010_6d_3bodies.tsv")

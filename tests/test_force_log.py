@@ -147,6 +147,72 @@ def test_bad_truncated_file(tmp_path, how):
         assert e.where == f"line {N + 1}"
 
 
+def _text(tmp_path: Path, text: str, name: str = "f.csv") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("text, where", [
+    ("time,Fx,Fy\n0.000,1.000,2.000\n0.001,3.000,40.002,4.000,5.000\n0.003,4.000,5.000\n",
+     "line 3"),                                       # two rows merged: more fields
+    ("time,Fx,Fy\n0,1,2,9\n0.001,3,4\n0.002,4,5\n", "line 2"),   # first row: pandas' index
+    ("time,Fx,Fy\n0,1,2,9\n0.001,3,4,5\n0.002,4,5,6\n", "line 2"),
+])
+def test_bad_row_with_extra_fields(tmp_path, text, where):
+    e = _bad(_text(tmp_path, text), "fields", channels=["Fx", "Fy"], units="N", kind="wrench")
+    assert e.where == where
+
+
+def test_trailing_separator_on_every_row_is_accepted(tmp_path):
+    s = read_force_log(_text(tmp_path, "time,Fx,Fy\n0,1,2,\n0.001,3,4,\n"), "time",
+                       ["Fx", "Fy"], units="N", kind="wrench")
+    assert s.values.tolist() == [[1, 2], [3, 4]]
+
+
+def test_bad_duplicate_header_names(tmp_path):
+    e = _bad(_text(tmp_path, "time,time,G0\n0,1,2\n0.001,3,4\n"), "duplicate column name",
+             channels=["G0"], units="V")
+    assert e.where == "line 1"
+
+
+@pytest.mark.parametrize("text", [
+    "time,G0\n0.000,0.125\n0.001,0.25\n0.002,0.5",          # decimals vary: nothing to judge
+    "time,G0\n0.000,0.125\n0.001,0.250\n0.002,1e-05",       # not a plain decimal number
+    "time,G0\n0.000,0.125\n0.001,0.250\n0.002,nan",         # a gap, then refused as a gap
+])
+def test_last_line_without_line_break(tmp_path, text):
+    p = _text(tmp_path, text)
+    if text.endswith("nan"):
+        _bad(p, "column G0 has no value", channels=["G0"])
+    else:
+        assert read_force_log(p, "time", ["G0"]).frames == 3
+
+
+def test_bad_last_number_cut(tmp_path):
+    p = _text(tmp_path, "time,G0\n0.000,0.125\n0.001,0.250\n0.002,0.5")   # 3 decimals, then 1
+    assert _bad(p, "truncated", channels=["G0"]).where == "line 4"
+
+
+def test_bad_time_out_of_range(tmp_path):
+    e = _bad(_text(tmp_path, "time,G0\n0,1\n1e300,2\n"), "int64 nanosecond range",
+             channels=["G0"])
+    assert e.where == "line 3"
+    e = _bad(_write(pd.DataFrame({"t": np.array([0, 10**12], dtype=np.int64), "G0": [1.0, 2]}),
+                    tmp_path / "big.parquet", "parquet"), "int64 nanosecond range",
+             time="t", channels=["G0"], time_unit="s")
+    assert e.where == "row 2"
+
+
+def test_bad_damaged_compressed_mat(tmp_path):
+    p = tmp_path / "f.mat"
+    scipy.io.savemat(p, {c: v.to_numpy() for c, v in _log().items()}, do_compression=True)
+    raw = bytearray(p.read_bytes())
+    raw[len(raw) // 2:len(raw) // 2 + 32] = bytes(32)
+    p.write_bytes(bytes(raw))
+    _bad(p, "cannot read")
+
+
 def test_bad_format_and_parameters(tmp_path):
     p = tmp_path / "f.bin"
     p.write_bytes(b"\x00\x01\x02" * 100)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 import h5py
@@ -15,7 +16,9 @@ from data_schema.session import read_session
 from pipeline.atomic import atomic_output, atomic_outputs
 from pipeline.cli import COMMANDS, cli
 from pipeline.errors import BadInput
+from pipeline.options import resolve_rrd
 from pipeline.provenance import make_provenance, sha256_file
+from pipeline.recording import default_rrd_path
 
 
 def test_atomic_output_renames_only_on_success(tmp_path):
@@ -30,6 +33,51 @@ def test_atomic_output_renames_only_on_success(tmp_path):
         tmps[2].write_text("half")
         raise RuntimeError("crash")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+
+
+def test_atomic_outputs_refuse_one_path_twice(tmp_path):
+    a = tmp_path / "o" / "a.mcap"
+    for twice in (a, tmp_path / "o" / ".." / "o" / "a.mcap"):
+        with pytest.raises(ValueError, match="named twice"), atomic_outputs(a, None, twice):
+            pass
+    assert not list(tmp_path.iterdir())
+
+
+def test_atomic_output_under_a_file_is_bad_input(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(BadInput, match="a file is in the way"), \
+            atomic_output(tmp_path / "f" / "a.h5"):
+        pass
+    assert (tmp_path / "f").read_text() == "x"
+
+
+@pytest.mark.parametrize("out, rrd", [("o/x.mcap", "o/x.rrd"), ("o/a.b.h5", "o/a.b.rrd"),
+                                      ("o/r.rrd", "o/r.rrd.rrd"), ("o/noext", "o/noext.rrd")])
+def test_default_rrd_path_never_equals_the_output(tmp_path, out, rrd):
+    assert default_rrd_path(tmp_path / out) == tmp_path / rrd
+    assert default_rrd_path(tmp_path / out, folder=True) == tmp_path / out / "recording.rrd"
+    assert resolve_rrd(tmp_path / out, None, False) == tmp_path / rrd
+    assert resolve_rrd(tmp_path / out, None, True) is None
+
+
+def test_default_rrd_path_of_a_folder(tmp_path):
+    assert default_rrd_path(tmp_path) == tmp_path / "recording.rrd"        # an existing folder
+
+    @click.command()
+    @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+    def make(out_dir: Path) -> None:
+        """A command whose output is a (new) folder, as synth's OUT_DIR."""
+        click.echo(resolve_rrd(out_dir, None, False))
+
+    res = CliRunner().invoke(make, [str(tmp_path / "new.v1")])
+    assert res.output.strip() == str(tmp_path / "new.v1" / "recording.rrd")
+
+
+def test_resolve_rrd_refuses_the_output_itself(tmp_path):
+    out = tmp_path / "x.mcap"
+    for rrd in (out, tmp_path / "." / "x.mcap"):
+        with pytest.raises(BadInput, match="--rrd and --out name the same file"):
+            resolve_rrd(out, rrd, False)
 
 
 def test_bad_input_line_names_file_and_place():
@@ -109,10 +157,49 @@ def test_session_toml_parses(tmp_path):
      "duplicate"),
     ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]'}, "calibration"),
     ({"force": None}, r"\[force\]"),
+    ({"mocap": 'file = "t.tsv"\nphantom_markers = ["P"]\nindenter_markers = ["I"]\n'
+               'trigger_event = 7'}, "mocap.trigger_event must be a non-empty string"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               "units = 5"}, "force.units: units must be a unit or a list"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               'units = "mm"'}, "unknown unit 'mm'"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               'units = "N"'}, "does not fit kind 'gauge'"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               'time_unit = ["s"]'}, "force.time_unit must be a non-empty string"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               "trigger_column = 3"}, "force.trigger_column must be a non-empty string"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = 5'},
+     "force.calibration must be a non-empty string"),
+    ({"pivot": 'file = ""'}, "pivot.file must be a non-empty string"),
 ])
 def test_session_toml_errors(tmp_path, over, words):
     with pytest.raises(BadInput, match=words):
         read_session(_session(tmp_path, **over))
+
+
+@pytest.mark.parametrize("top, words", [
+    ('pivot = "t.tsv"', "pivot must be a \\[pivot\\] table"),
+    ('schema_version = "2.0"', "schema_version '2.0' is not compatible with 1.0"),
+    ("schema_version = 1", "schema_version must be a non-empty string"),
+    ('schema = "phantom.other"', "schema is 'phantom.other'"),
+    ("name = []", "name must be a non-empty string"),
+])
+def test_session_toml_top_level_errors(tmp_path, top, words):
+    folder = _session(tmp_path)
+    path = folder / "session.toml"
+    path.write_text(top + "\n" + path.read_text())
+    with pytest.raises(BadInput, match=words):
+        read_session(folder)
+
+
+def test_session_toml_units_and_pivot(tmp_path):
+    folder = _session(tmp_path, force='file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\n'
+                                      'kind = "wrench"\nunits = "N, N, N, N-mm, N-mm, N-mm"',
+                      pivot='file = "t.tsv"')
+    s = read_session(folder)
+    assert s.force.units == ["N", "N", "N", "N-mm", "N-mm", "N-mm"] and s.force.calibration is None
+    assert s.pivot_file == folder / "t.tsv" and s.force.trigger_column is None
 
 
 def test_every_command_has_help_that_says_what_it_reads_and_writes():

@@ -236,8 +236,124 @@ def _duplicate_in_toml(folder: Path) -> str:
     return "session.toml"
 
 
+def _toml_edit(folder: Path, old: str, new: str) -> str:
+    path = folder / "session.toml"
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+    return "session.toml"
+
+
+def _toml_pivot_not_a_table(folder: Path) -> str:
+    (folder / "pivot.tsv").write_bytes((folder / "trial_3d.tsv").read_bytes())
+    return _toml_edit(folder, 'name = "tiny-session"', 'name = "tiny-session"\npivot = '
+                                                         '"pivot.tsv"')
+
+
+def _toml_units_not_text(folder: Path) -> str:
+    return _toml_edit(folder, 'units = "V"', "units = 5")
+
+
+def _toml_units_not_volts(folder: Path) -> str:
+    return _toml_edit(folder, 'units = "V"', 'units = "N"')
+
+
+def _toml_time_unit_list(folder: Path) -> str:
+    return _toml_edit(folder, 'time_unit = "s"', 'time_unit = ["s"]')
+
+
+def _toml_trigger_column_number(folder: Path) -> str:
+    return _toml_edit(folder, 'trigger_column = "trigger"', "trigger_column = 3")
+
+
+def _toml_schema_version_2(folder: Path) -> str:
+    return _toml_edit(folder, 'schema_version = "1.0"', 'schema_version = "2.0"')
+
+
+def _force_row_with_extra_field(folder: Path) -> str:
+    path = folder / "force.csv"
+    rows = path.read_text().splitlines()
+    rows[30] += ",0.5"                       # 9 fields under an 8-name header
+    path.write_text("\n".join(rows) + "\n")
+    return "force.csv:line 31"
+
+
+def _cal_force_units_not_force(folder: Path) -> str:
+    cal = folder / "FT14048.cal"
+    cal.write_text(cal.read_text().replace('ForceUnits="N"', 'ForceUnits="mV"'))
+    return "FT14048.cal"
+
+
+def _cal_nan_value(folder: Path) -> str:
+    cal = folder / "FT14048.cal"
+    text = cal.read_text()
+    i = text.index('values="', text.index('UserAxis Name="Fz"')) + len('values="')
+    cal.write_text(text[:i] + "nan " + text[text.index(" ", i) + 1:])
+    return "FT14048.cal"
+
+
+def _mocap_infinite_coordinate(folder: Path) -> str:
+    path = folder / "trial_3d.tsv"
+    lines = path.read_bytes().decode().split("\r\n")
+    cells = lines[20].split("\t")
+    cells[4] = "inf"
+    lines[20] = "\t".join(cells)
+    path.write_text("\r\n".join(lines))
+    return "trial_3d.tsv:line 21"
+
+
+def _mocap_time_out_of_range(folder: Path) -> str:
+    path = folder / "trial_3d.tsv"
+    lines = path.read_bytes().decode().split("\r\n")
+    cells = lines[-2].split("\t")
+    cells[1] = "1e300"
+    lines[-2] = "\t".join(cells)
+    path.write_text("\r\n".join(lines))
+    return f"trial_3d.tsv:line {len(lines) - 1}"
+
+
+def _mocap_frequency_too_low(folder: Path) -> str:
+    """An old-style export (no Frame/Time columns, timed by FREQUENCY) with a corrupt rate."""
+    path = folder / "trial_3d.tsv"
+    lines = path.read_bytes().decode().split("\r\n")
+    head = [ln.replace(f"FREQUENCY\t{RATE}", "FREQUENCY\t1e-300") for ln in lines[:12]]
+    rows = ["\t".join(ln.split("\t")[2:]) for ln in lines[13:]]   # drop column line, Frame, Time
+    path.write_bytes("\r\n".join(head + rows).encode())
+    return "trial_3d.tsv:line 4"
+
+
+def _mocap_damaged_qtm_mat(folder: Path) -> str:
+    from ingest.qtm_mat import write_qtm_mat
+
+    tsv = folder / "trial_3d.tsv"
+    mat = folder / "trial.mat"
+    write_qtm_mat(mat, read_mocap_file(tsv), version="7")
+    raw = bytearray(mat.read_bytes())
+    raw[len(raw) // 2:len(raw) // 2 + 64] = bytes(64)    # damage inside the compressed data
+    tsv.write_bytes(bytes(raw))                           # session.toml names trial_3d.tsv
+    mat.unlink()
+    return "trial_3d.tsv: cannot read the QTM struct"
+
+
+def _mocap_c3d_cut_in_parameters(folder: Path) -> str:
+    c3d = REAL / "c3d" / "qualisys_55markers_200hz.c3d"
+    (folder / "trial_3d.tsv").write_bytes(c3d.read_bytes()[:520])
+    return "trial_3d.tsv: truncated"
+
+
+def read_mocap_file(path: Path):  # noqa: ANN201 - a MarkerSeries
+    from ingest.detect import read_mocap
+
+    return read_mocap(path)
+
+
 BAD = [_absent_marker, _duplicate_marker, _unknown_format, _cal_not_6x6, _force_missing_column,
-       _force_text_in_numbers, _force_time_not_increasing, _truncated_tsv, _duplicate_in_toml]
+       _force_text_in_numbers, _force_time_not_increasing, _truncated_tsv, _duplicate_in_toml,
+       _toml_pivot_not_a_table, _toml_units_not_text, _toml_units_not_volts,
+       _toml_time_unit_list, _toml_trigger_column_number, _toml_schema_version_2,
+       _force_row_with_extra_field, _cal_force_units_not_force, _cal_nan_value,
+       _mocap_infinite_coordinate, _mocap_time_out_of_range, _mocap_frequency_too_low,
+       _mocap_damaged_qtm_mat, _mocap_c3d_cut_in_parameters]
 
 
 @pytest.mark.parametrize("spoil", BAD, ids=[f.__name__.strip("_") for f in BAD])
@@ -250,6 +366,7 @@ def test_bad_input(session, tmp_path, spoil):
     assert res.exit_code == 2, (res.output, res.stderr, res.exception)
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and culprit in lines[0], lines
+    assert f"{folder}/{culprit}" in lines[0] or culprit == "session.toml", lines
     assert "Traceback" not in res.stderr
     assert folder_hash(folder) == before
     assert not out.parent.exists() or not list(out.parent.iterdir())
@@ -260,6 +377,29 @@ def test_absent_markers_are_all_listed(session, tmp_path):
     write_toml(folder, phantom=[*PHANTOM[:23], "P98", "P99"])
     res = run(["ingest", str(folder), "--out", str(tmp_path / "x.mcap")])
     assert res.exit_code == 2 and "P98" in res.stderr and "P99" in res.stderr
+
+
+def test_rrd_and_out_naming_one_file_is_bad_input(session, tmp_path):
+    folder, _, _ = session
+    out = tmp_path / "o" / "x.mcap"
+    for rrd in (out, tmp_path / "o" / ".." / "o" / "x.mcap"):
+        res = run(["ingest", str(folder), "--out", str(out), "--rrd", str(rrd)])
+        assert res.exit_code == 2, (res.output, res.stderr, res.exception)
+        assert res.stderr.strip().splitlines() == [
+            f"error: {out}: --rrd and --out name the same file"]
+        assert not out.parent.exists() or not list(out.parent.iterdir())
+
+
+@pytest.mark.parametrize("name, rrd_name", [("r.rrd", "r.rrd.rrd"), ("noext", "noext.rrd"),
+                                            ("a.b.mcap", "a.b.rrd")])
+def test_default_rrd_never_collides_with_out(session, tmp_path, name, rrd_name):
+    folder, _, _ = session
+    out = tmp_path / "o" / name
+    res = run(["ingest", str(folder), "--out", str(out)])
+    assert res.exit_code == 0, (res.output, res.stderr, res.exception)
+    assert sorted(p.name for p in out.parent.iterdir()) == sorted([name, rrd_name])
+    assert read_raw_mcap(out).markers.frames == FRAMES
+    assert "Points3D" in rrd_entities(out.parent / rrd_name)["/mocap/phantom/P00"]
 
 
 def test_output_over_an_input_is_refused(session):

@@ -53,14 +53,23 @@ def test_qtm2010_names_with_spaces_and_dashes():
     assert "Knee Hinge" in s["markers"] and "Lower Leg IMU - 3" in s["markers"]
 
 
-def test_c3d_missing_samples_match_ezc3d():
+def test_c3d_missing_samples(tmp_path):
+    """A C3D with 17 samples whose residual is negative (ezc3d's mark of a gap)."""
     import ezc3d
 
-    c = ezc3d.c3d(str(C3D))
-    pts = c["data"]["points"][:3]
-    res = c["data"]["meta_points"]["residuals"][0]
-    expected = int(((res < 0) | np.isnan(pts).any(axis=0)).sum())
-    assert inspect_file(C3D)["missing_samples"] == expected
+    rng = np.random.default_rng(3)
+    res = np.ones((1, 6, 50))
+    res[0, rng.choice(6 * 50, 17, replace=False) // 50, np.arange(17) * 2] = -1.0
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [500]
+    c["parameters"]["POINT"]["LABELS"]["value"] = [f"P{i}" for i in range(6)]
+    c["parameters"]["POINT"]["UNITS"]["value"] = ["mm"]
+    c["data"]["points"] = np.vstack([rng.normal(0, 100, (3, 6, 50)), np.ones((1, 6, 50))])
+    c["data"]["meta_points"] = {"residuals": res, "camera_masks": np.zeros((7, 6, 50), bool)}
+    path = tmp_path / "gaps.c3d"
+    c.write(str(path))
+    s = inspect_json(path)
+    assert s["format"] == "c3d" and s["frames"] == 50 and s["missing_samples"] == 17
 
 
 def test_6d_export():
@@ -86,15 +95,30 @@ def test_ati_calibration():
     assert s["units"] == {"force": "N", "torque": "N-mm"}
 
 
-def test_force_log(tmp_path):
+@pytest.mark.parametrize("trigger", [None, "trigger", "Sync"])
+def test_force_log(tmp_path, trigger):
     path = tmp_path / "force.csv"
     t = np.arange(3000) / 1000
-    rows = ["time,G0,G1,G2,G3,G4,G5"] + [",".join([f"{x:.3f}"] + ["0.125"] * 6) for x in t]
+    pulse = [f",{int(i % 1000 < 5)}" if trigger else "" for i in range(3000)]
+    rows = ["time,G0,G1,G2,G3,G4,G5" + (f",{trigger}" if trigger else "")] + [
+        ",".join([f"{x:.3f}"] + ["0.125"] * 6) + p for x, p in zip(t, pulse, strict=True)]
     path.write_text("\n".join(rows) + "\n")
     s = inspect_json(path)
     assert s["format"] == "force_csv" and s["frames"] == 3000
     assert s["rate_hz"] == pytest.approx(1000.0) and s["duration_s"] == pytest.approx(3.0)
-    assert s["channels"] == [f"G{i}" for i in range(6)] and s["missing_samples"] == 0
+    assert s["channels"] == [f"G{i}" for i in range(6)]          # the trigger is no channel
+    assert s["details"].get("trigger_column") == trigger
+    assert s["units"] == {f"G{i}": "V" for i in range(6)}
+    assert s["missing_samples"] is None                  # a force log is read only when whole
+
+
+def test_force_log_with_a_gap_is_bad_input(tmp_path):
+    path = tmp_path / "force.csv"
+    path.write_text("time,G0\n0.000,0.125\n0.001,nan\n0.002,0.250\n")
+    res = CliRunner().invoke(cli, ["inspect", str(path)])
+    assert res.exit_code == 2
+    assert res.stderr.strip().splitlines() == [
+        f"error: {path}:line 3: column G0 has no value (or an infinite one)"]
 
 
 @pytest.mark.parametrize("version", ["7", "7.3"])

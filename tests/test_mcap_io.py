@@ -196,6 +196,26 @@ def test_other_files_are_bad_input(tmp_path):
         validate_raw_mcap(foreign)
 
 
+@pytest.mark.parametrize("damage", ["no events", "no source", "events not a list"])
+def test_session_record_lacking_a_key_is_bad_input(tmp_path, damage):
+    """The top-level keys are checked by the layout; a nested one is caught when read."""
+    from ingest.mcap_io import _session_record
+
+    s = make_session(frames=100, extras=False)
+    record = _session_record(s)
+    if damage == "no events":
+        del record["mocap"]["events"]
+    elif damage == "no source":
+        del record["force"]["source"]
+    else:
+        record["mocap"]["events"] = 5
+    path = tmp_path / "s.mcap"
+    write_raw_mcap(path, s, {"provenance": PROV, "session": record})
+    with pytest.raises(BadInput, match="not a readable raw MCAP file") as e:
+        read_raw_mcap(path)
+    assert e.value.path == str(path)
+
+
 def test_decreasing_time_is_refused_on_write(tmp_path):
     s = make_session(frames=100, extras=False)
     s.force.time_ns[50] = s.force.time_ns[49]

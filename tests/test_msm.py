@@ -7,17 +7,19 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.linalg import eig_banded
 
 from sim.msm import (
     MSM,
     MSMError,
     MSMParams,
+    max_eigenfrequency,
     relax_explicit,
     simulate_reference,
     stability_limit,
     unit,
 )
-from sim.msm_static import BandedTangent, StaticSolver, residual, simulate_sequence
+from sim.msm_static import StaticSolver, residual, simulate_sequence
 
 MODEL = MSM()
 CENTRE = MODEL.node(16, 16)
@@ -82,30 +84,37 @@ def test_forces_against_an_edge_loop_and_the_energy_gradient():
     assert slope == pytest.approx(-(f * v).sum(), rel=1e-6)
 
 
-def test_tangent_is_the_force_jacobian_and_the_band_is_the_matrix():
+def test_tangent_band_is_the_force_jacobian():
+    """The band storage, expanded to the full symmetric matrix, against finite differences."""
     rng = np.random.default_rng(1)
     x = MODEL.rest * 1.05 + rng.normal(0, 2e-4, MODEL.rest.shape)   # every spring stretched
-    k = MODEL.stiffness_matrix(x).toarray()
-    v = rng.normal(size=x.shape)
-    eps = 1e-7
-    jv = -(MODEL.forces(x + eps * v, 0 * x) - MODEL.forces(x - eps * v, 0 * x)) / (2 * eps)
-    assert np.allclose(jv.ravel(), k @ v.ravel(), atol=1e-5 * np.abs(k).max())
-    tangent = BandedTangent(MODEL)
-    ab, bw = tangent.matrix(x), tangent.bw
-    dense = np.zeros_like(k)
+    ab, bw = MODEL.stiffness_band(x), MODEL.band_width
+    k = np.zeros((3 * MODEL.N, 3 * MODEL.N))
     for off in range(bw + 1):
         i = np.arange(k.shape[0] - off)
-        dense[i, i + off] = dense[i + off, i] = ab[bw - off, off:]
-    assert np.allclose(dense, k, atol=1e-10)
+        k[i, i + off] = k[i + off, i] = ab[bw - off, off:]
+    for _ in range(3):
+        v = rng.normal(size=x.shape)
+        eps = 1e-7
+        jv = -(MODEL.forces(x + eps * v, 0 * x) - MODEL.forces(x - eps * v, 0 * x)) / (2 * eps)
+        assert np.allclose(jv.ravel(), k @ v.ravel(), atol=1e-5 * np.abs(k).max())
+    # the largest eigenvalue the stability limit uses, against LAPACK's banded eigensolver
+    top = eig_banded(ab, eigvals_only=True, select="i", select_range=(len(k) - 1,) * 2)[0]
+    assert max_eigenfrequency(MODEL, x) ** 2 * MODEL.params.mass == pytest.approx(top,
+                                                                                 rel=1e-10)
 
 
 # -- fast path ---------------------------------------------------------------------------------
 
 def test_fast_path_residual_below_1e6_newton(centre_normal):
-    states = simulate_sequence(MODEL, MODEL.node(5, 27), unit([0.4, -0.3, -1.0]))
+    solver = StaticSolver(MODEL)
+    states = simulate_sequence(MODEL, MODEL.node(5, 27), unit([0.4, -0.3, -1.0]),
+                               solver=solver)
     d = unit([0.4, -0.3, -1.0])
-    for t in range(1, 16):
-        assert residual(MODEL, states[t], MODEL.load(MODEL.node(5, 27), d * 0.5 * t)) < 1e-6
+    left = [residual(MODEL, states[t], MODEL.load(MODEL.node(5, 27), d * 0.5 * t))
+            for t in range(1, 16)]
+    assert max(left) < 1e-6
+    assert solver.stats.max_residual == pytest.approx(max(left), rel=1e-9)   # every step
     assert residual(MODEL, centre_normal[15], MODEL.load(CENTRE, [0, 0, -7.5])) < 1e-9
 
 
@@ -234,3 +243,24 @@ def test_bad_parameters_are_refused(field, value):
 def test_bad_direction_is_refused():
     with pytest.raises(MSMError, match="direction"):
         simulate_sequence(MODEL, CENTRE, [0, 0, 0])
+
+
+def test_a_solver_of_another_tolerance_or_model_is_refused():
+    """simulate_sequence used to ignore ``tol`` silently when handed a solver."""
+    solver = StaticSolver(MODEL, tol=1e-3)
+    with pytest.raises(ValueError, match="tolerance"):
+        simulate_sequence(MODEL, CENTRE, [0, 0, -1], steps=1, tol=1e-8, solver=solver)
+    with pytest.raises(ValueError, match="another model"):
+        simulate_sequence(MSM(), CENTRE, [0, 0, -1], steps=1, tol=1e-3, solver=solver)
+    states = simulate_sequence(MODEL, CENTRE, [0, 0, -1], steps=1, tol=1e-3, solver=solver)
+    assert residual(MODEL, states[1], MODEL.load(CENTRE, [0, 0, -7.5])) < 1e-3
+
+
+def test_non_finite_forces_at_finite_energy_are_refused():
+    """Two neighbouring masses on one point: the spring between them has no direction (NaN
+    force) while its energy is finite."""
+    x = MODEL.rest.copy()
+    x[MODEL.node(5, 6)] = x[MODEL.node(5, 5)]
+    with np.errstate(divide="ignore", invalid="ignore"), pytest.raises(MSMError,
+                                                                       match="non-finite"):
+        StaticSolver(MODEL)._evaluate(x.ravel(), MODEL.load(3, [0, 0, -1]))

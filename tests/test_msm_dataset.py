@@ -15,7 +15,7 @@ from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
 from pipeline.cli import cli
 from pipeline.recording import rrd_entities, rrd_has_blueprint
-from sim.msm import MSM, MSMError
+from sim.msm import MSM, MSMError, unit
 from sim.msm_dataset import Protocol, draw_plan, write_states
 from sim.msm_static import residual
 
@@ -101,15 +101,34 @@ def test_layout_of_the_states_file(small):
         assert json.loads(f.attrs["provenance"])["stage"] == "simulate"
 
 
-def test_states_are_equilibria(small):
+def test_states_are_equilibria_and_the_file_says_how_exactly(small):
+    """Every loaded state balances its load: to --tol as solved (float64), and to the float32
+    floor as stored; the file's residual attributes are the worst over all of them."""
     a = _arrays(small)
     model = MSM()
-    nodes = draw_plan(Protocol(locations=3, directions=2, steps=4, seed=7), 1024).nodes
+    plan = draw_plan(Protocol(locations=3, directions=2, steps=4, seed=7), 1024)
+    stored = []
     for k in np.flatnonzero(a["states/step"] > 0):
-        node = nodes[a["states/location"][k]]
-        load = model.load(node, a["states/force_vector"][k].astype(float))
-        # float32 storage rounds positions by ~4 nm: ~1e-6 N of spring force
-        assert residual(model, a["states/points"][k].astype(float), load) < 2e-5
+        loc, seq, t = a["states/location"][k], a["states/sequence"][k], a["states/step"][k]
+        force = unit(plan.directions[loc, seq % 2]) * 7.5 * t / 4
+        load = model.load(plan.nodes[loc], force)
+        stored.append(residual(model, a["states/points"][k].astype(float), load))
+    with h5py.File(small, "r") as f:
+        solved_attr, stored_attr = f.attrs["max_residual_N"], f.attrs["stored_residual_N"]
+    assert solved_attr < 1e-6                            # --tol (default)
+    assert max(stored) == pytest.approx(stored_attr, rel=1e-12)
+    # float32 rounds positions by up to ~4e-9 m at 0.1 m: ~1e-6 N of spring force, above --tol
+    assert solved_attr < stored_attr < 2e-5
+
+
+def test_cli_line_reports_both_residuals(tmp_path):
+    out = tmp_path / "one.h5"
+    result = _run("--out", str(out), "--locations", "1", "--directions", "1", "--steps", "2",
+                  "--workers", "1", "--no-rrd")
+    assert result.exit_code == 0, result.output
+    with h5py.File(out, "r") as f:
+        solved, stored = f.attrs["max_residual_N"], f.attrs["stored_residual_N"]
+    assert f"max residual {solved:.2g} N solved, {stored:.2g} N as stored" in result.output
 
 
 def test_same_seed_and_any_worker_count_give_the_same_bytes(small, tmp_path):
@@ -138,8 +157,10 @@ def test_shards_merge_into_the_one_run_arrays(small, tmp_path):
     a, b = _arrays(small), _arrays(merged)
     assert a.keys() == b.keys()
     assert all(a[k].tobytes() == b[k].tobytes() for k in a)
-    with h5py.File(merged, "r") as f:
+    with h5py.File(merged, "r") as f, h5py.File(small, "r") as one:
         assert "shard" not in f.attrs
+        for key in ("max_residual_N", "stored_residual_N"):     # the worst of the shards
+            assert f.attrs[key] == one.attrs[key]
         assert json.loads(f.attrs["provenance"])["stage"] == "simulate --merge"
 
 

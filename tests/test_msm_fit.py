@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import cli
-from sim.msm import MSMParams
+from pipeline.errors import BadInput
+from sim import msm_fit
+from sim.msm import MSMError, MSMParams
 from sim.msm_dataset import Plan, Protocol, draw_plan, file_attrs, generate, write_states
 from sim.msm_fit import fit_msm, mean_distance, read_measured
 
@@ -42,21 +45,62 @@ def test_mean_distance_is_zero_only_at_the_truth(made):
     assert mean_distance(MSMParams(k_between=88.0, k_fixed=30.0), sequences) > 1e-6
 
 
-def test_lab_like_states_in_another_frame(made, tmp_path):
-    """4 x 4 markers plus the tip, shifted and lifted into a lab frame: found again."""
-    _, a = made
-    keep = [i * 32 + j for i in (3, 11, 20, 28) for j in (3, 11, 20, 28)]
-    shift = np.array([0.31, -0.12, 0.85], np.float32)
-    pts = np.concatenate([a["states/points"][:, keep], a["states/tip"][:, None]], axis=1)
-    lab = {**a, "states/points": pts + shift, "states/tip": a["states/tip"] + shift}
-    path = tmp_path / "lab.h5"
+def _rotation(yaw_deg: float, tilt_deg: float) -> np.ndarray:
+    """Turned ``yaw_deg`` about z after tilting ``tilt_deg`` about x."""
+    y, t = np.radians(yaw_deg), np.radians(tilt_deg)
+    rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
+    rx = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+    return rz @ rx
+
+
+def _twin_layout() -> np.ndarray:
+    """The twin's markers in the MSM grid frame: 5 x 5 at 20 mm pitch, one corner lost.
+
+    Centred like the fit centres them (centroid on the grid centre). Not on the masses (the
+    pitch is 6.2 mass spacings); without the lost corner the middle row would fall exactly
+    between two masses, so the mass "nearest" it would be a tie.
+    """
+    pitch = 0.020 * (np.arange(5) - 2)
+    xy = np.array([(x, y) for y in pitch for x in pitch])[1:]
+    return np.c_[xy - xy.mean(axis=0) + 0.05, np.zeros(len(xy))]
+
+
+def _lab_file(path: Path, arrays: dict, yaw_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Markers laid out like the twin's, each moving with its nearest mass, written as lab
+    states in a frame where the phantom is turned about the vertical (the twin turns it up to
+    8 degrees), tilted and shifted. Returns the layout (grid frame) and the masses it follows."""
+    layout = _twin_layout()
+    ij = np.rint(layout[:, [1, 0]] / MSMParams().spacing).astype(int)
+    nearest = ij[:, 0] * 32 + ij[:, 1]
+    rest = arrays["states/points"][0].astype(float)
+    moved = layout + (arrays["states/points"][:, nearest] - rest[nearest])
+    rot, shift = _rotation(yaw_deg, 4.0), np.array([0.31, -0.12, 0.85])
+    pts = np.concatenate([moved, arrays["states/tip"][:, None]], axis=1) @ rot.T + shift
+    lab = {**arrays, "states/points": pts.astype(np.float32),
+           "states/tip": (arrays["states/tip"] @ rot.T + shift).astype(np.float32),
+           "states/force_vector": (arrays["states/force_vector"] @ rot.T).astype(np.float32)}
     attrs = file_attrs(_plan(), TRUE, 1e-6, {"stage": "test"}, None)
     attrs.update(source="lab")
     del attrs["msm_params"]
     write_states(path, lab, attrs)
-    sequences, params = read_measured(path)
+    return layout, nearest
+
+
+@pytest.mark.parametrize("yaw_deg", [7.5, -6.0, 0.0])
+def test_lab_states_yawed_tilted_and_off_the_grid_land_on_the_grid(made, tmp_path, yaw_deg):
+    _, a = made
+    layout, nearest = _lab_file(tmp_path / "lab.h5", a, yaw_deg)
+    sequences, params = read_measured(tmp_path / "lab.h5")
     assert params == MSMParams()                              # lab: the paper's grid
-    assert sequences[0].masses.tolist() == [*keep, sequences[0].node]
+    first = sequences[0]
+    np.testing.assert_allclose(first.rest[:-1], layout, atol=2e-6)   # float32 at ~1 m
+    assert first.masses.tolist() == [*nearest, first.node]
+    np.testing.assert_allclose(first.forces, a["states/force_vector"][1:5], atol=1e-5)
+
+
+def test_lab_states_in_a_yawed_frame_give_the_constants(made, tmp_path):
+    _lab_file(tmp_path / "lab.h5", made[1], 7.5)
+    sequences, params = read_measured(tmp_path / "lab.h5")
     result = fit_msm(sequences, params, start=(100.0, 21.0))
     assert result.k_between == pytest.approx(80.0, rel=0.02)
     assert result.k_fixed == pytest.approx(30.0, rel=0.02)
@@ -93,3 +137,27 @@ def test_cli_bad_input(tmp_path):
     write_states(nors, cut, attrs)
     result = CliRunner().invoke(cli, ["fit-msm", str(nors)])
     assert result.exit_code == 2 and "no rest state" in result.output
+
+
+def test_cli_refuses_a_start_where_the_msm_cannot_settle(made, tmp_path):
+    """--start 1e6 1e-3 N/m (a stiffness ratio of 1e9) ends in seconds with one line, no file;
+    the search from it used to run 300 failing trials and write Infinity."""
+    out = tmp_path / "params.json"
+    start = time.perf_counter()
+    result = CliRunner().invoke(cli, ["fit-msm", str(made[0]), "--out", str(out),
+                                      "--max-sequences", "1", "--start", "1e6", "1e-3"])
+    assert time.perf_counter() - start < 15.0
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: --start:") and len(result.output.splitlines()) == 1
+    assert "cannot settle at --start 1e+06 0.001" in result.output
+    assert not out.exists()
+
+
+def test_a_fit_whose_every_trial_fails_is_refused(made, monkeypatch):
+    def unsettled(*args, **kwargs):
+        raise MSMError("static solve did not converge")
+
+    sequences, params = read_measured(made[0])
+    monkeypatch.setattr(msm_fit, "mean_distance", unsettled)
+    with pytest.raises(BadInput, match="cannot settle"):
+        fit_msm(sequences, params)

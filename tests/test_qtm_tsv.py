@@ -306,3 +306,38 @@ def test_last_line_without_line_break_is_accepted_when_complete(tmp_path):
     p.write_bytes(p.read_bytes()[:-2])                      # drop the final "\r\n"
     s = read_qtm_3d(p)
     assert s.frames == 4 and s.positions[3, 1, 2] == pytest.approx(0.00675)
+
+
+def test_last_line_without_line_break_ending_in_a_gap(tmp_path):
+    rows = ["1.000\t2.000\t3.000\t1.000\t2.000\t3.000", "4.000\t5.000\t6.000\tNaN\tNaN\tNaN"]
+    p = _write(tmp_path, [*_header(["a", "b"], 2, 100), *rows], end="\n")
+    p.write_bytes(p.read_bytes()[:-1])                      # complete, no final line break
+    s = read_qtm_3d(p)
+    assert s.frames == 2 and np.isnan(s.positions[1, 1]).all()
+
+
+@pytest.mark.parametrize("value", ["inf", "-inf", "1e400"])
+def test_bad_infinite_coordinate(tmp_path, value):
+    lines = _good_lines(4)
+    lines[12] = lines[12].replace("\t2.250\t", f"\t{value}\t", 1)
+    _bad(_write(tmp_path, lines), "line 13", "column 4", "not a finite number")
+
+
+def test_bad_time_out_of_int64_range(tmp_path):
+    lines = _good_lines(2)
+    lines[12] = lines[12].replace("\t0.00200\t", "\t1e300\t")
+    _bad(_write(tmp_path, lines), "line 13", "1e+300 s", "int64 nanosecond range")
+
+
+@pytest.mark.parametrize("rate, words", [("1e-300", "too low"), ("0", "not a frame rate"),
+                                         ("1e12", "not a frame rate")])
+def test_bad_frequency_of_a_file_timed_by_it(tmp_path, rate, words):
+    lines = [ln.replace("FREQUENCY\t500", f"FREQUENCY\t{rate}") for ln in
+             _header(["A"], 2)] + ["1\t2\t3", "4\t5\t6"]
+    _bad(_write(tmp_path, lines), "FREQUENCY", words, "line 4")
+
+
+def test_bad_event_time(tmp_path):
+    lines = _good_lines(2)
+    lines.insert(9, "EVENT\tTrigger\t1\tinf")
+    _bad(_write(tmp_path, lines), "EVENT 1", "int64 nanosecond range")

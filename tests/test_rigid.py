@@ -97,6 +97,20 @@ def test_an_outlying_marker_is_dropped() -> None:
     assert fit_rigid(CLUSTER, obs, max_rms=1e-3).poor.all()
 
 
+def test_the_refit_with_the_smallest_residual_wins() -> None:
+    """Marker 3 off by 4 mm: the full fit is poor, and dropping marker 0 already passes the
+    limit (0.9 mm), but only dropping marker 3 gives the true pose."""
+    rot, trans = _poses(1, seed=3)
+    obs = _observe(rot, trans)
+    obs[:, 3] += 0.004 * rot[0] @ (np.ones(3) / np.sqrt(3))
+    without_0 = obs.copy()
+    without_0[:, 0] = np.nan
+    assert fit_rigid(CLUSTER, without_0, max_rms=1e-3, drop_outlier=False).rms[0] < 1e-3
+    fit = fit_rigid(CLUSTER, obs, max_rms=1e-3)
+    assert not fit.poor[0] and fit.n_markers[0] == 3 and fit.rms[0] < 1e-12
+    np.testing.assert_allclose(fit.rotation, rot, atol=1e-12)
+
+
 def test_cluster_reference_recovers_the_shape() -> None:
     rng = np.random.default_rng(7)
     rot, trans = _poses(200, seed=7)

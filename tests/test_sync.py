@@ -16,12 +16,11 @@ import pytest
 from click.testing import CliRunner
 
 from calib.gaps import FILLED, MISSING
-from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
 from pipeline.ingest_stage import ingest_session
 from pipeline.recording import rrd_entities
-from pipeline.sync_accuracy import TARGETS, sync_errors
-from pipeline.sync_stage import SyncParams, run_sync, sync_session, write_synced
+from pipeline.sync_accuracy import TARGETS, match_presses, sync_errors
+from pipeline.sync_stage import SyncParams, run_sync
 from sim.twin import synthesize_session
 
 SEEDS = (0, 1, 2, 3, 4)
@@ -34,7 +33,7 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, 
     out = {}
     for seed in SEEDS:
         folder = synthesize_session(root / f"s{seed}", seed=seed, locations=2, repeats=1,
-                                    press_seconds=60.0)
+                                    press_seconds=60.0, pivot_seconds=10.0)
         mcap = root / f"s{seed}.mcap"
         ingest_session(folder, mcap)
         synced = root / f"s{seed}.h5"
@@ -57,6 +56,9 @@ def test_accuracy_targets_against_truth(sessions: dict, seed: int) -> None:
     assert err["clock_offset_ms"] <= 4 * err["clock_offset_sd_ms"] + 0.05
     assert err["clock_drift_ppm"] <= 4 * err["clock_drift_sd_ppm"] + 0.5
     assert err["presses"] == 2 and err["presses_missed"] == 0 and err["locations_mixed"] == 0
+    assert err["presses_extra"] == 0 and err["presses_merged"] == 0
+    assert err["tip_coverage"] >= 0.95
+    assert err["force_rms_loaded_n"] <= TARGETS["force_rms_n"]
 
 
 def test_presses_locations_and_repeats(sessions: dict) -> None:
@@ -102,34 +104,35 @@ def test_gap_flags_follow_what_the_cameras_missed(sessions: dict) -> None:
         assert n_filled > 0
 
 
-def test_marker_missing_through_a_press_is_not_invented(sessions: dict, tmp_path: Path
-                                                        ) -> None:
-    _, mcap, _ = sessions[2]
-    raw = read_raw_mcap(mcap)
-    t = raw.markers.time_ns * 1e-9
-    col = raw.markers.labels.index(raw.phantom_markers[12])
-    raw.markers.positions[(t > 1.0) & (t < t[-1] - 1.0), col] = np.nan
-    r = sync_session(raw, SyncParams())
-    for rec in r.presses:
-        inside = slice(rec.press.onset, rec.press.release)
-        assert np.isnan(rec.points[inside, 12]).all()
-        assert (rec.quality[inside, 12] == MISSING).all()
-    write_synced(tmp_path / "m.h5", r, {}, "m.mcap")
-    with h5py.File(tmp_path / "m.h5") as h:
-        for g in h["presses"].values():
-            assert 12 in g.attrs["points_missing_throughout"]
-
-
 def test_data_driven_clock_on_the_twin(sessions: dict) -> None:
+    """Two presses of about a minute each: slow force changes pin the lag to about a
+    millisecond only (the reported uncertainty says so), and matter as little to the force.
+    The contact-state seed is a few tenths of a second off on presses this slow: the per-press
+    scan must walk to the lag from there."""
     folder, mcap, _ = sessions[0]
     out = mcap.with_name("data.h5")
     run_sync(mcap, out, params=SyncParams(clock="data"))
     err = sync_errors(out, folder / "truth.h5")
     with h5py.File(out) as s:
         assert s["calibration"].attrs["clock_method"] == "data"
-    assert err["clock_offset_ms"] <= 1.0
+    assert err["clock_offset_ms"] <= 2.0
     assert err["clock_offset_ms"] <= 4 * err["clock_offset_sd_ms"]
     assert err["force_rms_n"] <= TARGETS["force_rms_n"]
+
+
+def test_press_matching_is_one_to_one() -> None:
+    """True presses at frames 0-99, 200-299, 400-499, 600-699 (locations 0, 1, 0, 1)."""
+    start, end = np.array([0, 200, 400, 600]), np.array([99, 299, 499, 699])
+    truth_loc = np.array([0, 1, 0, 1])
+    exact = match_presses([(10, 90), (210, 290), (410, 490), (610, 690)], [0, 1, 0, 1],
+                          start, end, truth_loc)
+    assert exact == {"presses_missed": 0, "presses_extra": 0, "presses_merged": 0,
+                     "locations_mixed": 0}
+    # the first two merged into one, an extra press where there was none, the last split
+    found = match_presses([(10, 250), (410, 490), (550, 580), (610, 640), (650, 690)],
+                          [0, 0, 2, 1, 1], start, end, truth_loc)
+    assert found == {"presses_missed": 1, "presses_extra": 2, "presses_merged": 1,
+                     "locations_mixed": 0}
 
 
 def test_recording_shows_alignment_tip_and_gaps(sessions: dict) -> None:

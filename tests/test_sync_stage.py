@@ -12,13 +12,16 @@ import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
+from calib.gaps import MISSING
 from data_schema.hdf5 import validate_h5
 from data_schema.synced import SYNCED
 from ingest.mcap_io import write_raw_mcap
 from ingest.series import ForceSeries, MarkerSeries, RawSession
 from pipeline.cli import cli
+from pipeline.errors import BadInput
 from pipeline.provenance import make_provenance
 from pipeline.recording import rrd_entities, rrd_has_blueprint
+from pipeline.sync_stage import SyncParams, sync_session, write_synced
 
 RATE, LOG_RATE = 500.0, 1000.0
 OFFSET, DRIFT = 0.8, 20.0                       # logger clock: OFFSET + (1 + DRIFT ppm) t_m
@@ -86,6 +89,7 @@ def _sync(mcap: Path, out: Path, *extra: str):
     return CliRunner().invoke(cli, ["-q", "sync", str(mcap), "--out", str(out), *extra])
 
 
+@pytest.mark.filterwarnings("error")
 def test_sync_writes_valid_presses_and_recording(tmp_path: Path) -> None:
     mcap = _mcap(tmp_path, _session())
     out = tmp_path / "s.h5"
@@ -106,6 +110,9 @@ def test_sync_writes_valid_presses_and_recording(tmp_path: Path) -> None:
         assert abs(g["force_magnitude"][i] - 7.0) < 0.1
         assert abs(g["depth"][i] - 0.006) < 0.5e-3
         assert g["force_magnitude"][0] < 0.05                  # unloaded margin kept
+        assert h["presses"].attrs["cut_off"] == 0
+        # the rest next to the press is what was left of the bias after the start tare: ~0
+        assert np.abs(g.attrs["rest_force_n"]).max() < 0.01
         assert list(h["point_names"].asstr()[-2:]) == ["P24", "tip"]
         prov = json.loads(h.attrs["provenance"])
         assert prov["stage"] == "sync" and str(mcap) in prov["inputs"]
@@ -117,6 +124,21 @@ def test_sync_writes_valid_presses_and_recording(tmp_path: Path) -> None:
         assert e in ents, e
     assert "Points3D" in ents["/scene/tip"] and "Points2D" in ents["/force_vs_depth/after"]
     assert rrd_has_blueprint(rrd)
+
+
+def test_marker_missing_through_a_press_is_not_invented(tmp_path: Path) -> None:
+    raw = _session()
+    t = raw.markers.time_ns * 1e-9
+    raw.markers.positions[(t > 1.0) & (t < t[-1] - 1.0), 12] = np.nan
+    r = sync_session(raw, SyncParams())
+    for rec in r.presses:
+        inside = slice(rec.press.onset, rec.press.release)
+        assert np.isnan(rec.points[inside, 12]).all()
+        assert (rec.quality[inside, 12] == MISSING).all()
+    write_synced(tmp_path / "m.h5", r, {}, "m.mcap")
+    with h5py.File(tmp_path / "m.h5") as h:
+        for g in h["presses"].values():
+            assert 12 in g.attrs["points_missing_throughout"]
 
 
 def test_data_clock_agrees_with_trigger(tmp_path: Path) -> None:
@@ -135,6 +157,7 @@ def test_data_clock_agrees_with_trigger(tmp_path: Path) -> None:
 
 
 def _bad(tmp_path: Path, session: RawSession, pattern: str, *extra: str) -> None:
+    tmp_path.mkdir(exist_ok=True)
     mcap = _mcap(tmp_path, session)
     before = mcap.read_bytes()
     out = tmp_path / "bad.h5"
@@ -198,7 +221,111 @@ def test_output_never_overwrites_the_input(tmp_path: Path) -> None:
     assert mcap.read_bytes() == before
 
 
-@pytest.mark.parametrize("bad", ["--max-gap-ms=x", "--clock=gps"])
+@pytest.mark.parametrize("bad", ["--max-gap-ms=x", "--clock=gps", "--margin-s=-1",
+                                 "--max-gap-ms=-5", "--location-radius-mm=-1",
+                                 "--location-radius-mm=0"])
 def test_bad_options_are_usage_errors(tmp_path: Path, bad: str) -> None:
-    res = _sync(tmp_path / "missing.mcap", tmp_path / "o.h5", bad)
-    assert res.exit_code == 2
+    mcap = _mcap(tmp_path, _session(presses=2))
+    out = tmp_path / "o.h5"
+    res = _sync(mcap, out, bad)
+    assert res.exit_code == 2, res.output
+    assert bad.split("=")[0] in res.output and "Traceback" not in res.output
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("field", ["margin_s", "max_gap_s", "location_radius_m"])
+def test_bad_parameters_are_bad_input_for_library_callers(field: str) -> None:
+    with pytest.raises(BadInput, match=field):
+        sync_session(_session(presses=1), SyncParams(**{field: -1.0}))
+
+
+def test_swapped_indenter_labels_are_refused(tmp_path: Path) -> None:
+    """Labels of two indenter markers swapped in the trial but not in the pivot recording:
+    every rigid fit is poor, so there is no tip anywhere."""
+    s = _session()
+    s.markers.positions[:, [26, 27]] = s.markers.positions[:, [27, 26]]
+    _bad(tmp_path, s, "trial.tsv: the indenter has a usable pose in only 0 of")
+
+
+def test_poor_fits_through_one_press_are_refused(tmp_path: Path) -> None:
+    s = _session()
+    t = s.markers.time_ns * 1e-9
+    during = (t > 5.0) & (t < 8.0)                        # the whole second press
+    pos = s.markers.positions
+    pos[np.ix_(during, [26, 27])] = pos[np.ix_(during, [27, 26])]
+    _bad(tmp_path, s, "press 1: every indenter fit through the whole press is poor")
+
+
+@pytest.mark.parametrize("load", [0.3, 0.45])
+def test_log_starting_under_a_small_steady_load(tmp_path: Path, load: float) -> None:
+    """Below the detection level, but well above the noise: presses would merge."""
+    s = _session()
+    s.force.values[: int(1.2 * LOG_RATE), 2] += load
+    _bad(tmp_path, s, f"force between presses is {load:.2f} N")
+
+
+def test_bias_creep_is_re_tared_at_every_press(tmp_path: Path) -> None:
+    """A bias creeping 0.6 mN/s on Fz (ten times the twin's sensor): 40 mN by the end of a
+    16-press session, twice the force target. Each press is re-tared from the rest next to
+    it, and the rest that was removed is stored."""
+    n = 16
+    s = _session(presses=n)
+    t_f = s.force.time_ns * 1e-9
+    creep = np.array([0.3, -0.2, 0.6, 0.01, -0.02, 0.0]) * 1e-3
+    s.force.values += np.outer(t_f, creep)
+    mcap = _mcap(tmp_path, s)
+    out = tmp_path / "s.h5"
+    res = _sync(mcap, out, "--no-rrd")
+    assert res.exit_code == 0, res.output
+    with h5py.File(out) as h:
+        assert len(h["presses"]) == n
+        for k in range(n):
+            g = h[f"presses/{k:03d}"]
+            on, peak = g.attrs["onset_index"], g.attrs["peak_index"]
+            assert abs(g["force_magnitude"][peak] - 7.0) < 0.03, k
+            margin = g["force"][: on - 25]                           # unloaded
+            assert np.linalg.norm(margin.mean(axis=0)) < 3e-3, k
+        for g in h["presses"].values():
+            t_on, t_off = (OFFSET + (1 + DRIFT * 1e-6) * g.attrs[key] * 1e-9
+                           for key in ("onset_ns", "release_ns"))
+            want = np.outer([t_on, t_off], creep[:3]) - creep[:3] * 1.0   # tare ~ t = 1 s
+            np.testing.assert_allclose(g.attrs["rest_force_n"], want, atol=3e-3)
+
+
+def test_presses_cut_off_by_either_recording_are_left_out(tmp_path: Path) -> None:
+    s = _session()
+    start = int(2.5e9)                                     # mocap starts inside press 0
+    keep = s.markers.time_ns >= start
+    s.markers.time_ns = s.markers.time_ns[keep] - start
+    s.markers.positions = s.markers.positions[keep]
+    s.markers.events = [(lab, t - start) for lab, t in s.markers.events if t >= start]
+    f = s.force
+    end = np.searchsorted(f.time_ns, int((OFFSET + 14.5) * 1e9))    # log ends inside press 3
+    f.time_ns, f.values, f.trigger = f.time_ns[:end], f.values[:end], f.trigger[:end]
+    mcap = _mcap(tmp_path, s)
+    out = tmp_path / "s.h5"
+    res = _sync(mcap, out, "--no-rrd")
+    assert res.exit_code == 0, res.output
+    assert "2 cut off" in res.output
+    with h5py.File(out) as h:
+        assert h["presses"].attrs["cut_off"] == 2 and len(h["presses"]) == 2
+        for g in h["presses"].values():
+            on = g.attrs["onset_index"]
+            assert on >= 0.4 * RATE and g["force_magnitude"][0] < 0.05
+            assert abs(g["force_magnitude"][g.attrs["peak_index"]] - 7.0) < 0.1
+
+
+def test_dead_trigger_channel_falls_back_to_the_data_clock(tmp_path: Path) -> None:
+    s = _session(seed=1)
+    ttl = np.zeros_like(s.force.trigger)
+    ttl[3000:3010] = 5.0                                    # one pulse, then nothing
+    s.force.trigger = ttl
+    mcap = _mcap(tmp_path, s)
+    out = tmp_path / "s.h5"
+    res = _sync(mcap, out, "--no-rrd")
+    assert res.exit_code == 0, res.output
+    with h5py.File(out) as h:
+        assert h["calibration"].attrs["clock_method"] == "data"
+        assert abs(h["calibration"].attrs["clock_offset_s"] - OFFSET) < 1e-3
+        assert "1 pulse edges" in json.loads(h.attrs["calibration"])["clock"]["note"]
+    _bad(tmp_path / "strict", s, "trigger: 1 pulse edges", "--clock", "trigger")
