@@ -5,6 +5,8 @@
 MAT v7 files are read with scipy.io; v7.3 files are HDF5 with a MATLAB userblock, read with h5py
 (MATLAB stores arrays with their dimensions reversed, and cell arrays of strings as object
 references to uint16 character arrays). ``write_qtm_mat`` writes both, for tests and the twin.
+Telling a QTM export from a force log reads only each variable's header (``mat5_structs``), so
+a compressed export is inflated once, by the read itself.
 """
 
 from __future__ import annotations
@@ -40,8 +42,8 @@ _HEAD_BYTES = 1 << 16          # of a variable, enough for its header and struct
 def is_qtm_mat(path: str | Path) -> bool:
     """Whether a MAT file (v7 or v7.3) holds a QTM export struct (one with ``Trajectories``).
 
-    Reads only the variable headers (a compressed variable is not inflated); a file that cannot
-    be read that far is bad input, not "some other MAT file".
+    Reads only the first bytes of each variable (its header and field names), never the data;
+    a file that cannot be read that far is bad input, not "some other MAT file".
     """
     return bool(_struct_names(path))
 
