@@ -498,6 +498,8 @@ def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
     names = [*PHANTOM_MARKERS, *twin.indenter.names]
     finals = [folder / FILES[k] for k in ("trial", "bodies", "pivot", "csv", "mat", "session",
                                           "truth")] + [folder / cal_name]
+    if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
+        raise BadInput(rrd, "--rrd names one of the session files synth writes")
     stamp, mat_date = _stamp(p.seed)
     columns = {"time": twin.log.time_s, **{g: twin.log.volts[:, i] for i, g in enumerate(GAUGES)}}
     formats = {"time": "%.3f", **dict.fromkeys(GAUGES, "%.6f"), TRIGGER_COLUMN: "%.4f"}

@@ -373,3 +373,10 @@ def test_default_session_is_fast_and_deep_like_the_paper(tmp_path: Path) -> None
     assert 8.0 < np.mean(multi) < 12.5
     assert 1.6 < np.mean(single) < 2.9
     assert 200 < len(press) < 320
+
+
+def test_rrd_naming_a_session_file_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "s"
+    res = run(["synth", str(out), *TINY, "--rrd", str(out / "truth.h5")])
+    assert res.exit_code == 2 and "--rrd" in res.output, res.output
+    assert not out.exists() or not any(out.iterdir())
