@@ -77,8 +77,23 @@ def check_time(time_ns: np.ndarray, source: str | Path) -> None:
             raise BadInput(source, f"time is not increasing at sample {i}", where=f"frame {i}")
 
 
+class _Tracked:
+    """Frame count and missing samples, shared by marker and body series."""
+
+    time_ns: np.ndarray
+    positions: np.ndarray
+
+    @property
+    def frames(self) -> int:
+        return int(self.time_ns.shape[0])
+
+    def missing_samples(self) -> int:
+        """Number of (frame, marker or body) samples with no position."""
+        return int(np.isnan(self.positions).any(axis=2).sum())
+
+
 @dataclass
-class MarkerSeries:
+class MarkerSeries(_Tracked):
     """3D marker trajectories: ``positions[t, m] = (x, y, z)`` in metres, NaN where missing."""
 
     source: str
@@ -90,14 +105,6 @@ class MarkerSeries:
     events: list[tuple[str, int]] = field(default_factory=list)  # (label, time_ns)
     meta: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def frames(self) -> int:
-        return int(self.time_ns.shape[0])
-
-    def missing_samples(self) -> int:
-        """Number of (frame, marker) samples with no position."""
-        return int(np.isnan(self.positions).any(axis=2).sum())
-
     def select(self, names: list[str]) -> np.ndarray:
         """Positions of the named markers, ``(T, len(names), 3)``; a missing name is bad input."""
         index = {n: i for i, n in enumerate(self.labels)}
@@ -108,7 +115,7 @@ class MarkerSeries:
 
 
 @dataclass
-class BodySeries:
+class BodySeries(_Tracked):
     """6DOF rigid bodies: position (m), rotation matrix (body to lab), residual; NaN when lost."""
 
     source: str
@@ -121,13 +128,6 @@ class BodySeries:
     events: list[tuple[str, int]] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def frames(self) -> int:
-        return int(self.time_ns.shape[0])
-
-    def missing_samples(self) -> int:
-        """Number of (frame, body) samples where the body was lost."""
-        return int(np.isnan(self.positions).any(axis=2).sum())
 
 
 @dataclass

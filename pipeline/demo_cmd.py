@@ -20,7 +20,7 @@ def demo_steps(out: Path, seed: int) -> list[list[str]]:
         ["sync", str(out / "session.mcap"), "--out", str(out / "synced.h5")],
         ["simulate", "--out", str(out / "msm.h5"), "--locations", "10", "--directions", "3",
          "--seed", s],
-        ["inspect", str(out / "synced.h5")],
+        ["inspect", str(out / "session.mcap")],
     ]
 
 
