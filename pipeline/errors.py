@@ -9,7 +9,8 @@ class BadInput(Exception):
     """An input file (or parameter) is wrong in a way the user must fix.
 
     The message names the file and, where it applies, the line or frame, so that the CLI can
-    print it as one line: ``path:line 12: what is wrong``.
+    print it as one line: ``path:line 12: what is wrong``. A bad parameter has no path: its
+    message names the option instead.
     """
 
     def __init__(self, path: str | Path | None, what: str, where: str | None = None) -> None:
@@ -20,7 +21,5 @@ class BadInput(Exception):
 
     def line(self) -> str:
         """The one-line message shown to the user."""
-        head = self.path or "input"
-        if self.where:
-            head = f"{head}:{self.where}"
-        return f"{head}: {self.what}"
+        head = ":".join(p for p in (self.path, self.where) if p)
+        return f"{head}: {self.what}" if head else self.what
