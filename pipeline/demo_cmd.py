@@ -30,7 +30,7 @@ def demo_steps(out: Path, seed: int) -> list[list[str]]:
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, seed: int) -> None:
-    """Run every stage on a small synthetic session (small settings, a minute or two).
+    """Run every stage on a synthetic session (a default twin session, a small MSM set; ~20 s).
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
     session.mcap (ingest), synced.h5 (sync), msm.h5 (mass-spring states), and a rerun
