@@ -129,8 +129,8 @@ def bare_parse(tsv: Path) -> np.ndarray:
 
 
 def ingest(folder: Path, out: Path, rrd: Path | None) -> None:
+    from core.progress import set_quiet
     from pipeline.ingest_stage import ingest_session
-    from pipeline.progress import set_quiet
 
     set_quiet(True)
     ingest_session(folder, out, rrd)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 
 @dataclass

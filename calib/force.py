@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.gaps import nan_runs
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 
 @dataclass

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 
 @dataclass

@@ -14,7 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 Dim = int | str
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 
 @dataclass(frozen=True)

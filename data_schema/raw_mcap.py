@@ -46,7 +46,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 SCHEMA = "phantom.raw_mcap"
 VERSION = "1.0"

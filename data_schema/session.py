@@ -34,8 +34,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ingest.units import TIME_UNITS, channel_units
-from pipeline.errors import BadInput
+from core.errors import BadInput
+from core.units import TIME_UNITS, channel_units
 
 SCHEMA = "phantom.session"
 VERSION = "1.0"

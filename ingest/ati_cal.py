@@ -4,7 +4,7 @@ ATI's own note in every file: build the calibration matrix from the six ``UserAx
 Fy, Fz, Tx, Ty, Tz); the ``Axis`` rows are scaled for ATI's internal use. Rows are converted to
 SI (N and N*m per volt) from the file's ``ForceUnits`` / ``TorqueUnits``, and so are the rated
 loads (``max``). ``write_ati_cal`` writes the inverse, in N and N-mm as ATI ships Nano17 files.
-Units come from :mod:`ingest.units` (``unit_to_si`` is re-exported here for callers).
+Units come from :mod:`core.units` (``unit_to_si`` is re-exported here for callers).
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ingest.series import AtiCalibration
-from ingest.units import unit_to_si
-from pipeline.atomic import atomic_output
-from pipeline.errors import BadInput
+from core.atomic import atomic_output
+from core.errors import BadInput
+from core.series import AtiCalibration
+from core.units import unit_to_si
 
 AXES = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
 

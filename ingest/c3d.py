@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ingest.series import MarkerSeries, frame_times_ns, time_to_ns
-from ingest.units import length_scale
-from pipeline.errors import BadInput
+from core.errors import BadInput
+from core.series import MarkerSeries, frame_times_ns, time_to_ns
+from core.units import length_scale
 
 
 def _param(params: dict, group: str, name: str, path: str | Path) -> Any:

@@ -10,8 +10,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ingest.series import MarkerSeries
-from pipeline.errors import BadInput
+from core.errors import BadInput
+from core.series import MarkerSeries
 
 FORMATS = (
     "qtm_tsv_3d", "qtm_tsv_6d", "c3d", "qtm_mat", "force_csv", "force_mat", "force_parquet",

@@ -21,11 +21,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import scipy.io
 
+from core.errors import BadInput
+from core.series import ForceSeries, time_to_ns
+from core.units import TIME_UNITS, channel_units, unit_to_si
 from ingest.detect import check_last_line, sniff
 from ingest.qtm_mat import MAT_ERRORS, mat73_text
-from ingest.series import ForceSeries, time_to_ns
-from ingest.units import TIME_UNITS, channel_units, unit_to_si
-from pipeline.errors import BadInput
 
 _NAME_VARS = ("columns", "names", "column_names")
 _MAT_SKIP = ("#refs#", "#subsystem#")

@@ -15,6 +15,15 @@ from typing import Any
 
 import numpy as np
 
+from core.atomic import atomic_output
+from core.series import (
+    AtiCalibration,
+    BodySeries,
+    ForceSeries,
+    MarkerSeries,
+    RawSession,
+    check_time,
+)
 from data_schema.raw_mcap import (
     BLOCK_SECONDS,
     RAW_MCAP,
@@ -26,15 +35,6 @@ from data_schema.raw_mcap import (
     read_index,
     reading,
 )
-from ingest.series import (
-    AtiCalibration,
-    BodySeries,
-    ForceSeries,
-    MarkerSeries,
-    RawSession,
-    check_time,
-)
-from pipeline.atomic import atomic_output
 
 CHUNK_BYTES = 1 << 20   # 1 MiB chunks
 COMPRESSION = ("none", "zstd")
@@ -59,11 +59,11 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
 
     ``metadata`` holds extra metadata records by name, each a dict of JSON-able values; its
     ``provenance`` record (default: ``session.provenance``) should come from
-    :func:`pipeline.provenance.make_provenance`. ``compression``: "none" or "zstd" chunks.
+    :func:`core.provenance.make_provenance`. ``compression``: "none" or "zstd" chunks.
     """
     from mcap.writer import CompressionType, Writer
 
-    from pipeline.provenance import code_version
+    from core.provenance import code_version
 
     if compression not in COMPRESSION:
         raise ValueError(f"compression must be one of {COMPRESSION}, got {compression!r}")

@@ -21,10 +21,10 @@ import h5py
 import numpy as np
 import scipy.io
 
+from core.atomic import atomic_output
+from core.errors import BadInput
+from core.series import MarkerSeries, frame_times_ns
 from ingest.detect import sniff
-from ingest.series import MarkerSeries, frame_times_ns
-from pipeline.atomic import atomic_output
-from pipeline.errors import BadInput
 
 _SKIP = ("#refs#", "#subsystem#")
 # What scipy.io, h5py and the MAT header walk raise on a damaged file; every MAT reader

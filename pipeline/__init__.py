@@ -1,3 +1,3 @@
 """The `pipeline` CLI and the stage code that turns phantom sessions into trained models."""
 
-__version__ = "0.1.0"
+from core import __version__  # noqa: F401  (one version for the package)

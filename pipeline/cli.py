@@ -12,8 +12,8 @@ import importlib.util
 
 import click
 
-from pipeline.errors import BadInput
-from pipeline.progress import set_quiet
+from core.errors import BadInput
+from core.progress import set_quiet
 
 # command name -> "module:attribute" of its click command, in the order of the stages.
 COMMANDS: dict[str, str] = {

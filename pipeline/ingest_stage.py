@@ -13,20 +13,20 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
-from data_schema.session import ForceConfig, SessionConfig, read_session
-from ingest.mcap_io import write_raw_mcap
-from ingest.series import (
+from core.atomic import atomic_outputs, same_path
+from core.errors import BadInput
+from core.progress import progress
+from core.provenance import make_provenance
+from core.series import (
     AtiCalibration,
     BodySeries,
     ForceSeries,
     MarkerSeries,
     RawSession,
 )
-from pipeline.atomic import atomic_outputs, same_path
-from pipeline.errors import BadInput
-from pipeline.progress import progress
-from pipeline.provenance import make_provenance
+from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
+from data_schema.session import ForceConfig, SessionConfig, read_session
+from ingest.mcap_io import write_raw_mcap
 
 
 def ingest_session(folder: str | Path, out: str | Path, rrd: str | Path | None = None,

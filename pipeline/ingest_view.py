@@ -23,8 +23,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ingest.series import MarkerSeries, RawSession
-from pipeline.recording import recording, time_column
+from core.recording import recording, time_column
+from core.series import MarkerSeries, RawSession
 
 APP_ID = "phantom-ingest"
 VIEW_HZ = 50.0           # 3D points per marker per second of recording, at most

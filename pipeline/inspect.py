@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from ingest.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
-from pipeline.errors import BadInput
+from core.errors import BadInput
+from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
 
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
         "missing_samples", "units", "events", "schema", "schema_version", "provenance",
@@ -338,7 +338,7 @@ def _inspect_session(path: Path) -> dict[str, Any]:
 
 
 def _inspect_rrd(path: Path) -> dict[str, Any]:
-    from pipeline.recording import rrd_entities, rrd_has_blueprint
+    from core.recording import rrd_entities, rrd_has_blueprint
 
     try:
         entities = rrd_entities(path)

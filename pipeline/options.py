@@ -8,9 +8,9 @@ from typing import Any
 
 import click
 
-from pipeline.atomic import same_path
-from pipeline.errors import BadInput
-from pipeline.recording import default_rrd_path
+from core.atomic import same_path
+from core.errors import BadInput
+from core.recording import default_rrd_path
 
 
 def rrd_option(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -28,7 +28,7 @@ def resolve_rrd(out: Path, rrd: Path | None, no_rrd: bool,
                 folder: bool | None = None) -> Path | None:
     """The recording path a stage writes, or None with ``--no-rrd``.
 
-    The default goes beside ``out`` (:func:`~pipeline.recording.default_rrd_path`), or inside
+    The default goes beside ``out`` (:func:`~core.recording.default_rrd_path`), or inside
     it when ``out`` is a folder: ``folder`` says so; None: when one exists there or the running
     command declares ``out`` as one (``click.Path(file_okay=False)``, as synth's OUT_DIR). An
     ``--rrd`` naming the ``--out`` file is bad input.

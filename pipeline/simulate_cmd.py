@@ -122,9 +122,9 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int,
     placed on the grid). Prints a one-line summary, and writes --out (when given): the
     constants, the distances and the full MSM parameters as JSON.
     """
+    from core.atomic import atomic_output
+    from core.provenance import make_provenance
     from data_schema.json_docs import MSM_PARAMS, validate_json_doc
-    from pipeline.atomic import atomic_output
-    from pipeline.provenance import make_provenance
     from sim.msm_fit import fit_msm as run_fit
     from sim.msm_fit import read_measured
 

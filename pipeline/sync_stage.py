@@ -44,13 +44,13 @@ from calib.pivot import PivotResult, pivot_calibrate
 from calib.resample import antialiased_interpolant
 from calib.rigid import RigidFit, cluster_reference, fit_rigid
 from calib.smooth import lowpass_track
+from core.atomic import atomic_outputs
+from core.errors import BadInput
+from core.provenance import make_provenance
+from core.series import RawSession
 from data_schema.hdf5 import validate_h5
 from data_schema.synced import FORCE_BITS, QUALITY_BITS, SYNCED
-from ingest.series import RawSession
-from pipeline.atomic import atomic_outputs
-from pipeline.errors import BadInput
 from pipeline.presses import Press, assign_locations, segment_presses
-from pipeline.provenance import make_provenance
 
 POOR_FIT = np.uint8(QUALITY_BITS["poor_fit"])
 TIP = "tip"

@@ -24,7 +24,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from calib.gaps import FILLED, MISSING
-from pipeline.recording import recording, time_column
+from core.recording import recording, time_column
 from pipeline.sync_stage import SyncResult
 
 APP_ID = "phantom-sync"

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 # Edge families as (row offset, column offset): rows, columns, the one diagonal.
 FAMILIES: tuple[tuple[int, int], ...] = ((0, 1), (1, 0), (1, 1))

@@ -31,12 +31,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from core.atomic import atomic_output
+from core.errors import BadInput
+from core.progress import progress
+from core.provenance import make_provenance
 from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
-from pipeline.atomic import atomic_output
-from pipeline.errors import BadInput
-from pipeline.progress import progress
-from pipeline.provenance import make_provenance
 from sim.cone import cone_directions
 from sim.msm import MSM, MSMError, MSMParams, unit
 from sim.msm_static import (

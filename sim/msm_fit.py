@@ -33,9 +33,9 @@ import h5py
 import numpy as np
 from scipy.optimize import minimize
 
+from core.errors import BadInput
 from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
-from pipeline.errors import BadInput
 from sim.blas_threads import blas_threads
 from sim.msm import MSM, MSMError, MSMParams
 from sim.msm_dataset import attr_text

@@ -21,7 +21,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pipeline.recording import recording
+from core.recording import recording
 
 APP_ID = "phantom-simulate"
 ARROW_M_PER_N = 0.003

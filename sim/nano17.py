@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ingest.series import AtiCalibration
+from core.series import AtiCalibration
 
 # A real Nano17's UserAxis rows (N and N-mm per volt; SI-50-0.5, FT14048): the gauge pattern
 _PATTERN = np.array([

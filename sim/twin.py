@@ -39,15 +39,15 @@ import h5py
 import numpy as np
 
 from calib.rigid import fit_rigid
+from core.atomic import atomic_outputs
+from core.errors import BadInput
+from core.progress import progress
+from core.provenance import make_provenance
 from data_schema.hdf5 import validate_h5
 from data_schema.session import SCHEMA as SESSION_SCHEMA
 from data_schema.session import VERSION as SESSION_VERSION
 from data_schema.truth import CLOCK_DOC, TRUTH
 from ingest.ati_cal import write_ati_cal
-from pipeline.atomic import atomic_outputs
-from pipeline.errors import BadInput
-from pipeline.progress import progress
-from pipeline.provenance import make_provenance
 from sim.indenter import (
     BODY_NAME,
     GRAVITY,

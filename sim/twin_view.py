@@ -22,7 +22,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pipeline.recording import recording, time_column
+from core.recording import recording, time_column
 
 if TYPE_CHECKING:
     from sim.twin import Twin

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import BadInput
+from core.series import AtiCalibration
+from core.units import channel_units, length_scale, unit_to_si
 from ingest.ati_cal import read_ati_cal, write_ati_cal
-from ingest.series import AtiCalibration
-from ingest.units import channel_units, length_scale, unit_to_si
-from pipeline.errors import BadInput
 
 CAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "ati" / \
     "nano17_FT14048_SI-50-0.5.cal"

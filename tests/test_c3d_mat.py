@@ -12,10 +12,10 @@ import pytest
 import scipy.io
 from scipy.io.matlab import matfile_version
 
+from core.errors import BadInput
+from core.series import MarkerSeries
 from ingest.c3d import read_c3d
 from ingest.qtm_mat import read_qtm_mat, write_mat73, write_qtm_mat
-from ingest.series import MarkerSeries
-from pipeline.errors import BadInput
 
 C3D = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "c3d" / \
     "qualisys_55markers_200hz.c3d"

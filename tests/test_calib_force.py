@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calib.force import apply_calibration, noise_sigma, rest_baseline, unloaded_start
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 RATE = 1000.0
 

@@ -16,7 +16,7 @@ from calib.clock import (
     rising_edges,
 )
 from calib.resample import antialiased_interpolant
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 OFFSET, DRIFT = 1.23456, 37.0          # s, ppm: t_f = OFFSET + (1 + DRIFT e-6) t_m
 

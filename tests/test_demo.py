@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from click.testing import CliRunner
 
+from core.recording import rrd_entities
 from data_schema import validate_h5
 from data_schema.states import STATES
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.recording import rrd_entities
 
 
 def test_demo_runs_every_stage(tmp_path):

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 import scipy.io
 
+from core.errors import BadInput
 from ingest.force_log import force_log_columns, read_force_log
 from ingest.qtm_mat import write_mat73
-from pipeline.errors import BadInput
 
 GAUGES = [f"G{i}" for i in range(6)]
 N = 500

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.atomic import atomic_output, atomic_outputs
+from core.errors import BadInput
+from core.provenance import make_provenance, sha256_file
+from core.recording import default_rrd_path
 from data_schema import Dataset, H5Schema, validate_h5
 from data_schema.session import read_session
-from pipeline.atomic import atomic_output, atomic_outputs
 from pipeline.cli import COMMANDS, cli
-from pipeline.errors import BadInput
 from pipeline.options import resolve_rrd
-from pipeline.provenance import make_provenance, sha256_file
-from pipeline.recording import default_rrd_path
 
 
 def test_atomic_output_renames_only_on_success(tmp_path):

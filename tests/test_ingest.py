@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.provenance import sha256_file
+from core.recording import rrd_entities, rrd_has_blueprint
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.provenance import sha256_file
-from pipeline.recording import rrd_entities, rrd_has_blueprint
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
 PHANTOM = [f"P{r}{c}" for r in range(5) for c in range(5)]

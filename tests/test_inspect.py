@@ -123,8 +123,8 @@ def test_force_log_with_a_gap_is_bad_input(tmp_path):
 
 @pytest.mark.parametrize("version", ["7", "7.3"])
 def test_qtm_mat(tmp_path, version):
+    from core.series import MarkerSeries
     from ingest.qtm_mat import write_qtm_mat
-    from ingest.series import MarkerSeries
 
     pos = np.random.default_rng(0).normal(0, 0.1, (300, 4, 3))
     pos[20:30, 1] = np.nan

@@ -7,9 +7,9 @@ import json
 import pytest
 from click.testing import CliRunner
 
+from core.errors import BadInput
 from data_schema.json_docs import MSM_PARAMS, validate_folds, validate_json_doc
 from pipeline.cli import cli
-from pipeline.errors import BadInput
 
 
 def test_folds_manifest_is_checked(tmp_path):

@@ -10,10 +10,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from core.errors import BadInput
+from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
 from data_schema.raw_mcap import BLOCK_HEADER, RAW_MCAP, validate_raw_mcap
 from ingest.mcap_io import read_raw_mcap, write_raw_mcap
-from ingest.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
-from pipeline.errors import BadInput
 
 PROV = {"stage": "ingest", "code_version": "test", "inputs": {"a.tsv": "0" * 64}}
 

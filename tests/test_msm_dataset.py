@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.recording import rrd_entities, rrd_has_blueprint
 from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
 from pipeline.cli import cli
-from pipeline.recording import rrd_entities, rrd_has_blueprint
 from sim.msm import MSM, MSMError, unit
 from sim.msm_dataset import Protocol, draw_plan, write_states
 from sim.msm_static import residual

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.errors import BadInput
 from pipeline.cli import cli
-from pipeline.errors import BadInput
 from sim import msm_fit
 from sim.msm import MSMError, MSMParams
 from sim.msm_dataset import Plan, Protocol, draw_plan, file_attrs, generate, write_states

@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from calib.pivot import pivot_calibrate, rotation_spread_deg
 from calib.rigid import cluster_reference, fit_rigid
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 CLUSTER = np.array([[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.0, 0.030, 0.0], [0.012, 0.015, 0.038]])
 TIP = np.array([0.004, -0.006, -0.110])      # body frame, metres

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import BadInput
+from core.series import BodySeries, MarkerSeries
 from ingest.qtm_tsv import parse_qtm_header, read_qtm_3d, read_qtm_6d, read_qtm_tsv
-from ingest.series import BodySeries, MarkerSeries
-from pipeline.errors import BadInput
 
 QTM = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "qtm"
 OLD_3D = QTM / "qtm2010_3d_noheader_nan_gaps.tsv"

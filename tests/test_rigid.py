@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from calib.rigid import cluster_reference, fit_rigid
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 # An asymmetric 4-marker cluster (metres), like an indenter's marker tree.
 CLUSTER = np.array([[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.0, 0.030, 0.0], [0.012, 0.015, 0.038]])

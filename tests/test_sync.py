@@ -16,9 +16,9 @@ import pytest
 from click.testing import CliRunner
 
 from calib.gaps import FILLED, MISSING
+from core.recording import rrd_entities
 from pipeline.cli import cli
 from pipeline.ingest_stage import ingest_session
-from pipeline.recording import rrd_entities
 from pipeline.sync_accuracy import TARGETS, match_presses, sync_errors
 from pipeline.sync_stage import SyncParams, run_sync
 from sim.twin import synthesize_session

@@ -13,14 +13,14 @@ from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
 from calib.gaps import MISSING
+from core.errors import BadInput
+from core.provenance import make_provenance
+from core.recording import rrd_entities, rrd_has_blueprint
+from core.series import ForceSeries, MarkerSeries, RawSession
 from data_schema.hdf5 import validate_h5
 from data_schema.synced import SYNCED
 from ingest.mcap_io import write_raw_mcap
-from ingest.series import ForceSeries, MarkerSeries, RawSession
 from pipeline.cli import cli
-from pipeline.errors import BadInput
-from pipeline.provenance import make_provenance
-from pipeline.recording import rrd_entities, rrd_has_blueprint
 from pipeline.sync_stage import SyncParams, sync_session, write_synced
 
 RATE, LOG_RATE = 500.0, 1000.0

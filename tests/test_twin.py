@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.recording import rrd_entities, rrd_has_blueprint
 from data_schema.hdf5 import validate_h5
 from data_schema.session import read_session
 from data_schema.truth import TRUTH
@@ -23,7 +24,6 @@ from ingest.ati_cal import read_ati_cal
 from ingest.force_log import read_force_log
 from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d
 from pipeline.cli import cli
-from pipeline.recording import rrd_entities, rrd_has_blueprint
 from sim.indenter import HandStyle, plan_hand
 from sim.nano17 import FILE_TO_SI, Nano17
 

@@ -10,7 +10,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-from pipeline.errors import BadInput
+from core.errors import BadInput
 
 
 def same_path(a: str | Path, b: str | Path) -> bool:

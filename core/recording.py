@@ -15,7 +15,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from pipeline.atomic import atomic_output
+from core.atomic import atomic_output
 
 
 def default_rrd_path(output: str | Path, folder: bool | None = None) -> Path:

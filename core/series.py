@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ingest.units import TIME_UNITS
-from pipeline.errors import BadInput
+from core.errors import BadInput
+from core.units import TIME_UNITS
 
 _NS_LIMIT = float(2**63 - 2**10)       # |ns| below this rounds and casts to int64 safely
 

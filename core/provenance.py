@@ -12,7 +12,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from pipeline import __version__
+from core import __version__
 
 
 def sha256_file(path: str | Path, block: int = 1 << 20) -> str:
