@@ -21,7 +21,6 @@ Nothing is written unless everything succeeds; every bad input is one :class:`Ba
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from calib.clock import (
 )
 from calib.force import RestBaseline, Tare, apply_calibration, rest_baseline, unloaded_start
 from calib.gaps import MISSING, fill_gaps
+from calib.phantom_frame import rest_plane
 from calib.pivot import PivotResult, pivot_calibrate
 from calib.resample import antialiased_interpolant
 from calib.rigid import RigidFit, cluster_reference, fit_rigid
@@ -222,32 +222,6 @@ def _pivot(raw: RawSession, p: SyncParams) -> tuple[np.ndarray, PivotResult]:
     res = pivot_calibrate(fit.rotation[good], fit.translation[good], raw.pivot.source,
                           p.min_pivot_rotation_deg)
     return ref, res
-
-
-def rest_plane(phantom: np.ndarray, up: np.ndarray, source: str | Path
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """The phantom markers' rest plane: a point and the unit normal out of the phantom.
-
-    Each marker's rest position is its median over the session (it is pressed only a part of
-    the time); the plane is their least-squares fit. The normal is turned to agree with ``up``
-    (T, 3): the indenter's shaft, from the tip to its marker cluster, which always stands
-    above the surface.
-    """
-    with warnings.catch_warnings():          # a marker never seen has no rest position: NaN
-        warnings.simplefilter("ignore", RuntimeWarning)
-        rest = np.nanmedian(phantom, axis=0)
-    ok = np.isfinite(rest).all(axis=1)
-    if ok.sum() < 3:
-        raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
-    centre = rest[ok].mean(axis=0)
-    normal = np.linalg.svd(rest[ok] - centre)[2][2]
-    along = up @ normal
-    along = along[np.isfinite(along)]
-    if along.size == 0:
-        raise BadInput(source, "the indenter is never tracked: no side of the surface is up")
-    if np.median(along) < 0:
-        normal = -normal
-    return centre, normal
 
 
 def _mean_seen(points: np.ndarray) -> np.ndarray:
