@@ -2,5 +2,5 @@
 # Install the pipeline on a fresh machine and run the main job: every stage on a synthetic session.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install -q -e .
+bash scripts/install.sh
 pipeline demo --out "${1:-out/demo}"

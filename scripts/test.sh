@@ -2,6 +2,6 @@
 # Install everything the tests need on a fresh machine, lint, and run the test suite.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-python3 -m pip install -q -e ".[test]"
+bash scripts/install.sh test
 python3 -m ruff check .
 python3 -m pytest -q -m "not slow" "$@"
