@@ -135,7 +135,8 @@ def cluster_reference(
 
     Generalised Procrustes: align every complete frame to the current mean, average, repeat.
     The body frame has its origin at the markers' centroid and its axes along their principal
-    directions (largest spread first), a right-handed frame.
+    directions (largest spread first), a right-handed frame whose signs the markers' order
+    fixes (:func:`canonical_axes`), so every machine finds the same body frame.
     """
     obs = np.asarray(observed, float)
     complete = np.isfinite(obs).all(axis=(1, 2))
@@ -149,7 +150,23 @@ def cluster_reference(
         body = np.einsum("tji,tmj->tmi", fit.rotation, frames - fit.translation[:, None])
         mean = body.mean(axis=0)
         mean -= mean.mean(axis=0)
-    _, _, vt = np.linalg.svd(mean)
-    if np.linalg.det(vt) < 0:
-        vt[2] *= -1
-    return mean @ vt.T
+    return mean @ canonical_axes(mean).T
+
+
+def canonical_axes(points: np.ndarray, rel_tol: float = 1e-6) -> np.ndarray:
+    """Principal axes (3, 3, rows) of centred points (M, 3), their signs fixed by the data.
+
+    An SVD leaves each axis' sign to LAPACK (it differs between BLAS kernels). Here the first
+    two axes point so that the first marker, in the markers' order, with a clear projection on
+    the axis lies on its positive side, and the third is their cross product: the same
+    right-handed frame on every machine for the same input.
+    """
+    _, s, vt = np.linalg.svd(points)
+    axes = vt.copy()
+    for a in range(2):
+        proj = points @ axes[a]
+        clear = np.flatnonzero(np.abs(proj) > rel_tol * max(s[0], 1e-300))
+        if clear.size and proj[clear[0]] < 0:
+            axes[a] = -axes[a]
+    axes[2] = np.cross(axes[0], axes[1])
+    return axes

@@ -121,7 +121,23 @@ def test_cluster_reference_recovers_the_shape() -> None:
     true = np.linalg.norm(CLUSTER[:, None] - CLUSTER[None], axis=2)
     np.testing.assert_allclose(dist, true, atol=3e-5)
     np.testing.assert_allclose(ref.mean(axis=0), 0, atol=1e-12)
-    assert np.linalg.det(np.linalg.svd(ref)[2]) > 0
+    # the body frame is right-handed: the signed volume of the markers keeps its sign
+    volume = np.linalg.det(np.stack([ref[1] - ref[0], ref[2] - ref[0], ref[3] - ref[0]]))
+    true_volume = np.linalg.det(np.stack([CLUSTER[i] - CLUSTER[0] for i in (1, 2, 3)]))
+    assert np.sign(volume) == np.sign(true_volume) != 0
+    # the axes' signs come from the markers' order: marker 0 on the positive side of x and y
+    assert ref[0, 0] > 0 and ref[0, 1] > 0
+
+
+def test_cluster_reference_is_the_same_frame_however_the_cluster_was_held() -> None:
+    """The body frame is fixed by the markers, not by the pose or LAPACK's sign choices: the
+    same cluster seen in two sets of poses gives the same body coordinates."""
+    a = cluster_reference(_observe(*_poses(20, seed=11)))
+    b = cluster_reference(_observe(*_poses(20, seed=12)))
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    # and it is the true shape up to one rotation (the body frame's), no reflection
+    u, _, vt = np.linalg.svd(a.T @ (CLUSTER - CLUSTER.mean(axis=0)))
+    assert np.linalg.det(u @ vt) > 0
 
 
 def test_cluster_reference_needs_a_complete_frame() -> None:
