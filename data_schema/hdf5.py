@@ -14,6 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from core.atomic import atomic_output
 from core.errors import BadInput
 
 Dim = int | str
@@ -150,3 +151,43 @@ def _check_shape(path: str | Path, member: str, got: tuple[int, ...],
 
 def _text(v: object) -> str:
     return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def attr_text(v: object) -> str:
+    """An HDF5 string attribute as text (h5py gives ``bytes`` or ``str``)."""
+    return _text(v)
+
+
+def write_h5(path: str | Path, schema: H5Schema, arrays: dict[str, np.ndarray],
+             attrs: dict[str, object]) -> None:
+    """Write ``arrays`` (dataset path -> array) and root ``attrs`` as a file of ``schema``.
+
+    Each array is cast to its schema dtype and given its schema units; a name the schema does
+    not declare is a programming error. The file is validated before it is renamed into place,
+    so a file of the final name always matches its schema.
+    """
+    declared = {d.path: d for d in schema.datasets}
+    unknown = sorted(set(arrays) - set(declared))
+    if unknown:
+        raise ValueError(f"{schema.name} declares no dataset(s) {unknown}")
+    with atomic_output(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["schema"], f.attrs["schema_version"] = schema.name, schema.version
+            for key, value in attrs.items():
+                f.attrs[key] = value
+            for name, data in arrays.items():
+                ds_schema = declared[name]
+                dtype = h5py.string_dtype() if ds_schema.dtype == "str" else ds_schema.dtype
+                ds = f.create_dataset(name, data=np.asarray(data).astype(dtype))
+                if ds_schema.units is not None:
+                    ds.attrs["units"] = ds_schema.units
+        validate_h5(tmp, schema)
+
+
+def read_datasets(path: str | Path, names: list[str] | None = None) -> dict[str, np.ndarray]:
+    """Every dataset of a file (or the ``names`` given) as arrays, keyed by path."""
+    with h5py.File(path, "r") as f:
+        if names is None:
+            names = []
+            f.visititems(lambda n, o: names.append(n) if isinstance(o, h5py.Dataset) else None)
+        return {n: f[n][()] for n in sorted(names) if n in f}

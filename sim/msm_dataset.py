@@ -31,12 +31,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from core.atomic import atomic_output
 from core.errors import BadInput
 from core.progress import progress
 from core.provenance import make_provenance
-from data_schema.hdf5 import validate_h5
-from data_schema.states import STATES
+from data_schema.hdf5 import attr_text, write_h5
+from data_schema.states import STATES, validate_states
 from sim.cone import cone_directions
 from sim.msm import MSM, MSMError, MSMParams, unit
 from sim.msm_static import (
@@ -230,12 +229,15 @@ def states_arrays(plan: Plan, sim: Simulated) -> dict[str, np.ndarray]:
     multi = base[:, :, None] + plan.multi[seq]
     return {
         "states/points": sim.points,
+        "states/valid": np.ones(sim.points.shape[:2], dtype=bool),
         "states/tip": sim.points[np.arange(len(step)), nodes],
         "states/force": force,
         "states/force_vector": force_vector.astype(np.float32),
         "states/step": step.astype(np.int32),
         "states/sequence": np.repeat(seq, T).astype(np.int32),
         "states/location": np.repeat(seq // p.directions, T).astype(np.int32),
+        "states/session": np.zeros(len(step), dtype=np.int32),
+        "states/mass": nodes.astype(np.int32),
         "single/start": single.ravel().astype(np.int32),
         "single/end": (single + 1).ravel().astype(np.int32),
         "multi/start": multi[..., 0].ravel().astype(np.int32),
@@ -243,25 +245,13 @@ def states_arrays(plan: Plan, sim: Simulated) -> dict[str, np.ndarray]:
     }
 
 
-UNITS = {"states/points": "m", "states/tip": "m", "states/force": "N",
-         "states/force_vector": "N"}
-
-
 def write_states(path: str | Path, arrays: dict[str, np.ndarray], attrs: dict) -> None:
-    """Write a states file atomically and validate it against ``phantom.states``."""
-    with atomic_output(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["schema"] = STATES.name
-            f.attrs["schema_version"] = STATES.version
-            for key, value in attrs.items():
-                f.attrs[key] = value
-            for name, data in arrays.items():
-                if not np.isfinite(data).all():
-                    raise MSMError(f"refusing to write non-finite values in {name}")
-                ds = f.create_dataset(name, data=data)
-                if name in UNITS:
-                    ds.attrs["units"] = UNITS[name]
-        validate_h5(tmp, STATES)
+    """Write an MSM states file atomically, validated against ``phantom.states``."""
+    for name, data in arrays.items():
+        if data.dtype.kind == "f" and not np.isfinite(data).all():
+            raise MSMError(f"refusing to write non-finite values in {name}")
+    write_h5(path, STATES, arrays, attrs)
+    validate_states(path)
 
 
 def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
@@ -278,6 +268,9 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
         "source": "msm",
         "units_length": "m",
         "units_force": "N",
+        "step_n": plan.protocol.fmax / plan.protocol.steps,
+        "frame": "phantom",
+        "session_names": json.dumps(["msm"]),
         "msm_params": json.dumps(params.as_dict()),
         "protocol": json.dumps(asdict(plan.protocol)),
         "solver": json.dumps({"method": "static equilibrium (preconditioned L-BFGS)",
@@ -324,7 +317,7 @@ def merge_shards(paths: Sequence[str | Path], out: str | Path) -> dict[str, np.n
     first: dict | None = None
     count = None
     for path in map(Path, paths):
-        validate_h5(path, STATES)
+        validate_states(path)
         with h5py.File(path, "r") as f:
             attrs = {k: attr_text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
         if attrs["source"] != "msm" or not attrs["shard"]:
@@ -379,8 +372,3 @@ def _dataset_names(f: h5py.File) -> list[str]:
 def _root_attrs(path: Path) -> dict:
     with h5py.File(path, "r") as f:
         return dict(f.attrs.items())
-
-
-def attr_text(v: object) -> str:
-    """An HDF5 string attribute as text (h5py gives ``bytes`` or ``str``)."""
-    return v.decode() if isinstance(v, bytes) else str(v)

@@ -34,11 +34,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from core.errors import BadInput
-from data_schema.hdf5 import validate_h5
-from data_schema.states import STATES
+from data_schema.hdf5 import attr_text
+from data_schema.states import validate_states
 from sim.blas_threads import blas_threads
 from sim.msm import MSM, MSMError, MSMParams
-from sim.msm_dataset import attr_text
 from sim.msm_static import StaticSolver
 
 FIT_TOL = 1e-7            # N, static tolerance inside the fit (well below the fit's resolution)
@@ -78,7 +77,7 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     keeps that many sequences, drawn with ``seed``.
     """
     path = Path(path)
-    validate_h5(path, STATES)
+    validate_states(path)
     with h5py.File(path, "r") as f:
         source = attr_text(f.attrs["source"])
         file_params = f.attrs.get("msm_params")

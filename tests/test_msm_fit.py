@@ -77,6 +77,7 @@ def _lab_file(path: Path, arrays: dict, yaw_deg: float) -> tuple[np.ndarray, np.
     rot, shift = _rotation(yaw_deg, 4.0), np.array([0.31, -0.12, 0.85])
     pts = np.concatenate([moved, arrays["states/tip"][:, None]], axis=1) @ rot.T + shift
     lab = {**arrays, "states/points": pts.astype(np.float32),
+           "states/valid": np.ones(pts.shape[:2], dtype=bool),
            "states/tip": (arrays["states/tip"] @ rot.T + shift).astype(np.float32),
            "states/force_vector": (arrays["states/force_vector"] @ rot.T).astype(np.float32)}
     attrs = file_attrs(_plan(), TRUE, 1e-6, {"stage": "test"}, None)

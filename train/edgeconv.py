@@ -1,0 +1,59 @@
+"""DynamicEdgeConv, dense and batched, in plain torch (the cGNN's graph layer).
+
+For each point i the layer rebuilds a k-nearest-neighbour graph on its input features (the
+point itself included, so k = 5 is the point and 4 others), sends each neighbour j the message
+h(x_i, x_j - x_i) and averages the messages (paper, eq. 1, mean aggregation). h is a two-layer
+MLP ``Linear(2F, H) -> ReLU -> Linear(H, O)``: exactly what PyTorch Geometric's
+``EdgeConv(nn=layer.mlp, aggr="mean")`` computes (tests/test_cgnn_model.py checks it).
+
+Two identities make it fast, with no change to the function:
+- the first linear of h(x_i, x_j - x_i) is ``(Wa - Wb) x_i + Wb x_j + b``: both terms are
+  computed once per point and only the H-wide ``Wb x_j`` is gathered per edge (as DGCNN does);
+- the second linear commutes with the mean, so it runs once per point, not once per edge.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+def knn(features: torch.Tensor, k: int, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Indices (B, N, k) of each point's k nearest points by feature distance, itself included.
+
+    ``mask`` (B, N) bool: points that may be neighbours (False for a missing marker).
+    """
+    sq = (features * features).sum(-1)                                    # (B, N)
+    # squared distances up to a per-row constant (|x_i|^2 does not change a row's ranking)
+    d = sq.unsqueeze(1) - 2.0 * features @ features.transpose(1, 2)      # (B, N, N)
+    if mask is not None:
+        d = d.masked_fill(~mask.unsqueeze(1), float("inf"))
+    return d.topk(k, dim=-1, largest=False).indices                      # (B, N, k)
+
+
+def gather_rows(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """Rows of ``x`` (B, N, H) at ``idx`` (B, N, k): (B, N, k, H)."""
+    b, n, k = idx.shape
+    flat = idx.reshape(b, n * k, 1).expand(-1, -1, x.shape[-1])
+    return x.gather(1, flat).reshape(b, n, k, x.shape[-1])
+
+
+class DynamicEdgeConv(nn.Module):
+    """One dynamic edge convolution: kNN on the input features, mean of h(x_i, x_j - x_i)."""
+
+    def __init__(self, in_features: int, hidden: int, out_features: int, k: int = 5) -> None:
+        super().__init__()
+        self.k = k
+        self.mlp = nn.Sequential(nn.Linear(2 * in_features, hidden), nn.ReLU(),
+                                 nn.Linear(hidden, out_features))
+
+    def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Features (B, N, F) -> (B, N, O)."""
+        first, _, second = self.mlp
+        f = x.shape[-1]
+        w_centre, w_offset = first.weight[:, :f], first.weight[:, f:]    # (H, F) each
+        own = x @ (w_centre - w_offset).T + first.bias                    # (B, N, H)
+        nbr = x @ w_offset.T                                               # (B, N, H)
+        idx = knn(x, self.k, mask)                                         # (B, N, k)
+        hidden = torch.relu(own.unsqueeze(2) + gather_rows(nbr, idx))      # (B, N, k, H)
+        return second(hidden.mean(dim=2))                                  # (B, N, O)

@@ -1,0 +1,122 @@
+"""The conditional graph neural network (cGNN) of the paper, on one screen.
+
+points (B, N, 3) and condition C = [tip start, tip end] (B, 6), both normalised:
+    x1 = EdgeConv(points), x2 = EdgeConv(x1), x3 = EdgeConv(x2)            (B, N, 64) each
+    local  = [x1, x2, x3, C repeated per point]                           (B, N, 192 + 6)
+    disp   = MLP 256-128-3 (local)                                        (B, N, 3)
+    global = [max over points, mean over points] of [x1, x2, x3], C       (B, 384 + 6)
+    dforce = MLP 128-64-32-1 (global): four linear layers                 (B,)
+noCond (``use_condition=False``) removes C from both heads. Missing points (``mask`` False)
+are never neighbours and never pooled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import torch
+from torch import nn
+
+from train.edgeconv import DynamicEdgeConv
+
+CONDITION = 6
+
+
+@dataclass(frozen=True)
+class CGNNConfig:
+    """Widths of the network (the paper gives none; these are ours) and its variant."""
+
+    k: int = 5
+    edge_widths: tuple[tuple[int, int], ...] = ((64, 64), (64, 64), (64, 64))
+    disp_widths: tuple[int, ...] = (256, 128)
+    force_widths: tuple[int, ...] = (128, 64, 32)
+    use_condition: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain types, for a checkpoint loaded with ``weights_only``."""
+        d = asdict(self)
+        d["edge_widths"] = [list(w) for w in self.edge_widths]
+        d["disp_widths"], d["force_widths"] = list(self.disp_widths), list(self.force_widths)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CGNNConfig:
+        return cls(k=int(d["k"]), edge_widths=tuple(tuple(w) for w in d["edge_widths"]),
+                   disp_widths=tuple(d["disp_widths"]), force_widths=tuple(d["force_widths"]),
+                   use_condition=bool(d["use_condition"]))
+
+
+def mlp(widths: list[int]) -> nn.Sequential:
+    """Linear layers of the given widths with ReLU between them (none after the last)."""
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
+        layers.append(nn.Linear(a, b))
+        if i < len(widths) - 2:
+            layers.append(nn.ReLU())
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class _Features:
+    local: torch.Tensor                  # (B, N, F) concatenated layer outputs
+    cond: torch.Tensor | None            # (B, 6) or None (noCond)
+    mask: torch.Tensor | None = field(default=None)
+
+
+class CGNN(nn.Module):
+    """Predicts each point's displacement and the change of force (normalised units)."""
+
+    def __init__(self, config: CGNNConfig = CGNNConfig()) -> None:
+        super().__init__()
+        self.config = config
+        convs, width = [], 3
+        for hidden, out in config.edge_widths:
+            convs.append(DynamicEdgeConv(width, hidden, out, config.k))
+            width = out
+        self.convs = nn.ModuleList(convs)
+        local = sum(out for _, out in config.edge_widths)
+        cond = CONDITION if config.use_condition else 0
+        self.disp_head = mlp([local + cond, *config.disp_widths, 3])
+        self.force_head = mlp([2 * local + cond, *config.force_widths, 1])
+
+    def features(self, points: torch.Tensor, cond: torch.Tensor,
+                 mask: torch.Tensor | None = None) -> _Features:
+        """The three edge convolutions' outputs, concatenated."""
+        x, outs = points, []
+        for conv in self.convs:
+            x = torch.relu(conv(x, mask))                                   # (B, N, O)
+            outs.append(x)
+        return _Features(torch.cat(outs, dim=-1),
+                         cond if self.config.use_condition else None, mask)
+
+    def displacement(self, f: _Features) -> torch.Tensor:
+        """Per-point displacement (B, N, 3) from the local features and C."""
+        x = f.local
+        if f.cond is not None:
+            x = torch.cat([x, f.cond.unsqueeze(1).expand(-1, x.shape[1], -1)], dim=-1)
+        return self.disp_head(x)
+
+    def force(self, f: _Features) -> torch.Tensor:
+        """Change of force (B,) from max- and mean-pooled features and C."""
+        x = f.local
+        if f.mask is None:
+            pooled = [x.amax(dim=1), x.mean(dim=1)]
+        else:
+            m = f.mask.unsqueeze(-1)
+            count = m.sum(dim=1).clamp(min=1)
+            pooled = [x.masked_fill(~m, float("-inf")).amax(dim=1),
+                      x.masked_fill(~m, 0.0).sum(dim=1) / count]
+        g = torch.cat(pooled if f.cond is None else [*pooled, f.cond], dim=-1)
+        return self.force_head(g).squeeze(-1)
+
+    def forward(self, points: torch.Tensor, cond: torch.Tensor,
+                mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(displacement (B, N, 3), change of force (B,)), normalised."""
+        f = self.features(points, cond, mask)
+        return self.displacement(f), self.force(f)
+
+    def forward_force(self, points: torch.Tensor, cond: torch.Tensor,
+                      mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Only the change of force (B,): the displacement head is skipped."""
+        return self.force(self.features(points, cond, mask))
