@@ -20,6 +20,8 @@ COMMANDS: dict[str, str] = {
     "synth": "pipeline.synth_cmd:synth",
     "ingest": "pipeline.ingest_cmd:ingest",
     "sync": "pipeline.sync_cmd:sync",
+    "extract": "pipeline.extract_cmd:extract",
+    "split": "pipeline.split_cmd:split",
     "simulate": "pipeline.simulate_cmd:simulate",
     "fit-msm": "pipeline.simulate_cmd:fit_msm",
     "inspect": "pipeline.inspect_cmd:inspect",

@@ -1,0 +1,71 @@
+"""``pipeline extract``: the click layer over :mod:`calib.extract`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option, seed_option
+
+
+def _size(text: str) -> tuple[float, float]:
+    try:
+        w, h = (float(v) for v in text.lower().split("x")[:2])
+    except ValueError:
+        raise click.BadParameter(f"expected WIDTHxLENGTH in mm, e.g. 100x100, got {text!r}") from None
+    if not (w > 0 and h > 0):
+        raise click.BadParameter(f"sizes must be positive, got {text!r}")
+    return w * 1e-3, h * 1e-3
+
+
+@click.command()
+@click.argument("synced", nargs=-1, required=True,
+                type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="States file to write (schema phantom.states 2.0).")
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), default=0.5,
+              show_default=True, help="Force level spacing, N.")
+@click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
+@click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True), default=20.0,
+              show_default=True, help="Frames within this of a level's instant are fitted.")
+@click.option("--phantom-size", default="100x100", show_default=True,
+              help="Phantom footprint WIDTHxLENGTH in mm (the marker grid is centred on it).")
+@click.option("--shared-locations", is_flag=True,
+              help="The synced files' location ids name the same places in every session.")
+@seed_option
+@rrd_option
+def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float | None,
+            half_window_ms: float, phantom_size: str, shared_locations: bool, seed: int,
+            rrd: Path | None, no_rrd: bool) -> None:
+    """Extract static states every --step N from synced presses, with training examples.
+
+    Reads SYNCED files (from `pipeline sync`). In each press's loading phase, takes the 26
+    points (25 markers + tip) and the force at the instant the force first reaches each level
+    (k = 0: the surface just before contact), from a line fitted over the frames around it;
+    moves them into the phantom frame (rest surface z = 0, +z out, footprint from
+    --phantom-size); builds single-step (t -> t+1) and multi-step examples (15 random pairs at
+    least two levels apart per press, seeded). Writes --out (HDF5 phantom.states 2.0) and a rerun
+    recording of the levels on each force curve and the states in 3D (--rrd, default beside
+    --out). Excluded presses and dropped states are counted in the file and printed.
+    """
+    from calib.extract import extract as run
+    from calib.extract import write_states
+    from calib.extract_view import write_extract_recording
+    from calib.static_states import ExtractParams
+
+    size = _size(phantom_size)
+    params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed)
+    rrd_path = resolve_rrd(out, rrd, no_rrd)
+    ex = run(synced, params, seed, size, shared_locations)
+    write_states(out, ex, params, seed, synced)
+    if rrd_path:
+        write_extract_recording(rrd_path, ex.sessions, size)
+    a = ex.arrays
+    presses = len(set(a["states/sequence"].tolist()))
+    left = ", ".join(f"{k} {v}" for k, v in ex.excluded.items() if v) or "nothing"
+    click.echo(f"{out}: {len(a['states/step'])} states from {presses} presses of "
+               f"{len(synced)} session(s); {len(a['single/start'])} single-step, "
+               f"{len(a['multi/start'])} multi-step examples; left out: {left}"
+               + (f"; recording {rrd_path}" if rrd_path else ""))
