@@ -13,7 +13,8 @@ def _size(text: str) -> tuple[float, float]:
     try:
         w, h = (float(v) for v in text.lower().split("x")[:2])
     except ValueError:
-        raise click.BadParameter(f"expected WIDTHxLENGTH in mm, e.g. 100x100, got {text!r}") from None
+        raise click.BadParameter(
+            f"expected WIDTHxLENGTH in mm, e.g. 100x100, got {text!r}") from None
     if not (w > 0 and h > 0):
         raise click.BadParameter(f"sizes must be positive, got {text!r}")
     return w * 1e-3, h * 1e-3
