@@ -1,9 +1,11 @@
 """JSON documents the pipeline writes: their required keys and types, and one validator.
 
 - ``phantom.msm_params``: the spring constants ``pipeline fit-msm`` found (one object).
-- ``phantom.folds``: k-fold split manifests, nnU-Net style, a plain list that other trainers
-  read and users edit: ``[{"train": [...], "val": [...], "test": [...]}, ...]`` where each
-  entry lists example or location ids; ``test`` is optional.
+- ``phantom.folds`` 2.0: k-fold split manifests (``pipeline split``) that other trainers read
+  and users edit: the states file's name and sha256, the grouping (``sequence`` or
+  ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
+  ``{"groups": [...], "single": [example ids], "multi": [example ids]}`` plus
+  ``train_subsets`` (nested lists of 1..n training groups, for the data-scarcity study).
 """
 
 from __future__ import annotations
@@ -29,8 +31,13 @@ MSM_PARAMS = JsonSchema("phantom.msm_params", "1.0", {
     "schema": str, "schema_version": str, "k_between": float, "k_fixed": float,
     "mean_distance_m": float, "msm_params": dict, "provenance": dict,
 })
-FOLD_KEYS = {"train": list, "val": list}
-JSON_SCHEMAS = {s.name: s for s in (MSM_PARAMS,)}
+FOLDS = JsonSchema("phantom.folds", "2.0", {
+    "schema": str, "schema_version": str, "data": dict, "group_by": str, "ratio": list,
+    "seed": int, "groups": int, "note": str, "folds": list, "provenance": dict,
+})
+ROLES = ("train", "val", "test")
+SETS = ("single", "multi")
+JSON_SCHEMAS = {s.name: s for s in (MSM_PARAMS, FOLDS)}
 
 
 def validate_json_doc(path: str | Path, schema: JsonSchema) -> dict[str, Any]:
@@ -47,20 +54,51 @@ def validate_json_doc(path: str | Path, schema: JsonSchema) -> dict[str, Any]:
     return doc
 
 
-def validate_folds(path: str | Path) -> list[dict[str, list]]:
-    """Read a fold manifest and check that each fold has train and val lists that don't meet."""
+def validate_folds(path: str | Path) -> dict[str, Any]:
+    """Read a ``phantom.folds`` 2.0 manifest and check it; return the document.
+
+    Each fold has the three roles, each with lists of group and example ids; no group and no
+    example is in two roles of one fold; every training subset is drawn from the fold's
+    training groups, and each subset holds the one before it.
+    """
     doc = _load(path)
-    if not isinstance(doc, list) or not doc:
-        raise BadInput(path, "a fold manifest is a non-empty JSON list of folds")
-    for i, fold in enumerate(doc):
-        if not isinstance(fold, dict) or not all(
-                isinstance(fold.get(k), t) for k, t in FOLD_KEYS.items()):
-            raise BadInput(path, "fold must be an object with 'train' and 'val' lists",
-                           where=f"fold {i}")
-        parts = [set(map(str, fold[k])) for k in ("train", "val", "test") if k in fold]
-        if sum(map(len, parts)) != len(set().union(*parts)):
-            raise BadInput(path, "an id appears in more than one part", where=f"fold {i}")
+    if isinstance(doc, list):
+        raise BadInput(path, "a phantom.folds 1.0 list of folds: re-run `pipeline split` to "
+                             "write a 2.0 manifest (with the data file's sha256)")
+    doc = validate_json_doc(path, FOLDS)
+    data = doc["data"]
+    if not (isinstance(data.get("file"), str) and isinstance(data.get("sha256"), str)
+            and len(data["sha256"]) == 64):
+        raise BadInput(path, "data must name the states file and its sha256")
+    if doc["group_by"] not in ("sequence", "location"):
+        raise BadInput(path, f"group_by must be 'sequence' or 'location', got {doc['group_by']!r}")
+    if not doc["folds"]:
+        raise BadInput(path, "no folds")
+    for i, fold in enumerate(doc["folds"]):
+        _check_fold(path, fold, f"fold {i}")
     return doc
+
+
+def _check_fold(path: str | Path, fold: Any, where: str) -> None:
+    if not isinstance(fold, dict) or not all(isinstance(fold.get(r), dict) for r in ROLES):
+        raise BadInput(path, "a fold needs train, val and test objects", where=where)
+    for key in ("groups", *SETS):
+        seen: set[int] = set()
+        for role in ROLES:
+            ids = fold[role].get(key)
+            if not isinstance(ids, list) or not all(isinstance(v, int) for v in ids):
+                raise BadInput(path, f"{role}.{key} must be a list of integers", where=where)
+            if seen & set(ids):
+                raise BadInput(path, f"{key} id(s) {sorted(seen & set(ids))[:5]} in two roles",
+                               where=where)
+            seen |= set(ids)
+    train = set(fold["train"]["groups"])
+    previous: set[int] = set()
+    for n, subset in enumerate(fold.get("train_subsets", []), start=1):
+        if len(set(subset)) != n or not set(subset) <= train or not previous <= set(subset):
+            raise BadInput(path, f"train subset {n} is not {n} training groups holding "
+                                 f"subset {n - 1}", where=where)
+        previous = set(subset)
 
 
 def _load(path: str | Path) -> Any:

@@ -1,0 +1,49 @@
+"""``pipeline split``: the click layer over :mod:`train.split_file`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option, seed_option
+
+
+@click.command()
+@click.argument("states", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Fold manifest to write (JSON, schema phantom.folds 2.0).")
+@click.option("--folds", type=int, default=5, show_default=True, help="Number of folds.")
+@click.option("--ratio", default=None,
+              help="TRAIN:VAL:TEST group counts ratio [default: 12:3:5 lab, 7:2:1 MSM].")
+@click.option("--group", "group_by", type=click.Choice(["sequence", "location"]), default=None,
+              help="Keep whole presses (sequence) or whole places (location) in one role "
+                   "[default: sequence for lab states, location for MSM].")
+@seed_option
+@rrd_option
+def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str | None,
+          seed: int, rrd: Path | None, no_rrd: bool) -> None:
+    """Split a states file into k folds of train/val/test examples, grouped.
+
+    Reads STATES (phantom.states 2.0, from `pipeline extract` or `pipeline simulate`). Writes
+    --out: per fold the group ids and the single-/multi-step example ids of each role, nested
+    training subsets of 1..n groups (data-scarcity study), the states file's name and sha256
+    (trainers refuse a manifest whose data changed), and a rerun recording of the fold roles on
+    the phantom footprint (--rrd, default beside --out).
+    """
+    from train.split import parse_ratio
+    from train.split_file import build_manifest, default_plan, write_manifest
+    from train.split_view import write_split_recording
+
+    plan = default_plan(states, group_by, parse_ratio(ratio) if ratio else None, folds, seed)
+    rrd_path = resolve_rrd(out, rrd, no_rrd)
+    doc = build_manifest(states, plan)
+    write_manifest(out, doc)
+    if rrd_path:
+        write_split_recording(rrd_path, states, doc)
+    f0 = doc["folds"][0]
+    click.echo(f"{out}: {len(doc['folds'])} folds over {doc['groups']} {plan.group_by} groups "
+               f"({':'.join(map(str, plan.ratio))}: fold 0 trains on "
+               f"{len(f0['train']['groups'])}, validates on {len(f0['val']['groups'])}, tests "
+               f"on {len(f0['test']['groups'])}); {doc['note']}"
+               + (f"; recording {rrd_path}" if rrd_path else ""))

@@ -1,0 +1,69 @@
+"""``pipeline split``: a states file -> its ``phantom.folds`` 2.0 manifest (and what it shows).
+
+Defaults follow the paper and the data: lab states group by press (``sequence``), 12:3:5;
+MSM states by location, 7:2:1; five folds.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from core.atomic import atomic_output
+from core.provenance import make_provenance, sha256_file
+from data_schema.hdf5 import attr_text
+from data_schema.json_docs import FOLDS, validate_folds
+from data_schema.states import validate_states
+from train.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
+
+
+def source_of(states: str | Path) -> str:
+    """``lab`` or ``msm``: what the states file holds (its defaults follow)."""
+    with h5py.File(states, "r") as f:
+        return attr_text(f.attrs["source"])
+
+
+def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int, int] | None,
+                 folds: int, seed: int) -> SplitPlan:
+    """The plan for ``states``: what the user gave, the data's defaults for the rest."""
+    d_group, d_ratio = DEFAULTS.get(source_of(states), DEFAULTS["lab"])
+    return SplitPlan(group_by or d_group, ratio or d_ratio, folds, seed)
+
+
+def example_groups(states: str | Path, group_by: str) -> dict[str, np.ndarray]:
+    """The group of every single- and multi-step example (that of its start state)."""
+    with h5py.File(states, "r") as f:
+        group = f[f"states/{group_by}"][()]
+        return {name: group[f[f"{name}/start"][()]] for name in ("single", "multi")}
+
+
+def build_manifest(states: str | Path, plan: SplitPlan) -> dict:
+    """The manifest document for ``states`` under ``plan`` (validated before it is written)."""
+    validate_states(states)
+    eg = example_groups(states, plan.group_by)
+    folds, note = make_folds(np.concatenate(list(eg.values())), plan)
+    out = []
+    for fold in folds:
+        roles = examples_by_role(eg, fold["groups"])
+        out.append({"fold": fold["fold"], **roles,
+                    "train_subsets": [[int(x) for x in s] for s in fold["train_subsets"]]})
+    groups = len(np.unique(np.concatenate(list(eg.values()))))
+    return {
+        "schema": FOLDS.name, "schema_version": FOLDS.version,
+        "data": {"file": Path(states).name, "sha256": sha256_file(states)},
+        "group_by": plan.group_by, "ratio": list(plan.ratio), "seed": plan.seed,
+        "groups": groups, "note": note, "folds": out,
+        "provenance": make_provenance("split", asdict(plan), [states], FOLDS.name,
+                                      FOLDS.version),
+    }
+
+
+def write_manifest(out: str | Path, doc: dict) -> None:
+    """Write the manifest atomically; it is checked before it takes its final name."""
+    with atomic_output(out) as tmp:
+        Path(tmp).write_text(json.dumps(doc, indent=1))
+        validate_folds(tmp)
