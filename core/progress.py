@@ -31,3 +31,9 @@ def progress(items: Iterable[T], label: str, length: int | None = None) -> Itera
         show_pos=True, show_eta=True,
     ) as bar:
         yield bar
+
+
+def say(text: str) -> None:
+    """One progress line on stderr (an epoch's loss, say), unless quiet."""
+    if not _QUIET:
+        click.echo(text, err=True)

@@ -23,12 +23,14 @@ def knn(features: torch.Tensor, k: int, mask: torch.Tensor | None = None) -> tor
 
     ``mask`` (B, N) bool: points that may be neighbours (False for a missing marker).
     """
-    sq = (features * features).sum(-1)                                    # (B, N)
-    # squared distances up to a per-row constant (|x_i|^2 does not change a row's ranking)
-    d = sq.unsqueeze(1) - 2.0 * features @ features.transpose(1, 2)      # (B, N, N)
-    if mask is not None:
-        d = d.masked_fill(~mask.unsqueeze(1), float("inf"))
-    return d.topk(k, dim=-1, largest=False).indices                      # (B, N, k)
+    with torch.no_grad():                     # the graph is chosen, not differentiated
+        x = features.detach()
+        sq = (x * x).sum(-1).unsqueeze(1)                                  # (B, 1, N)
+        # squared distances up to a per-row constant (|x_i|^2 does not change a row's order)
+        d = torch.baddbmm(sq, x, x.transpose(1, 2), alpha=-2.0)           # (B, N, N)
+        if mask is not None:
+            d = d.masked_fill(~mask.unsqueeze(1), float("inf"))
+        return d.topk(k, dim=-1, largest=False).indices                   # (B, N, k)
 
 
 def gather_rows(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:

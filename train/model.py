@@ -67,9 +67,9 @@ class _Features:
 class CGNN(nn.Module):
     """Predicts each point's displacement and the change of force (normalised units)."""
 
-    def __init__(self, config: CGNNConfig = CGNNConfig()) -> None:
+    def __init__(self, config: CGNNConfig | None = None) -> None:
         super().__init__()
-        self.config = config
+        self.config = config = config or CGNNConfig()
         convs, width = [], 3
         for hidden, out in config.edge_widths:
             convs.append(DynamicEdgeConv(width, hidden, out, config.k))

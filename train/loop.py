@@ -1,0 +1,262 @@
+"""Training the cGNN on one fold: Adam, the paper's loss, validation every epoch, checkpoints.
+
+Loss (paper, "Loss Function"): ``alpha * L_d + MSE(dF)`` with ``L_d`` the mean Euclidean distance
+between predicted and true deformed points, in metres, and the force change in newtons; alpha =
+88 (the paper's weight, which with these units makes the two terms of one order: 0.4 mm x 88 =
+0.035 against a force MSE of a few 1e-3 N^2).
+
+Each epoch's shuffle and point sampling (``point_fraction``: the paper's aug variant, that
+fraction of the points per sample in training, all in validation and test) come from a
+generator seeded by (seed, epoch), so a run killed after epoch e and resumed from ``last.pt``
+draws exactly what the uninterrupted run drew: same weights. ``best.pt`` is the epoch with the
+lowest validation loss. A non-finite or exploding loss stops the run naming epoch and batch.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.nn.parallel import DistributedDataParallel
+
+from core.errors import BadInput
+from core.progress import say
+from train.checkpoint import load_checkpoint, save_checkpoint
+from train.data import (
+    Batch,
+    States,
+    example_pairs,
+    load_manifest,
+    load_states,
+    make_batch,
+    role_examples,
+)
+from train.distributed import DistContext, from_env
+from train.model import CGNN, CGNNConfig
+from train.normalise import Normaliser
+
+EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
+LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
+              "samples_per_s")
+
+
+@dataclass(frozen=True)
+class TrainOptions:
+    """Everything that decides what a run learns (a resumed run must match it)."""
+
+    fold: int = 0
+    epochs: int = 250
+    batch: int = 32
+    lr: float = 1e-4
+    alpha: float = 88.0
+    point_fraction: float | None = None
+    train_groups: int | None = None
+    seed: int = 0
+
+
+@dataclass
+class Prediction:
+    """Model outputs in SI units."""
+
+    deformed: torch.Tensor   # (B, N, 3) m
+    dforce: torch.Tensor     # (B,) N
+
+
+def predict(model: torch.nn.Module, norm: Normaliser, b: Batch) -> Prediction:
+    """Deformed points and change of force for a batch."""
+    disp, df = model(norm.points(b.points), norm.condition(b.cond), b.mask)
+    return Prediction(b.points + disp * norm.disp_scale, df * norm.force_scale)
+
+
+def distances(p: Prediction, b: Batch) -> torch.Tensor:
+    """(B, N) Euclidean distance of each predicted point from the truth (0 where masked)."""
+    return torch.linalg.vector_norm(p.deformed - b.target, dim=-1) * b.mask
+
+
+def mean_distance(p: Prediction, b: Batch) -> torch.Tensor:
+    """L_d per example (B,): the mean over its valid points."""
+    return distances(p, b).sum(1) / b.mask.sum(1).clamp(min=1)
+
+
+def loss_sum(p: Prediction, b: Batch, alpha: float) -> torch.Tensor:
+    """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean)."""
+    return (alpha * mean_distance(p, b) + (p.dforce - b.dforce) ** 2).sum()
+
+
+def seeded(seed: int, epoch: int, device: torch.device) -> torch.Generator:
+    """The generator of one epoch's draws (shuffle, points), the same on every resume."""
+    return torch.Generator(device="cpu").manual_seed(seed * 1_000_003 + epoch)
+
+
+def fit_normaliser(states: States, pairs: torch.Tensor, seed: int, most: int = 2000
+                   ) -> Normaliser:
+    """Statistics of (at most ``most``, seeded) training examples."""
+    rng = np.random.default_rng(seed)
+    keep = pairs[np.sort(rng.choice(len(pairs), min(most, len(pairs)), replace=False))]
+    b = make_batch(states, keep)
+    m = b.mask.numpy()
+    return Normaliser.fit(b.points.numpy(), m, (b.target - b.points).numpy(), b.dforce.numpy())
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto``: CUDA when torch has it, else the CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise BadInput(None, "--device cuda: this torch has no CUDA device")
+    return torch.device(name)
+
+
+@dataclass
+class Run:
+    """What a training run needs, assembled."""
+
+    model: CGNN
+    norm: Normaliser
+    optimizer: torch.optim.Optimizer
+    states: States
+    train: torch.Tensor        # (E, 2) pairs
+    val: torch.Tensor
+    start_epoch: int
+    best_val: float
+    meta: dict
+
+
+def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
+            init: Path | None, device: torch.device) -> Run:
+    """Load data and fold, build or resume the model and optimizer."""
+    doc = load_manifest(splits, data)
+    states = load_states(data)
+    train = example_pairs(states, role_examples(doc, opts.fold, "train", data, opts.train_groups))
+    val = example_pairs(states, role_examples(doc, opts.fold, "val"))
+    if len(train) == 0:
+        raise BadInput(splits, f"fold {opts.fold} has no training example")
+    meta = {"options": asdict(opts), "config": config.to_dict(),
+            "data": {"file": str(data), "sha256": doc["data"]["sha256"]},
+            "splits": str(splits), "init": str(init) if init else None}
+    torch.manual_seed(opts.seed)
+    model = CGNN(config)
+    norm = fit_normaliser(states, train, opts.seed)
+    if init is not None:
+        state = load_checkpoint(init)
+        if state["config"] != config.to_dict():
+            raise BadInput(init, "its network (widths, k or conditioning) differs from this "
+                                 "run's: transfer learning needs the same network")
+        model.load_state_dict(state["model"])
+        norm = Normaliser.from_dict(state["norm"])   # one phantom frame: keep its statistics
+    model.to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=opts.lr)
+    start, best = 0, math.inf
+    last = out / "last.pt"
+    if last.is_file():
+        state = load_checkpoint(last, device)
+        if state["meta"] != meta:
+            raise BadInput(last, "holds a run with other data, fold, options or network: "
+                                 "choose another --out or remove it")
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        norm = Normaliser.from_dict(state["norm"])
+        start, best = state["epoch"] + 1, state["best_val"]
+    return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
+               start, best, meta)
+
+
+def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
+                ctx: DistContext, first_loss: float | None) -> float:
+    """One pass over the training examples; the mean loss."""
+    device = run.train.device
+    g = seeded(opts.seed, epoch, device)
+    perm = torch.randperm(len(run.train), generator=g).to(device)
+    n_points = run.states.points.shape[1]
+    keep = max(run.model.config.k + 1, math.ceil(opts.point_fraction * n_points)) \
+        if opts.point_fraction else None
+    net.train()
+    total = torch.zeros(2, device=device)
+    for b, rows in enumerate(perm.split(opts.batch)):
+        pairs = run.train[rows]
+        idx = None
+        if keep is not None:
+            idx = torch.rand(len(rows), n_points, generator=g).argsort(1)[:, :keep].to(device)
+        mine = ctx.my_slice(torch.arange(len(rows), device=device))
+        batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
+        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha)
+        value = float(loss.detach()) / max(len(mine), 1)
+        if not math.isfinite(value) or (first_loss and value > EXPLODE * first_loss):
+            raise BadInput(None, f"training diverged at epoch {epoch}, batch {b}: loss "
+                                 f"{value:.4g} (try a lower --lr)")
+        run.optimizer.zero_grad(set_to_none=True)
+        (loss * ctx.world / len(rows)).backward()     # DDP averages: the global batch's mean
+        run.optimizer.step()
+        total += torch.stack([loss.detach(), torch.tensor(float(len(mine)), device=device)])
+    total = ctx.total(total)
+    return float(total[0] / total[1])
+
+
+@torch.no_grad()
+def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: States,
+                   pairs: torch.Tensor, alpha: float, batch: int = 64) -> dict[str, float]:
+    """Mean loss, L_d (mm) and force error (N) over ``pairs`` (all points)."""
+    model.eval()
+    sums = torch.zeros(4, device=pairs.device)
+    for rows in torch.arange(len(pairs), device=pairs.device).split(batch):
+        b = make_batch(states, pairs[rows])
+        p = predict(model, norm, b)
+        sums += torch.stack([loss_sum(p, b, alpha), mean_distance(p, b).sum(),
+                             (p.dforce - b.dforce).abs().sum(), torch.tensor(float(len(rows)))])
+    n = max(float(sums[3]), 1.0)
+    return {"val_loss": float(sums[0]) / n, "val_ld_mm": float(sums[1]) / n * 1e3,
+            "val_force_abs_n": float(sums[2]) / n}
+
+
+def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
+              config: CGNNConfig | None = None, init: Path | None = None,
+              device: str = "auto") -> Path:
+    """Train (or resume) one fold into ``out`` (best.pt, last.pt, log.csv); returns best.pt."""
+    config = config or CGNNConfig()
+    dev = resolve_device(device)
+    ctx = from_env(dev)
+    run = prepare(data, splits, out, opts, config, init, dev)
+    net = DistributedDataParallel(run.model) if ctx.world > 1 else run.model
+    if ctx.main:
+        out.mkdir(parents=True, exist_ok=True)
+    first = None
+    for epoch in range(run.start_epoch, opts.epochs):
+        tic = time.perf_counter()
+        train_loss = train_epoch(run, net, opts, epoch, ctx, first)
+        first = first or train_loss
+        metrics = evaluate_pairs(run.model, run.norm, run.states, run.val, opts.alpha) \
+            if len(run.val) else {"val_loss": train_loss, "val_ld_mm": math.nan,
+                                  "val_force_abs_n": math.nan}
+        secs = time.perf_counter() - tic
+        row = {"epoch": epoch, "train_loss": train_loss, **metrics, "seconds": secs,
+               "samples_per_s": len(run.train) / secs}
+        if ctx.main:
+            _checkpoint(run, out, epoch, row)
+            say(f"epoch {epoch + 1}/{opts.epochs}: train {train_loss:.5f}, val "
+                f"{metrics['val_loss']:.5f} (L_d {metrics['val_ld_mm']:.3f} mm, |dF| "
+                f"{metrics['val_force_abs_n']:.3f} N), {row['samples_per_s']:.0f} samples/s")
+    return out / "best.pt"
+
+
+def _checkpoint(run: Run, out: Path, epoch: int, row: dict) -> None:
+    """Append the log row; write last.pt, and best.pt when validation improved."""
+    improved = row["val_loss"] < run.best_val
+    run.best_val = min(run.best_val, row["val_loss"])
+    state = {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(),
+             "epoch": epoch, "best_val": run.best_val, "config": run.meta["config"],
+             "norm": run.norm.to_dict(), "meta": run.meta}
+    if improved or not (out / "best.pt").exists():
+        save_checkpoint(out / "best.pt", state)
+    save_checkpoint(out / "last.pt", state)
+    log = out / "log.csv"
+    new = not log.exists() or epoch == 0
+    with open(log, "w" if new else "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+        if new:
+            w.writeheader()
+        w.writerow({k: row[k] for k in LOG_FIELDS})
