@@ -24,6 +24,9 @@ COMMANDS: dict[str, str] = {
     "split": "pipeline.split_cmd:split",
     "simulate": "pipeline.simulate_cmd:simulate",
     "fit-msm": "pipeline.simulate_cmd:fit_msm",
+    "train": "pipeline.train_cmd:train",
+    "eval": "pipeline.eval_cmd:eval_",
+    "export": "pipeline.export_cmd:export",
     "inspect": "pipeline.inspect_cmd:inspect",
     "demo": "pipeline.demo_cmd:demo",
 }

@@ -1,1 +1,17 @@
-"""The conditional graph neural network (cGNN): model, data loading, training and evaluation."""
+"""The conditional graph neural network (cGNN): model, data over states and folds, training,
+evaluation, and :class:`Predictor` for using a trained model.
+
+``from train import Predictor`` loads torch; ``import train.split`` (numpy only) does not.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def __getattr__(name: str) -> Any:
+    if name == "Predictor":
+        from train.predictor import Predictor
+
+        return Predictor
+    raise AttributeError(name)

@@ -137,8 +137,9 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
     if len(train) == 0:
         raise BadInput(splits, f"fold {opts.fold} has no training example")
     meta = {"options": asdict(opts), "config": config.to_dict(),
-            "data": {"file": str(data), "sha256": doc["data"]["sha256"]},
-            "splits": str(splits), "init": str(init) if init else None}
+            "data": {"file": str(Path(data).resolve()), "sha256": doc["data"]["sha256"]},
+            "splits": str(Path(splits).resolve()),
+            "init": str(Path(init).resolve()) if init else None}
     torch.manual_seed(opts.seed)
     model = CGNN(config)
     norm = fit_normaliser(states, train, opts.seed)

@@ -1,0 +1,59 @@
+"""``pipeline eval``: the click layer over :mod:`train.evaluate` and :mod:`train.scarcity`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option
+
+
+@click.command(name="eval")
+@click.argument("runs", nargs=-1, required=True,
+                type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Metrics JSON to write; the Markdown table goes beside it (.md).")
+@click.option("--scarcity", is_flag=True,
+              help="Also retrain each run's fold on 1..n training groups, with and without "
+                   "its transfer learning, and write the curve (.scarcity.json/.csv/.png).")
+@click.option("--scarcity-epochs", type=click.IntRange(min=1), default=None,
+              help="Epochs of each scarcity run [default: the run's own].")
+@click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
+@rrd_option
+def eval_(runs: tuple[Path, ...], out: Path, scarcity: bool, scarcity_epochs: int | None,
+          device: str, rrd: Path | None, no_rrd: bool) -> None:
+    """Evaluate trained runs on their folds' test examples (the paper's Table 2).
+
+    Reads RUNS (folders from `pipeline train`: best.pt, which names its data and manifest).
+    Writes --out (JSON: per run and per variant pooled over folds, single- and multi-step
+    apart: force MSE, force absolute error mean +- sd, mean and max distance error L_d mean
+    +- sd over examples), the same as a Markdown table (--out with .md), and a rerun recording
+    of predicted beside true surfaces coloured by error and of predicted beside true force
+    (--rrd, default beside --out).
+    """
+    from train.eval_view import write_eval_recording
+    from train.evaluate import evaluate_runs, table2, test_errors, write_json
+
+    rrd_path = resolve_rrd(out, rrd, no_rrd)
+    result = evaluate_runs(list(runs), device)
+    if scarcity:
+        result["scarcity"] = _scarcity(runs, out, scarcity_epochs, device)
+    write_json(out, result)
+    table = table2(result)
+    out.with_suffix(".md").write_text(table)
+    if rrd_path:
+        write_eval_recording(rrd_path, test_errors(runs[0], device)[2])
+    click.echo(table + f"\nwrote {out}, {out.with_suffix('.md')}"
+               + (f", {rrd_path}" if rrd_path else ""))
+
+
+def _scarcity(runs: tuple[Path, ...], out: Path, epochs: int | None, device: str) -> list:
+    from train.scarcity import plot, scarcity_rows, write_csv
+
+    rows = []
+    for run in runs:
+        rows += scarcity_rows(run, out.parent / f"{out.stem}.scarcity_runs", epochs, device)
+    write_csv(out.with_suffix(".scarcity.csv"), rows)
+    plot(out.with_suffix(".scarcity.png"), rows)
+    return rows

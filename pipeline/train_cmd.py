@@ -1,0 +1,62 @@
+"""``pipeline train``: the click layer over :func:`train.loop.train_run`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import seed_option
+
+EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+@click.command()
+@click.option("--data", required=True, type=EXISTING, help="States file (phantom.states 2.0).")
+@click.option("--splits", required=True, type=EXISTING,
+              help="Fold manifest of that file (phantom.folds 2.0, from `pipeline split`).")
+@click.option("--fold", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Run folder: best.pt, last.pt, log.csv, train.rrd.")
+@click.option("--init", type=EXISTING, default=None,
+              help="Start from this checkpoint (transfer learning from an MSM run).")
+@click.option("--no-cond", is_flag=True, help="The noCond ablation: no condition C.")
+@click.option("--point-fraction", type=click.FloatRange(0, 1, min_open=True), default=None,
+              help="The aug variant: this fraction of the points per sample in training.")
+@click.option("--train-groups", type=click.IntRange(min=1), default=None,
+              help="Train on the manifest's first N training groups only (data scarcity).")
+@click.option("--epochs", type=click.IntRange(min=1), default=250, show_default=True)
+@click.option("--batch", type=click.IntRange(min=1), default=32, show_default=True)
+@click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=1e-4,
+              show_default=True)
+@click.option("--k", type=click.IntRange(min=2), default=5, show_default=True,
+              help="Neighbours per point, itself included.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
+              show_default=True)
+@click.option("--rrd/--no-rrd", default=True, show_default=True,
+              help="Write RUN_DIR/train.rrd (the loss curves).")
+@seed_option
+def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
+          point_fraction: float | None, train_groups: int | None, epochs: int, batch: int,
+          lr: float, k: int, device: str, rrd: bool, seed: int) -> None:
+    """Train the cGNN on one fold (resumes a killed run in the same --out).
+
+    Reads --data and --splits (refused unless the manifest was made from exactly this data:
+    sha256), and --init. Loss 88 x mean distance (m) + MSE of the force change (N); Adam;
+    validation every epoch. Writes --out/best.pt (lowest validation loss) and last.pt (each
+    epoch; both atomic, loaded with weights_only), log.csv (epoch, losses, validation errors,
+    samples/s) and train.rrd. A NaN or exploding loss stops with the epoch and batch named.
+    Under torchrun it trains data-parallel (gloo on CPU, nccl on GPU).
+    """
+    from train.loop import TrainOptions, train_run
+    from train.model import CGNNConfig
+    from train.train_view import write_train_recording
+
+    opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr,
+                        point_fraction=point_fraction, train_groups=train_groups, seed=seed)
+    config = CGNNConfig(k=k, use_condition=not no_cond)
+    best = train_run(data, splits, out, opts, config, init, device)
+    if rrd and (out / "log.csv").is_file():
+        write_train_recording(out / "train.rrd", out / "log.csv")
+    click.echo(f"{out}: trained fold {fold} for {epochs} epochs; best checkpoint {best}"
+               + (f"; recording {out / 'train.rrd'}" if rrd else ""))

@@ -1,0 +1,69 @@
+"""The evaluation recording: predicted beside true surfaces, coloured by error, and forces.
+
+Timeline ``example`` (test examples of the first run shown). Entities: ``surface/true`` the
+true deformed points (grey), ``surface/predicted`` the prediction coloured by each point's
+error (blue 0 mm .. red ``ERROR_MM`` and above), ``surface/input`` the undeformed input (faint),
+``surface/tip`` the tip at start and end; ``force/true`` and ``force/predicted`` the change of
+force (N).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from core.recording import recording
+from train.data import Batch
+from train.loop import Prediction
+
+APP_ID = "phantom-eval"
+ERROR_MM = 2.0
+
+
+def blueprint() -> rrb.Blueprint:
+    return rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial3DView(name=f"predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
+                               "beside true (grey)", origin="/surface"),
+        rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
+        column_shares=[3, 2],
+    ), collapse_panels=True)
+
+
+def error_colors(err_mm: np.ndarray) -> np.ndarray:
+    """Blue (0) to red (``ERROR_MM`` and above), (M, 3) uint8."""
+    t = np.clip(err_mm / ERROR_MM, 0, 1)[:, None]
+    return (np.array([40, 110, 230]) * (1 - t) + np.array([230, 40, 40]) * t).astype(np.uint8)
+
+
+def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]]) -> None:
+    """Log up to the examples in ``shown`` (one run's first test batches)."""
+    with recording(APP_ID, path, blueprint()) as rec:
+        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        rec.log("force/true", rr.SeriesPoints(names=["true dF [N]"], colors=[(90, 90, 90)],
+                                              marker_sizes=[4]), static=True)
+        rec.log("force/predicted", rr.SeriesPoints(names=["predicted dF [N]"],
+                                                   colors=[(230, 90, 40)], markers=["cross"],
+                                                   marker_sizes=[4]), static=True)
+        i = 0
+        for b, p in shown:
+            for j in range(len(b.dforce)):
+                rec.set_time("example", sequence=i)
+                _example(rec, b, p, j)
+                i += 1
+
+
+def _example(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int) -> None:
+    m = b.mask[j].cpu().numpy()
+    true, pred = b.target[j].cpu().numpy()[m], p.deformed[j].cpu().numpy()[m]
+    err = np.linalg.norm(pred - true, axis=1) * 1e3
+    rec.log("surface/true", rr.Points3D(true, colors=[(170, 170, 170)], radii=[0.0006]))
+    rec.log("surface/predicted", rr.Points3D(pred, colors=error_colors(err), radii=[0.0009]))
+    rec.log("surface/input", rr.Points3D(b.points[j].cpu().numpy()[m], colors=[(70, 70, 90)],
+                                         radii=[0.0003]))
+    rec.log("surface/tip", rr.Points3D(b.cond[j].cpu().numpy().reshape(2, 3),
+                                       colors=[(250, 200, 40), (220, 40, 40)], radii=[0.0015]))
+    rec.log("force/true", rr.Scalars(float(b.dforce[j])))
+    rec.log("force/predicted", rr.Scalars(float(p.dforce[j])))
