@@ -156,7 +156,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
     last = out / "last.pt"
     if last.is_file():
         state = load_checkpoint(last, device)
-        if state["meta"] != meta:
+        if _resumable(state["meta"]) != _resumable(meta):
             raise BadInput(last, "holds a run with other data, fold, options or network: "
                                  "choose another --out or remove it")
         model.load_state_dict(state["model"])
@@ -165,6 +165,11 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         start, best = state["epoch"] + 1, state["best_val"]
     return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
                start, best, meta)
+
+
+def _resumable(meta: dict) -> dict:
+    """What a resumed run must share with the one it continues (more epochs may be asked)."""
+    return {**meta, "options": {k: v for k, v in meta["options"].items() if k != "epochs"}}
 
 
 def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
@@ -187,7 +192,8 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
         loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha)
         value = float(loss.detach()) / max(len(mine), 1)
-        if not math.isfinite(value) or (first_loss and value > EXPLODE * first_loss):
+        first_loss = first_loss or value
+        if not math.isfinite(value) or value > EXPLODE * first_loss:
             raise BadInput(None, f"training diverged at epoch {epoch}, batch {b}: loss "
                                  f"{value:.4g} (try a lower --lr)")
         run.optimizer.zero_grad(set_to_none=True)

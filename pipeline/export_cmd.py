@@ -1,0 +1,24 @@
+"""``pipeline export``: the click layer over :func:`train.export.export_onnx`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.argument("run", type=click.Path(exists=True, path_type=Path))
+@click.option("--onnx", "onnx_path", required=True,
+              type=click.Path(dir_okay=False, path_type=Path), help="ONNX model to write.")
+def export(run: Path, onnx_path: Path) -> None:
+    """Export a trained model for VR runtimes (ONNX, as game engines load).
+
+    Reads RUN (a run folder from `pipeline train`, its best.pt, or a checkpoint file). Writes
+    --onnx: inputs `points` (1, N, 3) m in the phantom frame (N free) and `condition` (1, 6) m;
+    outputs `deformed` (1, N, 3) m and `dforce` (1,) N; normalisation is inside the graph.
+    """
+    from train.export import export_onnx
+
+    export_onnx(run, onnx_path)
+    click.echo(f"{onnx_path}: ONNX model of {run}")

@@ -1,0 +1,55 @@
+"""Data-parallel training: two CPU processes (gloo) take the same steps as one process with the
+same global batch."""
+
+from __future__ import annotations
+
+import os
+import socket
+from pathlib import Path
+
+import pytest
+import torch
+import torch.distributed as dist
+import torch.multiprocessing as mp
+
+from cgnn_data import write_dent_states
+from train.checkpoint import load_checkpoint
+from train.loop import TrainOptions, train_run
+from train.model import CGNN, CGNNConfig
+from train.split_file import build_manifest, default_plan, write_manifest
+
+SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
+OPTS = TrainOptions(epochs=1, batch=6, lr=3e-3)
+
+
+def _worker(rank: int, world: int, port: int, data: Path, splits: Path, out: Path) -> None:
+    os.environ.update(RANK=str(rank), WORLD_SIZE=str(world), MASTER_ADDR="127.0.0.1",
+                      MASTER_PORT=str(port))
+    torch.set_num_threads(1)
+    try:
+        train_run(data, splits, out, OPTS, SMALL, device="cpu")
+    finally:
+        dist.destroy_process_group()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.skipif(not dist.is_available() or not dist.is_gloo_available(),
+                    reason="torch.distributed with gloo is not available")
+def test_two_processes_take_the_steps_of_one(tmp_path) -> None:
+    data, splits = tmp_path / "states.h5", tmp_path / "splits.json"
+    write_dent_states(data)
+    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 1, 0)))
+    mp.spawn(_worker, args=(2, _free_port(), data, splits, tmp_path / "ddp"), nprocs=2)
+    train_run(data, splits, tmp_path / "one", OPTS, SMALL, device="cpu")
+    a = load_checkpoint(tmp_path / "ddp" / "last.pt")["model"]
+    b = load_checkpoint(tmp_path / "one" / "last.pt")["model"]
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], atol=1e-5, rtol=1e-4)
+    torch.manual_seed(OPTS.seed)
+    start = CGNN(SMALL).state_dict()                  # the weights both runs started from
+    assert max(float((a[k] - start[k]).abs().max()) for k in a) > 1e-3   # they did train

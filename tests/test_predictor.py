@@ -1,0 +1,94 @@
+"""Using a trained model: Predictor and the ONNX export give the network's answers, and refuse
+inputs they cannot answer."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from cgnn_data import write_dent_states
+from pipeline.cli import cli
+from train import Predictor
+from train.checkpoint import load_checkpoint, model_from
+from train.loop import TrainOptions, train_run
+from train.model import CGNNConfig
+from train.split_file import build_manifest, default_plan, write_manifest
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
+    d = tmp_path_factory.mktemp("pred")
+    data, splits = d / "states.h5", d / "splits.json"
+    write_dent_states(data)
+    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 1, 0)))
+    cfg = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
+    train_run(data, splits, d / "run", TrainOptions(epochs=1, batch=8), cfg, device="cpu")
+    with h5py.File(data) as f:
+        points, tip = f["states/points"][3], f["states/tip"][3]
+    return d / "run", points, np.r_[tip, tip - [0, 0, 1e-3]].astype(np.float32)
+
+
+def test_predict_is_the_network_in_si_units(run) -> None:
+    path, points, cond = run
+    p = Predictor.load(path)
+    deformed, df = p.predict(points, cond)
+    model, norm = model_from(load_checkpoint(path / "best.pt"))
+    with torch.no_grad():
+        disp, f = model(norm.points(torch.from_numpy(points))[None],
+                        norm.condition(torch.from_numpy(cond))[None])
+    np.testing.assert_allclose(deformed, points + disp[0].numpy() * norm.disp_scale, atol=1e-7)
+    assert df == pytest.approx(float(f[0]) * norm.force_scale, rel=1e-5)
+    assert p.predict_force(points, cond) == pytest.approx(df, rel=1e-5, abs=1e-7)
+
+
+def test_refusals(run) -> None:
+    path, points, cond = run
+    p = Predictor.load(path)
+    with pytest.raises(ValueError, match="at least k \\+ 1"):
+        p.predict(points[:5], cond)
+    bad = points.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        p.predict(bad, cond)
+    with pytest.raises(ValueError, match="millimetres"):
+        p.predict(points * 1000, cond * 1000)
+
+
+def test_far_conditions_are_flagged(run) -> None:
+    path, points, cond = run
+    p = Predictor.load(path)
+    p.predict(points, cond)
+    assert not p.extrapolating
+    with pytest.warns(UserWarning, match="extrapolates"):
+        p.predict(points, cond + np.array([0, 0, 0.2, 0, 0, 0.2], np.float32))
+    assert p.extrapolating
+
+
+def test_duplicate_points_are_allowed(run) -> None:
+    path, points, cond = run
+    dup = np.concatenate([points, points[:3]])
+    deformed, _ = Predictor.load(path).predict(dup, cond)
+    np.testing.assert_allclose(deformed[-3:], deformed[:3], atol=1e-6)
+
+
+@pytest.mark.parametrize("n", [26, 1024])
+def test_onnx_export_matches_torch(run, tmp_path, n: int) -> None:
+    ort = pytest.importorskip("onnxruntime")
+    path, points, cond = run
+    onnx = tmp_path / "m.onnx"
+    res = CliRunner().invoke(cli, ["-q", "export", str(path), "--onnx", str(onnx)])
+    assert res.exit_code == 0, res.output
+    rng = np.random.default_rng(n)
+    pts = np.concatenate([points, rng.uniform(0, 0.1, (max(0, n - len(points)), 3))])[:n]
+    pts = pts.astype(np.float32)
+    pts[len(points):, 2] = 0
+    deformed, df = Predictor.load(path).predict(pts, cond)
+    out = ort.InferenceSession(str(onnx)).run(None, {"points": pts[None],
+                                                      "condition": cond[None]})
+    np.testing.assert_allclose(out[0][0], deformed, atol=1e-5)
+    assert float(out[1][0]) == pytest.approx(df, abs=1e-4)

@@ -1,0 +1,154 @@
+"""Training and evaluation of the cGNN on a surface with a known, closed-form dent."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from cgnn_data import write_dent_states
+from core.errors import BadInput
+from core.recording import rrd_entities
+from pipeline.cli import cli
+from train.checkpoint import load_checkpoint, save_checkpoint
+from train.evaluate import evaluate_runs
+from train.loop import TrainOptions, train_run
+from train.model import CGNNConfig
+from train.split_file import build_manifest, default_plan, write_manifest
+
+SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
+
+
+@pytest.fixture(scope="module")
+def dent(tmp_path_factory) -> tuple[Path, Path]:
+    d = tmp_path_factory.mktemp("dent")
+    data = d / "states.h5"
+    write_dent_states(data)
+    splits = d / "splits.json"
+    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 2, 0)))
+    return data, splits
+
+
+def _train(dent, out: Path, **kw) -> Path:
+    opts = TrainOptions(**{"epochs": 2, "batch": 8, "lr": 3e-3, **kw})
+    return train_run(*dent, out, opts, SMALL, device="cpu")
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    return load_checkpoint(path)["model"]
+
+
+def test_training_learns_the_dent(dent, tmp_path) -> None:
+    _train(dent, tmp_path / "run", epochs=12)
+    with open(tmp_path / "run" / "log.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 12
+    first, last = float(rows[0]["val_loss"]), min(float(r["val_loss"]) for r in rows)
+    assert last < 0.5 * first
+    assert (tmp_path / "run" / "best.pt").is_file() and (tmp_path / "run" / "last.pt").is_file()
+
+
+def test_a_resumed_run_equals_an_uninterrupted_one(dent, tmp_path) -> None:
+    _train(dent, tmp_path / "whole", epochs=3)
+    _train(dent, tmp_path / "killed", epochs=1)         # stopped after its first epoch
+    _train(dent, tmp_path / "killed", epochs=3)         # run again: resumes at epoch 2
+    a, b = _weights(tmp_path / "whole" / "last.pt"), _weights(tmp_path / "killed" / "last.pt")
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], atol=1e-6, rtol=1e-5)
+    assert load_checkpoint(tmp_path / "killed" / "last.pt")["epoch"] == 2
+
+
+def test_same_seed_same_weights_other_seed_other_weights(dent, tmp_path) -> None:
+    a = _weights(_train(dent, tmp_path / "a", epochs=1, seed=3))
+    b = _weights(_train(dent, tmp_path / "b", epochs=1, seed=3))
+    c = _weights(_train(dent, tmp_path / "c", epochs=1, seed=4))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_a_run_with_other_options_is_not_resumed(dent, tmp_path) -> None:
+    _train(dent, tmp_path / "run", epochs=1)
+    with pytest.raises(BadInput, match="other data, fold, options"):
+        _train(dent, tmp_path / "run", epochs=2, lr=1e-2)
+
+
+def test_a_manifest_of_other_data_is_refused(dent, tmp_path) -> None:
+    data, splits = dent
+    other = tmp_path / "other.h5"
+    write_dent_states(other, seed=5)
+    with pytest.raises(BadInput, match="sha256"):
+        train_run(other, splits, tmp_path / "run", TrainOptions(epochs=1), SMALL, device="cpu")
+
+
+def test_a_diverging_loss_names_epoch_and_batch(dent, tmp_path) -> None:
+    with pytest.raises(BadInput, match=r"diverged at epoch 0, batch \d+"):
+        _train(dent, tmp_path / "run", epochs=1, lr=1e9)
+
+
+def test_aug_trains_on_a_fraction_of_the_points(dent, tmp_path) -> None:
+    _train(dent, tmp_path / "aug", epochs=2, point_fraction=0.2)
+    assert load_checkpoint(tmp_path / "aug" / "best.pt")["meta"]["options"]["point_fraction"] \
+        == 0.2
+
+
+def test_eval_of_a_do_nothing_model_measures_the_true_displacement(dent, tmp_path) -> None:
+    """With the heads' last layers zeroed the model predicts no motion and no force change:
+    its L_d is then each example's true mean displacement, computed here from the file."""
+    data, splits = dent
+    best = _train(dent, tmp_path / "run", epochs=1)
+    state = load_checkpoint(best)
+    for key in list(state["model"]):
+        if key.startswith(("disp_head.2.", "force_head.6.")):
+            state["model"][key].zero_()
+    save_checkpoint(best, state)
+    result = evaluate_runs([tmp_path / "run"])
+    doc = json.loads(splits.read_text())
+    with h5py.File(data) as f:
+        pts, force = f["states/points"][()], f["states/force"][()]
+        expect = {}
+        for name in ("single", "multi"):
+            ids = doc["folds"][0]["test"][name]
+            s, e = f[f"{name}/start"][()][ids], f[f"{name}/end"][()][ids]
+            dist = np.linalg.norm(pts[e] - pts[s], axis=-1)
+            expect[name] = (dist.mean(1), dist.max(1), force[e] - force[s])
+    m = result["runs"][0]["metrics"]
+    for name, (ld, ld_max, df) in expect.items():
+        assert m[name]["ld_mean_mm"] == pytest.approx(ld.mean() * 1e3, rel=1e-4)
+        assert m[name]["ld_max_mm"] == pytest.approx(ld_max.mean() * 1e3, rel=1e-4)
+        assert m[name]["force_mse_n2"] == pytest.approx(np.mean(df**2), rel=1e-4)
+        assert m[name]["force_abs_n"] == pytest.approx(np.mean(np.abs(df)), rel=1e-4)
+    assert result["overall"][0]["label"] == "cGNN/Exp"
+
+
+def test_train_and_eval_commands_write_runs_tables_and_recordings(dent, tmp_path) -> None:
+    data, splits = dent
+    run = tmp_path / "run"
+    res = CliRunner().invoke(cli, ["-q", "train", "--data", str(data), "--splits", str(splits),
+                                   "--out", str(run), "--epochs", "1", "--batch", "8"])
+    assert res.exit_code == 0, res.output
+    assert {"/loss/train", "/loss/val", "/val/ld_mm"} <= set(rrd_entities(run / "train.rrd"))
+    out = tmp_path / "metrics.json"
+    res = CliRunner().invoke(cli, ["-q", "eval", str(run), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "| cGNN/Exp | Exp |" in out.with_suffix(".md").read_text()
+    ents = set(rrd_entities(out.with_suffix(".rrd")))
+    assert {"/surface/true", "/surface/predicted", "/force/true", "/force/predicted"} <= ents
+
+
+def test_train_bad_input_is_one_line_and_exit_2(dent, tmp_path) -> None:
+    data, splits = dent
+    bad = tmp_path / "bad.json"
+    bad.write_text("[1, 2")
+    res = CliRunner().invoke(cli, ["-q", "train", "--data", str(data), "--splits", str(bad),
+                                   "--out", str(tmp_path / "run")])
+    assert res.exit_code == 2 and "bad.json" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "run").exists()
+    res = CliRunner().invoke(cli, ["-q", "train", "--data", str(data), "--splits", str(splits),
+                                   "--fold", "7", "--out", str(tmp_path / "run")])
+    assert res.exit_code == 2 and "--fold 7" in res.output
