@@ -11,8 +11,8 @@ import pytest
 import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
-
 from cgnn_data import write_dent_states
+
 from train.checkpoint import load_checkpoint
 from train.loop import TrainOptions, train_run
 from train.model import CGNN, CGNNConfig

@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import pytest
 import torch
+from cgnn_data import write_dent_states
 from click.testing import CliRunner
 
-from cgnn_data import write_dent_states
 from pipeline.cli import cli
 from train import Predictor
 from train.checkpoint import load_checkpoint, model_from

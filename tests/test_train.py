@@ -10,9 +10,9 @@ import h5py
 import numpy as np
 import pytest
 import torch
+from cgnn_data import write_dent_states
 from click.testing import CliRunner
 
-from cgnn_data import write_dent_states
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
