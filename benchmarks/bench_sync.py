@@ -167,12 +167,30 @@ def _report(rows: dict[str, list[dict[str, float]]], naive: list[float],
           f"{', '.join(f'{x:.2f}' for x in times_seeds)}")
 
 
+def trigger_matching_time(repeats: int) -> None:
+    """match_trigger on a half-hour session (1,200 pulses, every 97th edge missed): the
+    vectorised count of 1.4 million (edge, event) proposals, median of ``repeats``."""
+    from calib.clock import match_trigger
+
+    rng = np.random.default_rng(5)
+    events = np.cumsum(rng.uniform(0.7, 2.3, 1200))
+    edges = 0.8 + (1 + 30e-6) * events + rng.uniform(-5e-4, 5e-4, len(events))
+    edges = np.delete(edges, np.arange(0, 1200, 97))
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        match_trigger(edges, events, source="bench")
+        times.append(time.perf_counter() - start)
+    print(f"trigger matching, 1,200 pulses: median {np.median(times):.3f} s over {repeats}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--workdir", type=Path, default=None)
     a = ap.parse_args()
+    trigger_matching_time(a.repeats)
     if a.workdir is not None:
         a.workdir.mkdir(parents=True, exist_ok=True)
         run(a.seeds, a.repeats, a.workdir)

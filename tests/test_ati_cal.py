@@ -14,6 +14,8 @@ from core.series import AtiCalibration
 from core.units import channel_units, length_scale, unit_to_si
 from ingest.ati_cal import read_ati_cal, write_ati_cal
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 CAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "ati" / \
     "nano17_FT14048_SI-50-0.5.cal"
 LBF = 4.4482216152605

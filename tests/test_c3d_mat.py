@@ -17,6 +17,8 @@ from core.series import MarkerSeries
 from ingest.c3d import read_c3d
 from ingest.qtm_mat import read_qtm_mat, write_mat73, write_qtm_mat
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 C3D = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "c3d" / \
     "qualisys_55markers_200hz.c3d"
 

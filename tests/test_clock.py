@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -71,14 +69,12 @@ def test_trigger_matching_with_missing_and_extra_pulses() -> None:
 
 def test_trigger_matching_scales_to_a_long_session() -> None:
     """1,200 pulses (half an hour): every (edge, event) pair is a proposal, 1.4 million of
-    them, counted at once (a loop over proposals took seconds)."""
+    them, counted at once (a loop over proposals took seconds; timed in bench_sync.py)."""
     rng = np.random.default_rng(5)
     events = np.cumsum(rng.uniform(0.7, 2.3, 1200))
     edges = _to_logger(events) + rng.uniform(-5e-4, 5e-4, len(events))
     edges = np.delete(edges, np.arange(0, 1200, 97))                      # missed edges
-    start = time.perf_counter()
-    fit = match_trigger(edges, events, source="force.csv")
-    assert time.perf_counter() - start < 2.0
+    fit = match_trigger(edges, events, source="force.csv")      # its time: bench_sync.py
     assert fit.n == len(edges)
     assert abs(fit.offset_s - OFFSET) < 1e-4 and abs(fit.drift_ppm - DRIFT) < 0.5
 

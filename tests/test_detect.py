@@ -18,6 +18,8 @@ from ingest.detect import detect_format, read_mocap, sniff
 from ingest.qtm_mat import write_mat73, write_qtm_mat
 from ingest.qtm_tsv import read_qtm_3d
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
 
 

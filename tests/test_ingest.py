@@ -15,6 +15,8 @@ from core.recording import rrd_entities, rrd_has_blueprint
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
 PHANTOM = [f"P{r}{c}" for r in range(5) for c in range(5)]
 INDENTER = ["Ind 1", "Ind 2", "Ind 3", "Ind 4"]          # names with spaces, as QTM allows

@@ -14,6 +14,8 @@ from click.testing import CliRunner
 from pipeline.cli import cli
 from pipeline.inspect import KEYS, inspect_file
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
 QTM2010 = REAL / "qtm" / "qtm2010_3d_noheader_nan_gaps.tsv"
 QTM2026 = REAL / "qtm" / "qtm2026_3d_15markers_100hz.tsv"

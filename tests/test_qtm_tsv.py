@@ -12,6 +12,8 @@ from core.errors import BadInput
 from core.series import BodySeries, MarkerSeries
 from ingest.qtm_tsv import parse_qtm_header, read_qtm_3d, read_qtm_6d, read_qtm_tsv
 
+pytestmark = pytest.mark.usefixtures("real_samples")
+
 QTM = Path(__file__).resolve().parents[2] / "shared" / "real_samples" / "qtm"
 OLD_3D = QTM / "qtm2010_3d_noheader_nan_gaps.tsv"
 NEW_3D = QTM / "qtm2026_3d_15markers_100hz.tsv"

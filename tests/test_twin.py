@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import shutil
-import time
 from pathlib import Path
 
 import h5py
@@ -355,9 +354,7 @@ def test_force_mat_log_is_the_csv_log(plain: Path, tmp_path: Path) -> None:
 def test_default_session_is_fast_and_deep_like_the_paper(tmp_path: Path) -> None:
     from sim.twin import synthesize_session
 
-    start = time.perf_counter()
-    folder = synthesize_session(tmp_path / "default", seed=0)
-    assert time.perf_counter() - start < 60.0
+    folder = synthesize_session(tmp_path / "default", seed=0)      # its time: bench_twin.py
     with truth(folder) as t:
         points, press = t["states/points"][()], t["states/press"][()]
     single, multi = [], []
