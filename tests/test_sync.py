@@ -16,10 +16,10 @@ import pytest
 from click.testing import CliRunner
 
 from calib.gaps import FILLED, MISSING
+from calib.sync_accuracy import TARGETS, match_presses, sync_errors
 from core.recording import rrd_entities
 from pipeline.cli import cli
 from pipeline.ingest_stage import ingest_session
-from pipeline.sync_accuracy import TARGETS, match_presses, sync_errors
 from pipeline.sync_stage import SyncParams, run_sync
 from sim.twin import synthesize_session
 

@@ -58,7 +58,9 @@ def mlp(widths: list[int]) -> nn.Sequential:
 
 
 @dataclass
-class _Features:
+class Features:
+    """The layers' outputs a head reads: local features, the condition, the valid points."""
+
     local: torch.Tensor                  # (B, N, F) concatenated layer outputs
     cond: torch.Tensor | None            # (B, 6) or None (noCond)
     mask: torch.Tensor | None = field(default=None)
@@ -81,23 +83,23 @@ class CGNN(nn.Module):
         self.force_head = mlp([2 * local + cond, *config.force_widths, 1])
 
     def features(self, points: torch.Tensor, cond: torch.Tensor,
-                 mask: torch.Tensor | None = None) -> _Features:
+                 mask: torch.Tensor | None = None) -> Features:
         """The three edge convolutions' outputs, concatenated."""
         x, outs = points, []
         for conv in self.convs:
             x = torch.relu(conv(x, mask))                                   # (B, N, O)
             outs.append(x)
-        return _Features(torch.cat(outs, dim=-1),
+        return Features(torch.cat(outs, dim=-1),
                          cond if self.config.use_condition else None, mask)
 
-    def displacement(self, f: _Features) -> torch.Tensor:
+    def displacement(self, f: Features) -> torch.Tensor:
         """Per-point displacement (B, N, 3) from the local features and C."""
         x = f.local
         if f.cond is not None:
             x = torch.cat([x, f.cond.unsqueeze(1).expand(-1, x.shape[1], -1)], dim=-1)
         return self.disp_head(x)
 
-    def force(self, f: _Features) -> torch.Tensor:
+    def force(self, f: Features) -> torch.Tensor:
         """Change of force (B,) from max- and mean-pooled features and C."""
         x = f.local
         if f.mask is None:
