@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from pipeline.demo_plan import PAPER, QUICK, Step, demo_steps
+from pipeline.demo_plan import PAPER, QUICK, SMOKE, Step, demo_steps
 from pipeline.options import seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
 
@@ -26,14 +26,16 @@ TL_CUT = 0.20          # transfer learning must cut the mean distance error by t
               show_default=True, help="Folder for everything the demo writes.")
 @click.option("--quick", is_flag=True,
               help="Small MSM set, short training: under 10 minutes on 2 CPU cores.")
+@click.option("--smoke", is_flag=True,
+              help="Only check the wiring: 2 folds, 2 epochs, a tiny MSM set (seconds).")
 @click.option("--force", is_flag=True, help="Run every step, even unchanged ones.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when a target is missed.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True, help="Where the cGNN trains.")
 @seed_option
 @click.pass_context
-def demo(ctx: click.Context, out: Path, quick: bool, force: bool, strict: bool, device: str,
-         seed: int) -> None:
+def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
+         device: str, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
@@ -44,7 +46,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, force: bool, strict: bool, 
     the accuracy targets. Without --quick it follows the paper's settings (hours on a CPU;
     uses a GPU when there is one).
     """
-    settings = QUICK if quick else PAPER
+    settings = SMOKE if smoke else QUICK if quick else PAPER
     started = time.perf_counter()
     for step in demo_steps(out, seed, settings, device):
         _run(ctx, step, force)
