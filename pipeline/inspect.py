@@ -293,16 +293,16 @@ def _inspect_json(path: Path) -> dict[str, Any]:
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise BadInput(path, f"not valid JSON ({e})") from None
     if isinstance(doc, list):
-        details: dict[str, Any] = {"items": len(doc)}
-        if all(isinstance(x, dict) and {"train", "val"} <= set(x) for x in doc):
-            details["folds"] = [{k: len(x[k]) for k in ("train", "val", "test") if k in x}
-                                for x in doc]
-            details["valid"] = _valid(lambda: validate_folds(path))
-        return {"schema": "phantom.folds" if "folds" in details else None, "details": details}
+        return {"details": {"items": len(doc)}}
     if not isinstance(doc, dict):
         return {"details": {"value": _short(doc)}}
     details = {"keys": sorted(k for k in doc if k != "provenance")}
-    if doc.get("schema") in JSON_SCHEMAS:
+    if doc.get("schema") == "phantom.folds":
+        details["valid"] = _valid(lambda: validate_folds(path))
+        details["folds"] = [{r: len(f[r]["groups"]) for r in ("train", "val", "test")
+                             if isinstance(f, dict) and isinstance(f.get(r), dict)}
+                            for f in doc.get("folds", [])]
+    elif doc.get("schema") in JSON_SCHEMAS:
         details["valid"] = _valid(lambda: validate_json_doc(path, JSON_SCHEMAS[doc["schema"]]))
     return {"schema": doc.get("schema"), "schema_version": doc.get("schema_version"),
             "provenance": doc.get("provenance"), "details": details}

@@ -229,11 +229,14 @@ def test_hdf5_generic(tmp_path):
 
 def test_json_manifest(tmp_path):
     path = tmp_path / "splits.json"
-    folds = [{"train": [1, 2, 3], "val": [4]}, {"train": [4, 1], "val": [2, 3]}]
-    path.write_text(json.dumps(folds))
+    role = lambda g: {"groups": g, "single": [], "multi": []}  # noqa: E731
+    doc = {"schema": "phantom.folds", "schema_version": "2.0", "folds": [
+        {"train": role([1, 2, 3]), "val": role([4]), "test": role([5])}]}
+    path.write_text(json.dumps(doc))
     s = inspect_json(path)
-    assert s["format"] == "json"
-    assert s["details"]["folds"] == [{"train": 3, "val": 1}, {"train": 2, "val": 2}]
+    assert s["format"] == "json" and s["schema"] == "phantom.folds"
+    assert s["details"]["folds"] == [{"train": 3, "val": 1, "test": 1}]
+    assert "invalid" in s["details"]["valid"]          # no data, ratio, seed...
 
 
 def test_unknown_file_is_bad_input(tmp_path):
