@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
-pipeline demo --out "${1:-out/demo}"
+pipeline demo --quick --out "${1:-out/demo}"
