@@ -70,7 +70,9 @@ def measure(d: Path) -> dict:
             theirs.append(np.linalg.norm(r[ok] - true[ok], axis=1).mean())
         single, multi = (np.stack([s[f"{n}/start"][()], s[f"{n}/end"][()]], 1)
                          for n in ("single", "multi"))
-        depth = {n: np.linalg.norm(pts[e[:, 1]] - pts[e[:, 0]], axis=-1)
+        both = {n: valid[e[:, 0]] & valid[e[:, 1]] for n, e in (("single", single),
+                                                                ("multi", multi))}
+        depth = {n: np.linalg.norm(pts[e[:, 1]] - pts[e[:, 0]], axis=-1)[both[n]]
                  for n, e in (("single", single), ("multi", multi))}
     return {"states": len(step), "presses": len(np.unique(seq)), "right": right,
             "ours_mm": np.array(ours) * 1e3, "raw_mm": np.array(theirs) * 1e3,

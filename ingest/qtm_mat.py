@@ -139,6 +139,9 @@ def _series(path: str | Path, name: str, f: dict[str, Any]) -> MarkerSeries:
     m, _, t = data.shape
     if len(labels) != m:
         raise BadInput(path, f"{len(labels)} labels for {m} trajectories in {name}")
+    if f.get("count") is not None and f["count"] != m:
+        raise BadInput(path, f"{name}.Trajectories.Labeled.Count is {f['count']} but Data holds "
+                             f"{m} trajectories")
     dups = sorted({s for s in labels if labels.count(s) > 1})
     if dups or any(not s for s in labels):
         raise BadInput(path, f"empty or duplicate label(s) in {name}: {', '.join(dups)}")
@@ -176,14 +179,22 @@ def _read7(path: str | Path, name: str) -> dict[str, Any]:
     labels = [str(np.ravel(x)[0]).strip() if np.size(x) else "" for x in
               np.ravel(field(labeled, "Labels"))]
     frames, start, stamp = (field(s, k, False) for k in ("Frames", "StartFrame", "Timestamp"))
+    count = field(labeled, "Count", False)
     return {
         "data": np.asarray(field(labeled, "Data"), dtype=np.float64),
         "labels": labels,
+        "count": None if count is None else _count(count),
         "rate": _scalar(field(s, "FrameRate")),
         "frames": None if frames is None else int(_scalar(frames)),
         "start_frame": None if start is None else int(_scalar(start)),
         "timestamp": None if stamp is None or not np.size(stamp) else str(np.ravel(stamp)[0]),
     }
+
+
+def _count(value: Any) -> int | float:
+    """A count field as an int (a non-whole value stays a float, so it never matches)."""
+    v = _scalar(value)
+    return int(v) if float(v).is_integer() else v
 
 
 def mat73_text(ds: h5py.Dataset) -> str:
@@ -205,9 +216,11 @@ def _read73(path: str | Path, name: str) -> dict[str, Any]:
             return s[key] if key in s else None
 
         frames, start, stamp = opt("Frames"), opt("StartFrame"), opt("Timestamp")
+        count = labeled["Count"][()] if "Count" in labeled else None
         return {
             "data": data,
             "labels": labels,
+            "count": None if count is None else _count(count),
             "rate": _scalar(s["FrameRate"][()]),
             "frames": None if frames is None else int(_scalar(frames[()])),
             "start_frame": None if start is None else int(_scalar(start[()])),

@@ -28,6 +28,8 @@ from ingest.detect import check_last_line
 
 _KEY = re.compile(r"[A-Z][A-Z0-9_]*")
 _LIST_KEYS = ("MARKER_NAMES", "BODY_NAMES", "TRAJECTORY_TYPES")
+NUMERIC_KEYS = ("NO_OF_FRAMES", "NO_OF_CAMERAS", "NO_OF_MARKERS", "NO_OF_BODIES", "FREQUENCY",
+                "NO_OF_ANALOG", "ANALOG_FREQUENCY")
 _GAPS = ["", "NaN", "nan", "NAN", "-nan", "-NaN", "null", "NULL", "Null"]
 _GAP_SET = frozenset(_GAPS)
 _UNIT_KEYS = ("MARKER_UNITS", "POSITION_UNITS", "LENGTH_UNITS", "UNITS")
@@ -62,7 +64,8 @@ class _Head:
         return v[0].strip() if v else None
 
     def number(self, key: str) -> float | None:
-        """A numeric header value; None when absent or not a number (``FREQUENCY EXT``)."""
+        """A numeric header value; None when absent (:func:`check_numeric_keys` has refused a
+        value that is not a number)."""
         v = self.scalar(key)
         try:
             return None if v is None else float(v)
@@ -441,6 +444,7 @@ def _layout_3d(head: _Head, names: list[str]) -> tuple[int, int | None, np.ndarr
             token = next(x for x in labels if not _is_value(x))
             raise head.bad(f"{token!r} is not a number (and this is no column line)",
                            head.labels_line)
+        _check_column_markers(head, labels, names)
         cols = np.empty((m, 3), dtype=np.int64)
         for j, name in enumerate(names):
             for k, axis in enumerate("XYZ"):
@@ -463,7 +467,34 @@ def _layout_3d(head: _Head, names: list[str]) -> tuple[int, int | None, np.ndarr
     return n_fields, time_col, lead + np.arange(3 * m).reshape(m, 3)
 
 
+def _check_column_markers(head: _Head, labels: list[str], names: list[str]) -> None:
+    """Every marker the column line names must be one of MARKER_NAMES: a column for another
+    marker would be dropped without a word."""
+    known = set(names)
+    extra = []
+    for label in labels:
+        if label.endswith((" X", " Y", " Z")) and label[:-2] not in known \
+                and label[:-2] not in extra:
+            extra.append(label[:-2])
+    if extra:
+        raise head.bad(f"column line names marker(s) {extra[:5]} that MARKER_NAMES does not "
+                       f"list ({len(names)} names)", head.labels_line)
+
+
+def check_numeric_keys(head: _Head) -> None:
+    """Header values that must be numbers are numbers (one line naming the key otherwise)."""
+    for key in NUMERIC_KEYS:
+        v = head.scalar(key)
+        if v is None:
+            continue
+        try:
+            float(v)
+        except ValueError:
+            raise head.bad(f"{key} {v!r} is not a number", _key_line(head, key)) from None
+
+
 def _read_3d(head: _Head) -> MarkerSeries:
+    check_numeric_keys(head)
     names = _names(head, "MARKER_NAMES", "NO_OF_MARKERS")
     types = head.keys.get("TRAJECTORY_TYPES")
     if types is not None and len(types) != len(names):
@@ -544,6 +575,7 @@ def _layout_6d(head: _Head, bodies: int) -> tuple[int, int | None, int, int, dic
 
 
 def _read_6d(head: _Head) -> BodySeries:
+    check_numeric_keys(head)
     names = _names(head, "BODY_NAMES", "NO_OF_BODIES")
     scale, unit = _length_scale(head)
     _require_data(head)
