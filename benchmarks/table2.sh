@@ -5,11 +5,12 @@
 # MSM model. Settings through the environment:
 #   OUT (out/table2)  EPOCHS_MSM (250)  EPOCHS_EXP (250)  LR_MSM (1e-4)  LR_EXP (1e-4)
 #   DEVICE (auto)  LOCATIONS (100)  DIRECTIONS (11)  SEED (0)  STAGE (all | msm | exp | eval)
+#   PIPELINE (pipeline; e.g. "python -m pipeline" where the package is not installed)
 # A run folder that exists is resumed, so the script can be stopped and started again.
 set -euo pipefail
 OUT=${OUT:-out/table2}; SEED=${SEED:-0}; DEVICE=${DEVICE:-auto}; STAGE=${STAGE:-all}
 EM=${EPOCHS_MSM:-250}; EE=${EPOCHS_EXP:-250}; LM=${LR_MSM:-1e-4}; LE=${LR_EXP:-1e-4}
-P="pipeline -q"
+P="${PIPELINE:-pipeline} -q"
 mkdir -p "$OUT"
 if [ "$STAGE" = all ] || [ "$STAGE" = msm ]; then
   [ -f "$OUT/msm.h5" ] || $P simulate --out "$OUT/msm.h5" --locations "${LOCATIONS:-100}" \
