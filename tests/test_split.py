@@ -72,6 +72,44 @@ def test_test_sets_cover_or_the_manifest_says_why() -> None:
     assert "cover 10 of 20" in note
 
 
+@pytest.mark.parametrize(("folds", "overlap"), [(4, False), (5, True)])
+def test_manifest_test_sets_over_20_presses(states, tmp_path, folds, overlap) -> None:
+    """20 presses at 12:3:5 give 5 test presses a fold: 4 folds test each press once, 5 folds
+    (25 > 20) cover every press with some tested twice, and the manifest's note says so."""
+    out = tmp_path / "s.json"
+    assert _split(states, out, "--folds", str(folds)).exit_code == 0
+    doc = json.loads(out.read_text())
+    tests = [fold["test"]["groups"] for fold in doc["folds"]]
+    assert len(tests) == folds and all(len(t) == 5 for t in tests)
+    assert set().union(*map(set, tests)) == set(range(20))
+    assert (sum(map(len, tests)) > 20) == overlap
+    assert ("overlap" in doc["note"]) == overlap
+    for fold in doc["folds"]:                         # nested subsets of 1..12 training presses
+        subsets = fold["train_subsets"]
+        assert [len(x) for x in subsets] == list(range(1, 13))
+        assert all(set(a) < set(b) for a, b in zip(subsets, subsets[1:], strict=False))
+        assert set(subsets[-1]) == set(fold["train"]["groups"])
+
+
+def test_msm_defaults_hold_whole_locations_out(tmp_path) -> None:
+    msm = tmp_path / "msm.h5"
+    res = CliRunner().invoke(cli, ["-q", "simulate", "--out", str(msm), "--locations", "10",
+                                   "--directions", "2", "--steps", "2", "--no-rrd"])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "s.json"
+    assert _split(msm, out, "--no-rrd").exit_code == 0
+    doc = json.loads(out.read_text())
+    assert (doc["group_by"], doc["ratio"], doc["groups"]) == ("location", [7, 2, 1], 10)
+    with h5py.File(msm) as f:
+        loc = f["states/location"][()]
+        where = {n: loc[f[f"{n}/start"][()]] for n in ("single", "multi")}
+    for fold in doc["folds"]:
+        assert [len(fold[r]["groups"]) for r in ("train", "val", "test")] == [7, 2, 1]
+        for role in ("train", "val", "test"):             # both directions of a place go along
+            held = {int(x) for n in where for x in where[n][fold[role][n]]}
+            assert held == set(fold[role]["groups"])
+
+
 def test_training_subsets_are_nested() -> None:
     folds, _ = make_folds(np.arange(20), SplitPlan("sequence", (12, 3, 5), folds=5, seed=0))
     for f in folds:
@@ -128,3 +166,8 @@ def test_the_readme_reader_loads_a_fold_without_our_code(states, tmp_path) -> No
     n = len(fold["single"]) + len(fold["multi"])
     assert env["inputs"].shape[0] == env["targets"].shape[0] == env["cond"].shape[0] == n
     assert env["cond"].shape[1] == 6 and env["dforce"].shape == (n,)
+    # the dent model's truth: the tip sinks 1 mm per 0.5 N, the surface stays on the grid
+    np.testing.assert_allclose(env["cond"][:, 2] - env["cond"][:, 5],
+                               env["dforce"] / 0.5 * 1e-3, atol=1e-6)
+    np.testing.assert_allclose(env["inputs"][..., :2], env["targets"][..., :2], atol=1e-7)
+    assert (env["targets"][..., 2] <= env["inputs"][..., 2] + 1e-9).all()

@@ -29,9 +29,9 @@ def _edit(path, name, fn):
 
 @pytest.mark.parametrize(("name", "edit", "message"), [
     ("single/end", lambda a: a.__setitem__(0, 10_000), "outside"),
+    ("multi/start", lambda a: a.__setitem__(0, -1), "outside"),
     ("single/end", lambda a: a.__setitem__(0, a[0] + 5), "joins two sequences"),
     ("single/end", lambda a: a.__setitem__(1, a[1] - 1), "does not move forward"),
-    ("multi/end", lambda a: a.__setitem__(0, a[0] - 1), "less than 2 levels|forward"),
     ("states/session", lambda a: a.__setitem__(0, 3), "session_names"),
 ])
 def test_each_fault_of_meaning_is_named(dent, name, edit, message) -> None:
@@ -49,6 +49,17 @@ def test_single_steps_are_exactly_one_level(dent) -> None:
         assert step[end[0]] - step[f["single/start"][0]] == 2
         f["single/end"][...] = end
     with pytest.raises(BadInput, match="not 1 level"):
+        validate_states(dent)
+
+
+def test_multi_steps_are_at_least_two_levels(dent) -> None:
+    with h5py.File(dent, "r+") as f:
+        step, seq = f["states/step"][()], f["states/sequence"][()]
+        start, end = f["multi/start"][()], f["multi/end"][()]
+        end[0] = start[0] + 1                             # the next state: one level on
+        assert seq[end[0]] == seq[start[0]] and step[end[0]] - step[start[0]] == 1
+        f["multi/end"][...] = end
+    with pytest.raises(BadInput, match="less than 2 levels apart"):
         validate_states(dent)
 
 
@@ -70,17 +81,23 @@ def test_version_1_files_are_refused_with_the_way_out(dent) -> None:
 def test_msm_states_are_in_the_phantom_frame(tmp_path) -> None:
     out = tmp_path / "msm.h5"
     res = CliRunner().invoke(cli, ["-q", "simulate", "--out", str(out), "--locations", "2",
-                                   "--directions", "1", "--steps", "3", "--no-rrd"])
+                                   "--directions", "2", "--steps", "4", "--no-rrd"])
     assert res.exit_code == 0, res.output
     validate_states(out)
     with h5py.File(out) as f:
         pts, step, mass = f["states/points"][()], f["states/step"][()], f["states/mass"][()]
+        seq, fvec = f["states/sequence"][()], f["states/force_vector"][()]
         assert f["states/valid"][()].all()
-        fvec = f["states/force_vector"][()]
+        assert len(set(seq)) == 4 and len(set(f["states/location"][()])) == 2
     rest = pts[step == 0]
     np.testing.assert_allclose(rest[..., 2], 0, atol=1e-9)                  # rest surface z = 0
     assert rest[..., :2].min() >= -1e-9 and rest[..., :2].max() <= 0.1 + 1e-9  # on [0, 0.1]^2
-    loaded = np.flatnonzero(step == 3)
-    rows = np.arange(len(step))
-    assert (pts[rows, mass][loaded, 2] < -1e-3).all()      # the normal load pushes into -z
-    assert (fvec[loaded, 2] < 0).all()
+    spacing = np.diff(np.unique(rest[0, :, 0])).min()
+    assert rest[..., :2].max() - rest[..., :2].min() > 0.1 - 1.5 * spacing  # spans the footprint
+    loaded_mass_z = pts[np.arange(len(step)), mass, 2]
+    normal = (step == 4) & (seq % 2 == 0)                  # direction 0 is the normal
+    np.testing.assert_allclose(fvec[normal] / np.linalg.norm(fvec[normal], axis=1)[:, None],
+                               [[0, 0, -1]] * normal.sum(), atol=1e-6)
+    assert (loaded_mass_z[normal] < -1e-3).all()           # the normal load pushes into -z
+    for s in set(seq):                                     # deeper at every level
+        assert (np.diff(loaded_mass_z[seq == s][np.argsort(step[seq == s])]) < 0).all()
