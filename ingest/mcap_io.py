@@ -24,6 +24,7 @@ from core.series import (
     RawSession,
     check_time,
 )
+from core.text import to_json
 from data_schema.raw_mcap import (
     BLOCK_SECONDS,
     RAW_MCAP,
@@ -82,7 +83,7 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
         for s in streams:
             _write_stream(writer, s)
         for name, record in records.items():
-            writer.add_metadata(name, {k: _json(v) for k, v in record.items()})
+            writer.add_metadata(name, {k: to_json(v) for k, v in record.items()})
         writer.finish()
 
 
@@ -250,13 +251,3 @@ def _calibration(r: dict[str, Any]) -> AtiCalibration:
         torque_units=r["torque_units"], meta=r.get("meta", {}),
     )
 
-
-def _json(value: Any) -> str:
-    return json.dumps(value, default=_jsonable)
-
-
-def _jsonable(value: Any) -> Any:
-    """numpy values and paths as plain JSON; anything else as its text."""
-    if isinstance(value, np.ndarray | np.generic):
-        return value.tolist()
-    return str(value)
