@@ -33,7 +33,7 @@ from calib.force import apply_calibration, rest_baseline
 from calib.sync_accuracy import TARGETS, sync_errors
 from core.progress import set_quiet
 from ingest.mcap_io import read_raw_mcap
-from pipeline.ingest_stage import ingest_session
+from ingest.session_to_mcap import ingest_session
 from pipeline.sync_stage import SyncParams, run_sync
 from sim.twin import synthesize_session
 

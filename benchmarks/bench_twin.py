@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from pipeline.ingest_stage import ingest_session
+from ingest.session_to_mcap import ingest_session
 from sim.phantom import Phantom
 from sim.twin import TwinParams, simulate, write_twin
 

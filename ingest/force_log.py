@@ -25,8 +25,8 @@ from core.errors import BadInput
 from core.series import ForceSeries, time_to_ns
 from core.text import attr_text
 from core.units import TIME_UNITS, channel_units, unit_to_si
-from ingest.detect import check_last_line, sniff
 from ingest.qtm_mat import MAT_ERRORS, mat73_text
+from ingest.sniff import check_last_line, sniff
 
 _NAME_VARS = ("columns", "names", "column_names")
 _MAT_SKIP = ("#refs#", "#subsystem#")

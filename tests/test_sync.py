@@ -18,8 +18,8 @@ from click.testing import CliRunner
 from calib.gaps import FILLED, MISSING
 from calib.sync_accuracy import TARGETS, match_presses, sync_errors
 from core.recording import rrd_entities
+from ingest.session_to_mcap import ingest_session
 from pipeline.cli import cli
-from pipeline.ingest_stage import ingest_session
 from pipeline.sync_stage import SyncParams, run_sync
 from sim.twin import synthesize_session
 
