@@ -36,7 +36,7 @@ from core.progress import set_quiet
 from ingest.mcap_io import read_raw_mcap
 from ingest.session_to_mcap import ingest_session
 from pipeline.sync_stage import run_sync
-from sim.twin import synthesize_session
+from sim.twin_folder import synthesize_session
 
 
 def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:

@@ -22,7 +22,7 @@ from core.recording import rrd_entities
 from ingest.session_to_mcap import ingest_session
 from pipeline.cli import cli
 from pipeline.sync_stage import run_sync
-from sim.twin import synthesize_session
+from sim.twin_folder import synthesize_session
 
 SEEDS = (0, 1, 2, 3, 4)
 
