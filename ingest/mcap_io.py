@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from core.atomic import atomic_output
+from core.provenance import code_version
 from core.series import (
     AtiCalibration,
     BodySeries,
@@ -63,8 +64,6 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
     :func:`core.provenance.make_provenance`. ``compression``: "none" or "zstd" chunks.
     """
     from mcap.writer import CompressionType, Writer
-
-    from core.provenance import code_version
 
     if compression not in COMPRESSION:
         raise ValueError(f"compression must be one of {COMPRESSION}, got {compression!r}")
