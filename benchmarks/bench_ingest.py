@@ -130,7 +130,7 @@ def bare_parse(tsv: Path) -> np.ndarray:
 
 def ingest(folder: Path, out: Path, rrd: Path | None) -> None:
     from core.progress import set_quiet
-    from pipeline.ingest_stage import ingest_session
+    from ingest.session_to_mcap import ingest_session
 
     set_quiet(True)
     ingest_session(folder, out, rrd)
@@ -150,7 +150,7 @@ import sys
 sys.path.insert(0, {root!r})
 import numpy, pandas, rerun, mcap, h5py, zstandard
 import benchmarks.bench_ingest as b
-import pipeline.ingest_stage, pipeline.ingest_view, ingest.detect, ingest.force_log
+import ingest.session_to_mcap, ingest.ingest_view, ingest.detect, ingest.force_log
 def hwm():
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM:"):

@@ -31,11 +31,12 @@ import numpy as np
 from calib.clock import ClockFit
 from calib.force import apply_calibration, rest_baseline
 from calib.sync_accuracy import TARGETS, sync_errors
+from calib.sync_params import SyncParams
 from core.progress import set_quiet
 from ingest.mcap_io import read_raw_mcap
-from pipeline.ingest_stage import ingest_session
-from pipeline.sync_stage import SyncParams, run_sync
-from sim.twin import synthesize_session
+from ingest.session_to_mcap import ingest_session
+from pipeline.sync_stage import run_sync
+from sim.twin_folder import synthesize_session
 
 
 def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:

@@ -28,9 +28,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from pipeline.ingest_stage import ingest_session
+from ingest.session_to_mcap import ingest_session
 from sim.phantom import Phantom
-from sim.twin import TwinParams, simulate, write_twin
+from sim.twin import simulate
+from sim.twin_folder import write_twin
+from sim.twin_scene import TwinParams
 
 LEVELS = np.concatenate([[0.25], np.arange(0.5, 7.01, 0.5), [7.2, 7.3]])
 TILT = np.radians(20.0)

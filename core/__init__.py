@@ -1,4 +1,5 @@
-"""The ground layer: errors, atomic outputs, provenance, progress, units, time-series
-containers and rerun helpers. Imports nothing of ours, so every package can stand on it."""
+"""The ground layer: errors, atomic outputs, provenance, progress, units, text and JSON forms
+of values, time-series containers and rerun helpers. Imports nothing of ours, so every
+package can stand on it."""
 
 __version__ = "0.1.0"

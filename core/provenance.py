@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from core import __version__
+from core.text import to_json
 
 
 def sha256_file(path: str | Path, block: int = 1 << 20) -> str:
@@ -54,15 +55,8 @@ def make_provenance(
         "stage": stage,
         "code_version": code_version(),
         "command": " ".join(sys.argv),
-        "params": {k: _jsonable(v) for k, v in params.items()},
+        "params": json.loads(to_json(dict(params))),
         "inputs": {str(p): sha256_file(p) for p in inputs},
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
 
-
-def _jsonable(value: Any) -> Any:
-    try:
-        json.dumps(value)
-        return value
-    except TypeError:
-        return str(value)

@@ -1,21 +1,32 @@
-"""Declarative HDF5 layouts and their validator.
+"""Declarative HDF5 layouts, their validator, and the one writer and reader of such files.
 
 A layout lists the root attributes a file must carry and its datasets, each with dtype, a
 symbolic shape (names bind to sizes, so ``("S", "N", 3)`` in two datasets must agree) and units.
 A ``*`` path segment matches every member of a group (one per press, say); names in a shape
 bind separately within each such member.
+
+:func:`write_h5` takes the arrays and attributes of a file and its layout, and takes from the
+layout what the layout already says (schema name and version, each dataset's dtype and units),
+so a writer restates nothing; it validates the file before it is renamed into place.
+:func:`read_h5` validates a file, then hands back its arrays and attributes. Attributes of
+groups and datasets are named by path, ``"<object path>/<attribute>"`` (``"presses/000/location"``);
+a name without ``/`` is a root attribute.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from fnmatch import fnmatchcase
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
 
 from core.atomic import atomic_output
 from core.errors import BadInput
+from core.text import attr_text, to_json
 
 Dim = int | str
 
@@ -53,7 +64,7 @@ def read_schema_id(path: str | Path) -> tuple[str, str] | None:
         raise BadInput(path, f"not a readable HDF5 file ({e})") from None
     if name is None or version is None:
         return None
-    return _text(name), _text(version)
+    return attr_text(name), attr_text(version)
 
 
 def validate_h5(path: str | Path, schema: H5Schema) -> None:
@@ -75,7 +86,8 @@ def validate_h5(path: str | Path, schema: H5Schema) -> None:
 
 
 def _check_root(path: str | Path, f: h5py.File, schema: H5Schema) -> None:
-    name, version = _text(f.attrs.get("schema", "")), _text(f.attrs.get("schema_version", ""))
+    name = attr_text(f.attrs.get("schema", ""))
+    version = attr_text(f.attrs.get("schema_version", ""))
     if name != schema.name:
         raise BadInput(path, f"schema is {name!r}, expected {schema.name!r}")
     if version.split(".")[0] != schema.version.split(".")[0]:
@@ -98,7 +110,7 @@ def _check_dataset(
         _check_dtype(path, member, obj, ds.dtype)
         scope = _scope(ds.path, member)
         _check_shape(path, member, obj.shape, ds.shape, bound.setdefault(scope, {}))
-        if ds.units is not None and _text(obj.attrs.get("units", "")) != ds.units:
+        if ds.units is not None and attr_text(obj.attrs.get("units", "")) != ds.units:
             raise BadInput(path, f"{member} units are {obj.attrs.get('units')!r}, "
                                  f"expected {ds.units!r}")
 
@@ -149,45 +161,98 @@ def _check_shape(path: str | Path, member: str, got: tuple[int, ...],
                                  f"{dim}={bound[dim]}")
 
 
-def _text(v: object) -> str:
-    return v.decode() if isinstance(v, bytes) else str(v)
+
+# --- writing and reading ----------------------------------------------------------------------
+
+GZIP_MIN_ITEMS = 4096     # smaller datasets stay uncompressed: the filter would cost more
 
 
-def attr_text(v: object) -> str:
-    """An HDF5 string attribute as text (h5py gives ``bytes`` or ``str``)."""
-    return _text(v)
+def write_h5(path: str | Path, schema: H5Schema, arrays: Mapping[str, Any],
+             attrs: Mapping[str, Any], *, gzip: Mapping[str, int] | None = None,
+             track_order: bool = False) -> None:
+    """Write ``arrays`` (dataset path -> values) and ``attrs`` to ``path`` in ``schema``'s layout.
 
-
-def write_h5(path: str | Path, schema: H5Schema, arrays: dict[str, np.ndarray],
-             attrs: dict[str, object]) -> None:
-    """Write ``arrays`` (dataset path -> array) and root ``attrs`` as a file of ``schema``.
-
-    Each array is cast to its schema dtype and given its schema units; a name the schema does
-    not declare is a programming error. The file is validated before it is renamed into place,
-    so a file of the final name always matches its schema.
+    Each dataset is stored with the dtype and ``units`` its :class:`Dataset` entry declares (a
+    path no entry matches is a programming error); ``attrs`` are named as in the module
+    docstring, dicts and lists are stored as JSON text, and ``schema``/``schema_version`` come
+    from ``schema``. ``gzip`` maps dataset patterns of the layout to a gzip level (applied to
+    numeric datasets of more than :data:`GZIP_MIN_ITEMS` values); ``track_order`` keeps the
+    creation order of members. Written atomically and validated before it takes the name.
     """
-    declared = {d.path: d for d in schema.datasets}
-    unknown = sorted(set(arrays) - set(declared))
-    if unknown:
-        raise ValueError(f"{schema.name} declares no dataset(s) {unknown}")
+    entries = [(name, _entry(schema, name), values) for name, values in arrays.items()]
     with atomic_output(path) as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["schema"], f.attrs["schema_version"] = schema.name, schema.version
+        with h5py.File(tmp, "w", track_order=track_order) as f:
+            f.attrs.update({"schema": schema.name, "schema_version": schema.version})
+            for name, entry, values in entries:
+                _create(f, name, entry, values, (gzip or {}).get(entry.path))
             for key, value in attrs.items():
-                f.attrs[key] = value
-            for name, data in arrays.items():
-                ds_schema = declared[name]
-                dtype = h5py.string_dtype() if ds_schema.dtype == "str" else ds_schema.dtype
-                ds = f.create_dataset(name, data=np.asarray(data).astype(dtype))
-                if ds_schema.units is not None:
-                    ds.attrs["units"] = ds_schema.units
+                owner, _, attr = key.rpartition("/")
+                obj = f if not owner else f[owner] if owner in f else f.require_group(owner)
+                if attr == "units" and isinstance(obj, h5py.Dataset) and "units" in obj.attrs:
+                    raise ValueError(f"write_h5: {owner} units come from the schema")
+                obj.attrs[attr] = _attr_value(value)
         validate_h5(tmp, schema)
 
 
-def read_datasets(path: str | Path, names: list[str] | None = None) -> dict[str, np.ndarray]:
-    """Every dataset of a file (or the ``names`` given) as arrays, keyed by path."""
+def read_h5(path: str | Path, schema: H5Schema, datasets: Iterable[str] | None = None
+            ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Validate ``path`` against ``schema``, then read it: (arrays, attrs).
+
+    ``arrays`` maps each dataset path present (``*`` expanded) to its values, text datasets as
+    arrays of ``str``; ``datasets`` limits them to these layout patterns. ``attrs`` holds the
+    attributes of the root, every group and every dataset read, named as in the module
+    docstring, text as ``str``.
+    """
+    validate_h5(path, schema)
+    wanted = [d.path for d in schema.datasets] if datasets is None else list(datasets)
     with h5py.File(path, "r") as f:
-        if names is None:
-            names = []
-            f.visititems(lambda n, o: names.append(n) if isinstance(o, h5py.Dataset) else None)
-        return {n: f[n][()] for n in sorted(names) if n in f}
+        arrays = {m: _values(f[m]) for pattern in wanted for m in _expand(f, pattern)}
+        attrs: dict[str, Any] = {}
+        groups = [""]
+        f.visititems(lambda name, obj: groups.append(name)
+                     if isinstance(obj, h5py.Group) else None)
+        for owner in [*groups, *arrays]:
+            obj = f[owner] if owner else f
+            attrs.update({f"{owner}/{k}" if owner else k: _attr_read(v)
+                          for k, v in obj.attrs.items()})
+    return arrays, attrs
+
+
+def _entry(schema: H5Schema, name: str) -> Dataset:
+    """The layout entry a concrete dataset path falls under."""
+    segs = name.split("/")
+    for ds in schema.datasets:
+        pattern = ds.path.split("/")
+        if len(pattern) == len(segs) and all(fnmatchcase(s, p) for s, p in
+                                             zip(segs, pattern, strict=True)):
+            return ds
+    raise ValueError(f"write_h5: {name} is not a dataset of {schema.name}")
+
+
+def _create(f: h5py.File, name: str, entry: Dataset, values: Any, level: int | None) -> None:
+    if entry.dtype == "str":
+        data = np.array([str(v) for v in np.ravel(values)], dtype=object).reshape(np.shape(values))
+        ds = f.create_dataset(name, data=data, dtype=h5py.string_dtype())
+    else:
+        data = np.asarray(values, dtype=entry.dtype)
+        packed = level is not None and data.size > GZIP_MIN_ITEMS
+        kw = {"compression": "gzip", "compression_opts": level, "shuffle": True} if packed \
+            else {}
+        ds = f.create_dataset(name, data=data, **kw)
+    if entry.units is not None:
+        ds.attrs["units"] = entry.units
+
+
+def _attr_value(value: Any) -> Any:
+    """Dicts and lists as JSON text; numbers, text and arrays as they are."""
+    return to_json(value) if isinstance(value, dict | list) else value
+
+
+def _values(ds: h5py.Dataset) -> np.ndarray:
+    if h5py.check_string_dtype(ds.dtype) is not None:
+        return np.asarray(ds.asstr()[()], dtype=object)
+    return ds[()]
+
+
+def _attr_read(value: Any) -> Any:
+    return attr_text(value) if isinstance(value, bytes | str) else value

@@ -23,9 +23,10 @@ import scipy.io
 
 from core.errors import BadInput
 from core.series import ForceSeries, time_to_ns
+from core.text import attr_text
 from core.units import TIME_UNITS, channel_units, unit_to_si
-from ingest.detect import check_last_line, sniff
 from ingest.qtm_mat import MAT_ERRORS, mat73_text
+from ingest.sniff import check_last_line, sniff
 
 _NAME_VARS = ("columns", "names", "column_names")
 _MAT_SKIP = ("#refs#", "#subsystem#")
@@ -128,8 +129,7 @@ def _mat_variables(path: str | Path, kind: str) -> dict[str, Any]:
             ds = f[k]
             if k in _MAT_SKIP or not isinstance(ds, h5py.Dataset):
                 continue
-            cls = ds.attrs.get("MATLAB_class", b"double")
-            cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+            cls = attr_text(ds.attrs.get("MATLAB_class", b"double"))
             if cls == "cell":
                 out[k] = [mat73_text(f[r]) for r in np.asarray(ds[()]).ravel(order="F")]
             elif cls == "char":

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from core.atomic import atomic_output
+from core.provenance import code_version
 from core.series import (
     AtiCalibration,
     BodySeries,
@@ -24,6 +25,7 @@ from core.series import (
     RawSession,
     check_time,
 )
+from core.text import to_json
 from data_schema.raw_mcap import (
     BLOCK_SECONDS,
     RAW_MCAP,
@@ -63,8 +65,6 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
     """
     from mcap.writer import CompressionType, Writer
 
-    from core.provenance import code_version
-
     if compression not in COMPRESSION:
         raise ValueError(f"compression must be one of {COMPRESSION}, got {compression!r}")
     streams = _streams(session)
@@ -82,7 +82,7 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
         for s in streams:
             _write_stream(writer, s)
         for name, record in records.items():
-            writer.add_metadata(name, {k: _json(v) for k, v in record.items()})
+            writer.add_metadata(name, {k: to_json(v) for k, v in record.items()})
         writer.finish()
 
 
@@ -250,13 +250,3 @@ def _calibration(r: dict[str, Any]) -> AtiCalibration:
         torque_units=r["torque_units"], meta=r.get("meta", {}),
     )
 
-
-def _json(value: Any) -> str:
-    return json.dumps(value, default=_jsonable)
-
-
-def _jsonable(value: Any) -> Any:
-    """numpy values and paths as plain JSON; anything else as its text."""
-    if isinstance(value, np.ndarray | np.generic):
-        return value.tolist()
-    return str(value)

@@ -24,7 +24,7 @@ import scipy.io
 from core.atomic import atomic_output
 from core.errors import BadInput
 from core.series import MarkerSeries, frame_times_ns
-from ingest.detect import sniff
+from ingest.sniff import sniff
 
 _SKIP = ("#refs#", "#subsystem#")
 # What scipy.io, h5py and the MAT header walk raise on a damaged file; every MAT reader

@@ -1,4 +1,4 @@
-"""``pipeline ingest``: the click layer over :func:`pipeline.ingest_stage.ingest_session`."""
+"""``pipeline ingest``: the click layer over :func:`ingest.session_to_mcap.ingest_session`."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
     provenance metadata) and a rerun recording of the raw trajectories and force (--rrd,
     default beside --out). Inputs are never modified; nothing is written on bad input.
     """
-    from pipeline.ingest_stage import ingest_session
+    from ingest.session_to_mcap import ingest_session
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     s = ingest_session(session_dir, out, rrd_path, "zstd" if zstd else "none")

@@ -25,6 +25,7 @@ import numpy as np
 
 from core.errors import BadInput
 from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
+from core.text import attr_text
 
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
         "missing_samples", "units", "events", "schema", "schema_version", "provenance",
@@ -351,7 +352,7 @@ def _inspect_rrd(path: Path) -> dict[str, Any]:
 
 def _attr(v: Any) -> Any:
     if isinstance(v, bytes):
-        return v.decode()
+        return attr_text(v)
     if isinstance(v, np.ndarray):
         return [_attr(x) for x in v.tolist()]
     if isinstance(v, np.generic):

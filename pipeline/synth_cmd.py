@@ -1,4 +1,4 @@
-"""``pipeline synth``: the click layer over :func:`sim.twin.synthesize_session`."""
+"""``pipeline synth``: the click layer over :func:`sim.twin_folder.synthesize_session`."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
     removed, and files the twin does not write are left alone. The same seed gives the same
     bytes of data. `pipeline ingest OUT_DIR` reads the folder as it is.
     """
-    from sim.twin import synthesize_session
+    from sim.twin_folder import synthesize_session
 
     rrd_path = resolve_rrd(out_dir, rrd, no_rrd)
     start = time.perf_counter()

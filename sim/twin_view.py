@@ -16,16 +16,13 @@ state), ``force/truth`` and ``force/measured`` (Scalars, N: 500 Hz and 1 kHz), `
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from core.recording import recording, time_column
-
-if TYPE_CHECKING:
-    from sim.twin import Twin
+from sim.twin import Twin
 
 APP_ID = "phantom-synth"
 VIEW_HZ = 50.0

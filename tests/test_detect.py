@@ -14,9 +14,10 @@ from mcap.writer import Writer
 
 from core.errors import BadInput
 from ingest.ati_cal import read_ati_cal, write_ati_cal
-from ingest.detect import detect_format, read_mocap, sniff
+from ingest.detect import detect_format, read_mocap
 from ingest.qtm_mat import write_mat73, write_qtm_mat
 from ingest.qtm_tsv import read_qtm_3d
+from ingest.sniff import sniff
 
 pytestmark = pytest.mark.usefixtures("real_samples")
 

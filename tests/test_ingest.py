@@ -414,7 +414,7 @@ def test_output_over_an_input_is_refused(session):
 
 def test_phantom_twin_session(tmp_path):
     """A whole synthetic session (6D bodies, pivot, trigger) survives ingest bit for bit."""
-    twin = pytest.importorskip("sim.twin")
+    twin = pytest.importorskip("sim.twin_folder")
     from ingest.detect import read_mocap
     from ingest.qtm_tsv import read_qtm_6d
 

@@ -262,7 +262,7 @@ def test_inspect_session_toml(tmp_path):
     from click.testing import CliRunner
 
     from pipeline.cli import cli
-    from sim.twin import synthesize_session
+    from sim.twin_folder import synthesize_session
 
     folder = synthesize_session(tmp_path / "s", seed=3, locations=1, repeats=1,
                                 press_seconds=3.0, pivot_seconds=3.0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.presses import assign_locations, segment_presses
+from calib.presses import assign_locations, segment_presses
 
 RATE = 500.0
 

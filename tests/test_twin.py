@@ -352,7 +352,7 @@ def test_force_mat_log_is_the_csv_log(plain: Path, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_default_session_is_fast_and_deep_like_the_paper(tmp_path: Path) -> None:
-    from sim.twin import synthesize_session
+    from sim.twin_folder import synthesize_session
 
     folder = synthesize_session(tmp_path / "default", seed=0)      # its time: bench_twin.py
     with truth(folder) as t:

@@ -1,4 +1,4 @@
-"""``pipeline ingest``: a raw session folder (lab files + session.toml) into one MCAP file.
+"""A raw session folder (lab files + session.toml) into one MCAP file (``pipeline ingest``).
 
 Reads every file the session names with the lab readers, which check each file on its own
 (unique names, numbers, increasing time, a finite 6x6 calibration); checks that the files agree
@@ -26,7 +26,12 @@ from core.series import (
 )
 from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
 from data_schema.session import ForceConfig, SessionConfig, read_session
+from ingest.ati_cal import read_ati_cal
+from ingest.detect import detect_format, read_mocap
+from ingest.force_log import read_force_log
+from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
+from ingest.qtm_tsv import read_qtm_6d
 
 
 def ingest_session(folder: str | Path, out: str | Path, rrd: str | Path | None = None,
@@ -53,8 +58,6 @@ def ingest_session(folder: str | Path, out: str | Path, rrd: str | Path | None =
         write_raw_mcap(tmp_out, session, {"provenance": session.provenance}, compression)
         validate_raw_mcap(tmp_out, deep=False)   # blocks are checked on every read
         if tmp_rrd is not None:
-            from pipeline.ingest_view import write_ingest_recording
-
             write_ingest_recording(session, tmp_rrd)
     return session
 
@@ -90,14 +93,11 @@ def load_session(cfg: SessionConfig) -> RawSession:
 
 
 def _read_mocap(cfg: SessionConfig) -> MarkerSeries:
-    from ingest.detect import read_mocap  # QTM TSV 3D, C3D or QTM MAT, read once
-
+    """The trial's 3D export (QTM TSV 3D, C3D or QTM MAT), read once."""
     return read_mocap(cfg.mocap.file)
 
 
 def _read_pivot(cfg: SessionConfig) -> MarkerSeries | None:
-    from ingest.detect import read_mocap
-
     return read_mocap(cfg.pivot_file) if cfg.pivot_file is not None else None
 
 
@@ -105,9 +105,6 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
     path = cfg.mocap.bodies_file
     if path is None:
         return None
-    from ingest.detect import detect_format
-    from ingest.qtm_tsv import read_qtm_6d
-
     if detect_format(path) != "qtm_tsv_6d":
         raise BadInput(path, "mocap.bodies_file must be a QTM 6D export")
     bodies = read_qtm_6d(path)
@@ -119,8 +116,6 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
 
 
 def _read_force(cfg: SessionConfig) -> ForceSeries:
-    from ingest.force_log import read_force_log
-
     f: ForceConfig = cfg.force
     return read_force_log(f.file, f.time_column, f.channels, time_unit=f.time_unit,
                           units=f.units, kind=f.kind, trigger_column=f.trigger_column)
@@ -130,8 +125,6 @@ def _read_calibration(cfg: SessionConfig) -> AtiCalibration | None:
     path = cfg.force.calibration
     if path is None:
         return None
-    from ingest.ati_cal import read_ati_cal
-
     return read_ati_cal(path)
 
 

@@ -1,10 +1,11 @@
-"""Splitting a session into presses, and naming each press's location and repeat.
+"""Splitting a session into presses, naming each press's location and repeat, cutting them out.
 
 A press runs from contact onset to release: the frames where the force magnitude stays above
 a contact level (a few noise widths), in a run that rises above a detection level. Presses at
 the same place on the phantom (tip within ``radius`` of a location's centre, measured in the
 surface plane) share a location id; locations are numbered in the order they are first
-pressed, repeats within each location.
+pressed, repeats within each location. Each press is then cut out of the session's series with
+a margin of unloaded frames on both sides (:func:`cut_presses`).
 """
 
 from __future__ import annotations
@@ -92,3 +93,33 @@ def assign_locations(
     means = np.array([pts[m].mean(axis=0) for m in members]) if members else np.empty(
         (0, pts.shape[1]))
     return loc, rep, means
+
+
+@dataclass
+class PressRecord:
+    """One press, cut out with its margins, on the mocap clock."""
+
+    press: Press                     # indices into this record's frames
+    time_ns: np.ndarray
+    points: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    force_magnitude: np.ndarray
+    depth: np.ndarray
+    quality: np.ndarray
+    force_quality: np.ndarray
+    rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
+
+
+def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
+                ) -> list[PressRecord]:
+    """Each press with ``margin`` frames either side (never into a neighbouring press)."""
+    out = []
+    n = len(series["time_ns"])
+    for k, pr in enumerate(presses):
+        lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
+        hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else n)
+        local = Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat)
+        out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
+                               rest=np.zeros((2, 6))))
+    return out

@@ -24,8 +24,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from calib.gaps import FILLED, MISSING
+from calib.sync import SyncResult
 from core.recording import recording, time_column
-from pipeline.sync_stage import SyncResult
 
 APP_ID = "phantom-sync"
 VIEW_HZ = 50.0
