@@ -478,8 +478,10 @@ def _layout_3d(head: _Head, names: list[str]) -> tuple[int, int | None, np.ndarr
             and finite(head.first[1]) is not None:
         lead, time_col = 2, 1                       # Frame, Time
     else:
+        why = (f", but {head.first[0].strip()!r} {head.first[1].strip()!r} are no frame number "
+               "and time" if core == 3 * m + 2 else "")
         raise head.bad(f"row has {n_fields} fields; {m} markers need {3 * m} "
-                       f"(or {3 * m + 2} with Frame and Time)", head.first_line)
+                       f"(or {3 * m + 2} with Frame and Time){why}", head.first_line)
     return n_fields, time_col, lead + np.arange(3 * m).reshape(m, 3)
 
 
@@ -546,10 +548,15 @@ def _check_body_labels(head: _Head, names: list[str], lead: int, stride: int) ->
         for k, label in enumerate(group):
             body, _, word = label.rpartition(" ")
             col = lead + stride * b + k + 1
-            if word != layout[k] or (body and (shared or body != names[b])):
-                want = "an unnamed label" if shared else f"{names[b]!r}'s {layout[k]}"
-                raise head.bad(f"column line has {label!r} in column {col} where BODY_NAMES "
-                               f"and the first body's labels want {want}", head.labels_line)
+            if body and (shared or body != names[b]):
+                want = f"body {b + 1} is {names[b]!r}" if not shared else \
+                    f"this one label group serves all {len(names)} bodies"
+                raise head.bad(f"column line names body {body!r} in column {col} ({label!r}), "
+                               f"but in BODY_NAMES {want}", head.labels_line)
+            if word != layout[k]:
+                raise head.bad(f"column line has {label!r} in column {col} where body "
+                               f"{names[b]!r} needs its {layout[k]!r} column, as the first "
+                               "body has it", head.labels_line)
         sep = lead + stride * b + _BODY_FIELDS
         if stride > _BODY_FIELDS and sep < len(labels) and labels[sep]:
             raise head.bad(f"column line has {labels[sep]!r} in column {sep + 1}, which "
@@ -575,8 +582,8 @@ def _layout_6d(head: _Head, names: list[str]) -> tuple[int, int | None, int, int
             offsets = _body_offsets(head, head.labels[lead:])
         for stride in (_BODY_FIELDS, _BODY_FIELDS + 1):
             need = lead + stride * bodies - (stride - _BODY_FIELDS)
-            if n_fields not in (need, need + 1):
-                continue
+            if not (n_fields == need or (n_fields == need + 1 and not first[-1].strip())):
+                continue                           # (need + 1: a trailing tab)
             seps = [] if stride == _BODY_FIELDS else [
                 lead + stride * b + _BODY_FIELDS for b in range(bodies)
                 if lead + stride * b + _BODY_FIELDS < n_fields]
