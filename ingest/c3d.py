@@ -160,7 +160,8 @@ def _check_against_header(numbers: dict[str, float], header: _Header,
 
     ezc3d sizes the data by POINT:USED and POINT:FRAMES (and rewrites the header from them), so
     a count that disagrees with the header would have it read the data block with another
-    stride (every marker shifted) or past the frames the file holds.
+    stride (every marker shifted) or past the frames the file holds. A header rate of 0 (left
+    unset by some writers) is not compared.
     """
     def said(name: str) -> float | None:
         return numbers.get(f"POINT:{name}")

@@ -25,7 +25,7 @@ _LEADING_COLUMNS = ("Frame", "Time")
 # an EVENT's time may differ from its frame's by this many frames (QTM stamps events between
 # frames and prints the time with 3 decimals, hence the extra millisecond)
 _EVENT_FRAMES, _EVENT_PRINT_S = 2.0, 1e-3
-# the Time column may run this much off FREQUENCY (relative), plus two rounded last digits
+# the Time column may run this much off FREQUENCY (relative), plus 1 ms for printed rounding
 _RATE_TOLERANCE, _TIME_PRINT_S = 0.01, 1e-3
 
 Problem = tuple[str, str]
