@@ -228,9 +228,9 @@ def test_a_3d_header_that_cannot_be_right_is_refused(real_samples, tmp_path, cas
         assert err.where == _line_of(real_samples, name, key_line)
 
 
-def test_the_same_edits_undone_read_again(real_samples, tmp_path):
-    """The edits themselves do not spoil a file: a harmless one (a value QTM could write)
-    reads, so each refusal above is the changed value's doing."""
+def test_harmless_edits_still_read(real_samples, tmp_path):
+    """The editing itself does not spoil a file: a value QTM could write reads, so each
+    refusal above is the changed value's doing."""
     for name, edit in [(QTM2026, _set("NO_OF_CAMERAS", "12")),
                        (QTM2026, _sub("DATA_INCLUDED", "3D", "3D\r\nEVENT\tTrigger\t10\t0.091")),
                        (QTM2010, _set("TIME_STAMP", "2010-10-13 17:05:42")),
