@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -33,15 +33,23 @@ def _first(params: dict, group: str, name: str, path: str | Path) -> Any:
 
 
 def _labels(params: dict, n: int, path: str | Path) -> list[str]:
-    """POINT:LABELS, continued in LABELS2, LABELS3 ... when there are more than 255 points."""
+    """POINT:LABELS, continued in LABELS2, LABELS3 ... when there are more than 255 points.
+
+    Exactly ``n`` names: a label more than the data hold names a marker whose data are not in
+    the file (empty padding after the ``n`` names is allowed)."""
     labels = [str(s).strip() for s in _param(params, "POINT", "LABELS", path)]
     k = 2
-    while len(labels) < n and f"LABELS{k}" in params["POINT"]:
+    while f"LABELS{k}" in params["POINT"]:
         labels += [str(s).strip() for s in params["POINT"][f"LABELS{k}"]["value"]]
         k += 1
+    extra = [s for s in labels[n:] if s]
+    if extra:
+        raise BadInput(path, f"POINT:LABELS names {n + len(extra)} points but POINT:USED and "
+                             f"the data hold {n} (no data for {', '.join(extra[:3])}"
+                             f"{' ...' if len(extra) > 3 else ''})")
     labels = labels[:n]
     if len(labels) < n or any(not s for s in labels):
-        raise BadInput(path, f"POINT:LABELS names {len(labels)} of {n} points")
+        raise BadInput(path, f"POINT:LABELS names {sum(map(bool, labels))} of {n} points")
     dups = sorted({s for s in labels if labels.count(s) > 1})
     if dups:
         raise BadInput(path, f"duplicate point label(s): {', '.join(dups)}")
@@ -54,21 +62,45 @@ def _events(params: dict, start_s: float, path: str | Path) -> list[tuple[str, i
     if "LABELS" not in ev or "TIMES" not in ev:
         return []
     labels = [str(s).strip() for s in ev["LABELS"]["value"]]
-    times = np.asarray(ev["TIMES"]["value"], dtype=np.float64).reshape(2, -1)
+    times = np.asarray(ev["TIMES"]["value"], dtype=np.float64)
+    used = _count(params, "EVENT", "USED", path)
+    if times.ndim != 2 or times.shape[0] != 2 or times.shape[1] != len(labels) or (
+            used is not None and used != len(labels)):
+        said = "" if used is None else f", EVENT:USED says {used}"
+        raise BadInput(path, f"EVENT:TIMES has shape {times.shape} for {len(labels)} "
+                             f"EVENT:LABELS{said}: times and names must pair up (2 x events)")
     ns = time_to_ns(times[0] * 60.0 + times[1] - start_s, path, where=lambda i: f"event {i}")
     return [(lab, int(t)) for lab, t in zip(labels, ns, strict=False)]
 
 
-def _check_header(path: str | Path) -> int | None:
-    """Check the file against its own header before ezc3d reads it; return the frame count.
+class _Header(NamedTuple):
+    """What the C3D header (block 1) says about the 3D data."""
+
+    points: int              # word 2
+    frames: int | None       # words 4-5: last - first + 1; None when it cannot say (> 65535)
+    rate: float              # words 11-12, a float in the processor's format
+    data_start: int          # word 9: the first 512-byte block of the data section
+
+
+def _header_float(raw: bytes, processor: int) -> float:
+    """A 4-byte float of the header: IEEE little-endian (Intel), big-endian (MIPS) or DEC."""
+    if processor == 86:
+        return struct.unpack(">f", raw)[0]
+    if processor == 85:                      # VAX F: words swapped, exponent bias 2 higher
+        return struct.unpack("<f", raw[2:4] + raw[0:2])[0] / 4.0
+    return struct.unpack("<f", raw)[0]
+
+
+def _check_header(path: str | Path) -> _Header:
+    """Check the file against its own header before ezc3d reads it; return the header.
 
     The header (block 1) says where the parameter section starts (byte 0: its first 512-byte
     block), the section's first 4 bytes its length in blocks (byte 2) and the processor type
     (byte 3: 84 Intel, 85 DEC, 86 MIPS big-endian), and header word 9 the block where the data
     starts. ezc3d reads past the end of a file cut before those points (it crashed or hung on
-    such files), so a file shorter than they say is refused as truncated here. The frame count
-    comes from the header words (ezc3d rewrites its copy to what it read, so a truncated data
-    section would pass unnoticed); None when the header cannot say (> 65535 frames).
+    such files), so a file shorter than they say is refused as truncated here. The counts come
+    from the header words, because ezc3d rewrites its copy of them from the parameters (a
+    truncated data section, or parameters that contradict the header, would pass unnoticed).
     """
     size = Path(path).stat().st_size
     with open(path, "rb") as f:
@@ -82,7 +114,8 @@ def _check_header(path: str | Path) -> int | None:
         raise BadInput(path, f"truncated: {size} bytes end before the parameter section")
     order = ">" if param[3] == 86 else "<"
     params_end = start + param[2] * 512
-    data_start = (int(np.frombuffer(head[16:18], dtype=f"{order}u2")[0]) - 1) * 512
+    words = np.frombuffer(head[:20], dtype=f"{order}u2")
+    data_start = (int(words[8]) - 1) * 512
     if size < params_end:
         raise BadInput(path, f"truncated: {size} bytes end inside the parameter section "
                              f"(bytes {start} to {params_end})")
@@ -91,15 +124,68 @@ def _check_header(path: str | Path) -> int | None:
                              f"{data_start})")
     with open(path, "rb") as f:
         f.seek(start)
-        _check_parameters(path, f.read(params_end - start), order, start)
-    first, last = np.frombuffer(head[6:10], dtype=f"{order}u2")
-    if last >= 65535 or last < first:
+        numbers = _check_parameters(path, f.read(params_end - start), param[3], start)
+    first, last = int(words[3]), int(words[4])
+    frames = None if last >= 65535 or last < first else last - first + 1
+    header = _Header(points=int(words[1]), frames=frames,
+                     rate=_header_float(head[20:24], param[3]), data_start=int(words[8]))
+    _check_against_header(numbers, header, path)
+    return header
+
+
+def _number(raw: bytes, kind: int, processor: int) -> float:
+    """One parameter value: a byte, an unsigned int16 (counts above 32767 are written so) or
+    a float in the processor's format."""
+    if kind == 4:
+        return _header_float(raw, processor)
+    if kind == 2:
+        return float(struct.unpack(">H" if processor == 86 else "<H", raw)[0])
+    return float(raw[0])
+
+
+def _count(params: dict, group: str, name: str, path: str | Path) -> int | None:
+    """A count parameter (POINT:USED, POINT:FRAMES, ...) as an int; None when absent."""
+    values = np.ravel(params.get(group, {}).get(name, {}).get("value", []))
+    if values.size == 0:
         return None
-    return int(last) - int(first) + 1
+    v = values[0]
+    if not isinstance(v, int | float | np.number) or not float(v).is_integer() or v < 0:
+        raise BadInput(path, f"C3D parameter {group}:{name} {v!r} is not a count")
+    return int(v)
 
 
-def _check_parameters(path: str | Path, section: bytes, order: str, offset: int) -> None:
-    """Walk the parameter records as ezc3d will, refusing any that would lead it astray.
+def _check_against_header(numbers: dict[str, float], header: _Header,
+                          path: str | Path) -> None:
+    """The POINT parameters must say what the header says.
+
+    ezc3d sizes the data by POINT:USED and POINT:FRAMES (and rewrites the header from them), so
+    a count that disagrees with the header would have it read the data block with another
+    stride (every marker shifted) or past the frames the file holds. A header rate of 0 (left
+    unset by some writers) is not compared.
+    """
+    def said(name: str) -> float | None:
+        return numbers.get(f"POINT:{name}")
+
+    checks = [("USED", "{} points", header.points), ("FRAMES", "{} frames", header.frames),
+              ("DATA_START", "data block {}", header.data_start)]
+    for name, what, value in checks:
+        v = said(name)
+        if v is not None and value is not None and v != value:
+            raise BadInput(path, f"POINT:{name} says {what.format(f'{v:g}')} but the header "
+                                 f"says {what.format(value)}")
+    rate = said("RATE")
+    if rate is not None and header.rate > 0 and not np.isclose(rate, header.rate, rtol=1e-4):
+        raise BadInput(path, f"POINT:RATE says {rate:g} Hz but the header says "
+                             f"{header.rate:g} Hz")
+    scale = said("SCALE")
+    if scale is not None and (scale == 0 or not np.isfinite(scale)):
+        raise BadInput(path, f"POINT:SCALE {scale:g} is not a scale factor (a non-zero number)")
+
+
+def _check_parameters(path: str | Path, section: bytes, processor: int,
+                      offset: int) -> dict[str, float]:
+    """Walk the parameter records as ezc3d will, refusing any that would lead it astray; return
+    the single-number parameters as ``{"GROUP:NAME": value}``, as the file has them.
 
     A record: name length (int8, negative when locked; 0 ends the section), group id (int8),
     the name, the int16 offset from that field to the next record (0: the last), then a group's
@@ -108,21 +194,35 @@ def _check_parameters(path: str | Path, section: bytes, order: str, offset: int)
     one made it crash or loop, so each record must fit before the next, and the next must lie
     ahead, inside the section.
     """
+    order = ">" if processor == 86 else "<"
+    groups: dict[int, str] = {}
+    numbers: dict[tuple[int, str], float] = {}
+
+    def found() -> dict[str, float]:
+        return {f"{groups.get(g, g)}:{name}": v for (g, name), v in numbers.items()}
+
     pos = 4
     while pos + 2 <= len(section):
         n = abs(struct.unpack_from("b", section, pos)[0])
         if n == 0:
-            return
-        group = struct.unpack_from("b", section, pos + 1)[0] < 0
+            return found()
+        gid = struct.unpack_from("b", section, pos + 1)[0]
+        name = section[pos + 2:pos + 2 + n].decode("latin-1").upper()
         link = pos + 2 + n
         if link + 2 > len(section):
             break
         step = struct.unpack_from(order + "h", section, link)[0]
         end = link + 2
-        if not group and end + 2 <= len(section):
+        if gid < 0:
+            groups[-gid] = name
+        elif end + 2 <= len(section):
             kind, dims = struct.unpack_from("bB", section, end)
             shape = section[end + 2:end + 2 + dims]
-            end += 2 + dims + abs(kind) * (int(np.prod(list(shape))) if dims else 1)
+            size = int(np.prod(list(shape))) if dims else 1
+            value = section[end + 2 + dims:end + 2 + dims + abs(kind)]
+            if size == 1 and kind in (1, 2, 4) and len(value) == kind:
+                numbers[gid, name] = _number(value, kind, processor)
+            end += 2 + dims + abs(kind) * size
         if end < len(section):
             end += 1 + section[end]                                   # the description
         nxt = link + step
@@ -130,7 +230,7 @@ def _check_parameters(path: str | Path, section: bytes, order: str, offset: int)
             raise BadInput(path, "damaged parameter section: a record does not fit where "
                                  "the next one starts", where=f"byte {offset + pos}")
         if step == 0:
-            return
+            return found()
         pos = nxt
     raise BadInput(path, "damaged parameter section: records run past its end",
                    where=f"byte {offset + pos}")
@@ -142,7 +242,7 @@ def read_c3d(path: str | Path) -> MarkerSeries:
 
     if not Path(path).is_file():
         raise BadInput(path, "no such file")
-    claimed = _check_header(path)
+    header = _check_header(path)
     try:
         c = ezc3d.c3d(str(path))
     except Exception as e:  # ezc3d raises bare RuntimeError/IndexError/... on bad files
@@ -153,9 +253,9 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     if points.ndim != 3 or points.shape[0] < 3:
         raise BadInput(path, f"C3D points have shape {points.shape}, expected (4, N, T)")
     n_points, n_frames = points.shape[1], points.shape[2]
-    if claimed is not None and claimed != n_frames:
-        raise BadInput(path, f"truncated: the header says {claimed} frames but {n_frames} "
-                             "could be read", where=f"frame {n_frames}")
+    if header.frames is not None and header.frames != n_frames:
+        raise BadInput(path, f"truncated: the header says {header.frames} frames but "
+                             f"{n_frames} could be read", where=f"frame {n_frames}")
     rate = _first(params, "POINT", "RATE", path)
     if not isinstance(rate, int | float | np.number):
         raise BadInput(path, f"POINT:RATE {rate!r} is not a number")

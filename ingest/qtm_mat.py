@@ -138,16 +138,22 @@ def _series(path: str | Path, name: str, f: dict[str, Any]) -> MarkerSeries:
                              "expected markers x 4 x frames")
     m, _, t = data.shape
     if len(labels) != m:
-        raise BadInput(path, f"{len(labels)} labels for {m} trajectories in {name}")
-    if f.get("count") is not None and f["count"] != m:
-        raise BadInput(path, f"{name}.Trajectories.Labeled.Count is {f['count']} but Data holds "
+        raise BadInput(path, f"{name}.Trajectories.Labeled.Labels: {len(labels)} labels for "
+                             f"{m} trajectories in Data")
+    count = _number(path, f"{name}.Trajectories.Labeled.Count", f["count"], whole=True)
+    if count is not None and count != m:
+        raise BadInput(path, f"{name}.Trajectories.Labeled.Count is {count} but Data holds "
                              f"{m} trajectories")
     dups = sorted({s for s in labels if labels.count(s) > 1})
     if dups or any(not s for s in labels):
         raise BadInput(path, f"empty or duplicate label(s) in {name}: {', '.join(dups)}")
-    if f["frames"] is not None and f["frames"] != t:
-        raise BadInput(path, f"{name}.Frames is {f['frames']} but Data has {t} frames")
-    rate = f["rate"]
+    frames = _number(path, f"{name}.Frames", f["frames"], whole=True)
+    if frames is not None and frames != t:
+        raise BadInput(path, f"{name}.Frames is {frames} but Data has {t} frames")
+    rate = _number(path, f"{name}.FrameRate", f["rate"])
+    if rate is None:
+        raise BadInput(path, f"{name}.FrameRate is missing: the frames cannot be timed")
+    start = _number(path, f"{name}.StartFrame", f["start_frame"], whole=True)
     time_ns = frame_times_ns(t, rate, path, f"{name}.FrameRate")
     positions = data[:, :3, :].transpose(2, 0, 1) * 1e-3                # (T, M, 3) metres
     res = data[:, 3, :].T * 1e-3 if data.shape[1] == 4 else np.zeros((t, m))
@@ -155,13 +161,25 @@ def _series(path: str | Path, name: str, f: dict[str, Any]) -> MarkerSeries:
     positions[missing] = np.nan
     res[missing] = np.nan
     meta = {"format": "qtm_mat", "struct": name, "units_in_file": "mm",
-            "start_frame": f["start_frame"], "timestamp": f["timestamp"] or None}
+            "start_frame": start, "timestamp": f["timestamp"] or None}
     return MarkerSeries(source=str(path), time_ns=time_ns, labels=labels, positions=positions,
                         rate_hz=float(rate), residuals=res, meta=meta)
 
 
-def _scalar(v: Any) -> float:
-    return float(np.asarray(v, dtype=np.float64).ravel()[0])
+def _number(path: str | Path, what: str, value: Any, whole: bool = False) -> Any:
+    """A numeric field of the QTM struct (one finite number; a count when ``whole``), or None
+    when the struct has no such field; anything else is bad input naming the field."""
+    if value is None:
+        return None
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf" or arr.size != 1:
+        shown = repr(str(arr.ravel()[0])) if arr.dtype.kind in "US" and arr.size else \
+            f"a {arr.dtype.kind} array of shape {arr.shape}"
+        raise BadInput(path, f"{what} is not a number ({shown})")
+    v = float(arr.ravel()[0])
+    if not np.isfinite(v) or (whole and not (v.is_integer() and v >= 0)):
+        raise BadInput(path, f"{what} {v:g} is not a {'count' if whole else 'finite number'}")
+    return int(v) if whole else v
 
 
 def _read7(path: str | Path, name: str) -> dict[str, Any]:
@@ -178,23 +196,16 @@ def _read7(path: str | Path, name: str) -> dict[str, Any]:
     labeled = field(field(s, "Trajectories"), "Labeled")
     labels = [str(np.ravel(x)[0]).strip() if np.size(x) else "" for x in
               np.ravel(field(labeled, "Labels"))]
-    frames, start, stamp = (field(s, k, False) for k in ("Frames", "StartFrame", "Timestamp"))
-    count = field(labeled, "Count", False)
+    stamp = field(s, "Timestamp", False)
     return {
         "data": np.asarray(field(labeled, "Data"), dtype=np.float64),
         "labels": labels,
-        "count": None if count is None else _count(count),
-        "rate": _scalar(field(s, "FrameRate")),
-        "frames": None if frames is None else int(_scalar(frames)),
-        "start_frame": None if start is None else int(_scalar(start)),
+        "count": field(labeled, "Count", False),
+        "rate": field(s, "FrameRate", False),
+        "frames": field(s, "Frames", False),
+        "start_frame": field(s, "StartFrame", False),
         "timestamp": None if stamp is None or not np.size(stamp) else str(np.ravel(stamp)[0]),
     }
-
-
-def _count(value: Any) -> int | float:
-    """A count field as an int (a non-whole value stays a float, so it never matches)."""
-    v = _scalar(value)
-    return int(v) if float(v).is_integer() else v
 
 
 def mat73_text(ds: h5py.Dataset) -> str:
@@ -212,19 +223,21 @@ def _read73(path: str | Path, name: str) -> dict[str, Any]:
         labels = [mat73_text(f[r]).strip() for r in refs]
         data = np.asarray(labeled["Data"][()], dtype=np.float64).T      # undo MATLAB's order
 
-        def opt(key: str) -> Any:
-            return s[key] if key in s else None
+        def opt(group: h5py.Group, key: str) -> Any:
+            """A field's value: text for a MATLAB char array, else the array; None if absent."""
+            if key not in group:
+                return None
+            ds = group[key]
+            return mat73_text(ds) if ds.attrs.get("MATLAB_class") == b"char" else ds[()]
 
-        frames, start, stamp = opt("Frames"), opt("StartFrame"), opt("Timestamp")
-        count = labeled["Count"][()] if "Count" in labeled else None
         return {
             "data": data,
             "labels": labels,
-            "count": None if count is None else _count(count),
-            "rate": _scalar(s["FrameRate"][()]),
-            "frames": None if frames is None else int(_scalar(frames[()])),
-            "start_frame": None if start is None else int(_scalar(start[()])),
-            "timestamp": None if stamp is None else mat73_text(stamp),
+            "count": opt(labeled, "Count"),
+            "rate": opt(s, "FrameRate"),
+            "frames": opt(s, "Frames"),
+            "start_frame": opt(s, "StartFrame"),
+            "timestamp": mat73_text(s["Timestamp"]) if "Timestamp" in s else None,
         }
 
 

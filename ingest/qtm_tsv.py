@@ -25,11 +25,18 @@ from core.errors import BadInput
 from core.series import BodySeries, MarkerSeries, frame_times_ns, time_to_ns
 from core.units import length_scale
 from ingest.sniff import check_last_line
+from ingest.qtm_header import (
+    column_problem,
+    count,
+    event_problem,
+    finite,
+    header_problem,
+    names_problem,
+    rate_problem,
+)
 
 _KEY = re.compile(r"[A-Z][A-Z0-9_]*")
 _LIST_KEYS = ("MARKER_NAMES", "BODY_NAMES", "TRAJECTORY_TYPES")
-NUMERIC_KEYS = ("NO_OF_FRAMES", "NO_OF_CAMERAS", "NO_OF_MARKERS", "NO_OF_BODIES", "FREQUENCY",
-                "NO_OF_ANALOG", "ANALOG_FREQUENCY")
 _GAPS = ["", "NaN", "nan", "NAN", "-nan", "-NaN", "null", "NULL", "Null"]
 _GAP_SET = frozenset(_GAPS)
 _UNIT_KEYS = ("MARKER_UNITS", "POSITION_UNITS", "LENGTH_UNITS", "UNITS")
@@ -50,6 +57,7 @@ class _Head:
     keys: dict[str, list[str]] = field(default_factory=dict)
     key_lines: dict[str, int] = field(default_factory=dict)
     events: list[tuple[str, int, float]] = field(default_factory=list)
+    event_lines: list[int] = field(default_factory=list)
     labels: list[str] | None = None      # the label / column line, trailing empties removed
     labels_line: int = 0                 # its 1-based line number
     first: list[str] | None = None       # fields of the first data row (None: no data)
@@ -64,8 +72,8 @@ class _Head:
         return v[0].strip() if v else None
 
     def number(self, key: str) -> float | None:
-        """A numeric header value; None when absent (:func:`check_numeric_keys` has refused a
-        value that is not a number)."""
+        """A numeric header value; None when absent (or, before :func:`_check_header` has run,
+        not a number)."""
         v = self.scalar(key)
         try:
             return None if v is None else float(v)
@@ -200,10 +208,14 @@ def _is_key(token: str) -> bool:
 def _header_line(head: _Head, key: str, values: list[str], line_no: int) -> None:
     if key == "EVENT":
         try:
-            label, frame, time = values[0].strip(), int(float(values[1])), float(values[2])
+            label, frame, time = values[0].strip(), count(values[1]), float(values[2])
         except (IndexError, ValueError):
-            raise head.bad("EVENT line must be: EVENT <label> <frame> <time>", line_no) from None
+            frame = None
+        if frame is None:
+            raise head.bad("EVENT line must be: EVENT <label> <frame number> <time in s>",
+                           line_no)
         head.events.append((label, frame, time))
+        head.event_lines.append(line_no)
         return
     if key in head.keys:
         raise head.bad(f"header key {key} appears twice", line_no)
@@ -218,19 +230,14 @@ def _strip_trailing(fields: list[str]) -> list[str]:
     return fields[:end]
 
 
-def _names(head: _Head, key: str, count_key: str) -> list[str]:
-    names = [n.strip() for n in head.keys[key]]
-    line = _key_line(head, key)
-    if not names or any(not n for n in names):
-        raise head.bad(f"{key} has an empty name", line)
-    dups = sorted({n for n in names if names.count(n) > 1})
-    if dups:
-        raise head.bad(f"duplicate name(s) in {key}: {', '.join(dups)}", line)
-    claimed = head.scalar(count_key)
-    if claimed is not None and claimed != str(len(names)):
-        raise head.bad(f"{count_key} is {claimed} but {key} lists {len(names)} names",
-                       _key_line(head, count_key))
-    return names
+def _check_header(head: _Head, names_key: str, count_key: str) -> list[str]:
+    """Refuse a header that cannot be right (:mod:`ingest.qtm_header`); return the names."""
+    for problem in (header_problem(head.keys, names_key),
+                    names_problem(head.keys, names_key, count_key)):
+        if problem is not None:
+            key, what = problem
+            raise head.bad(what, _key_line(head, key))
+    return [n.strip() for n in head.keys[names_key]]
 
 
 def _key_line(head: _Head, key: str) -> int:
@@ -373,13 +380,9 @@ def _check_rows(head: _Head, n_rows: int, n_fields: int) -> None:
     last = head.first_line + n_rows - 1
     check_last_line(head.path, "\t", n_fields, head.first or [], last)
     claimed = head.scalar("NO_OF_FRAMES")
-    if claimed is None:
+    frames = None if claimed is None else count(claimed)
+    if frames is None:                           # absent (checked by _check_header)
         return
-    try:
-        frames = int(claimed)
-    except ValueError:
-        raise head.bad(f"NO_OF_FRAMES {claimed!r} is not a whole number",
-                       _key_line(head, "NO_OF_FRAMES")) from None
     if n_rows < frames:
         raise head.bad(f"truncated: NO_OF_FRAMES says {frames} but the file has {n_rows} data "
                        "rows", last)
@@ -409,11 +412,20 @@ def _time_ns(head: _Head, t: np.ndarray | None, n: int) -> tuple[np.ndarray, flo
         raise head.bad(f"Time is not increasing ({t[i]:g} s after {t[i - 1]:g} s, frame {i})",
                        head.first_line + i)
     if freq is None:
-        freq = 1e9 / float(np.median(steps)) if steps.size else float("nan")
+        return ns, 1e9 / float(np.median(steps)) if steps.size else float("nan")
+    off = rate_problem(freq, n, (ns[-1] - ns[0]) / 1e9)
+    if off is not None:
+        raise head.bad(off, _key_line(head, "FREQUENCY"))
     return ns, freq
 
 
-def _events(head: _Head) -> list[tuple[str, int]]:
+def _events(head: _Head, rate: float) -> list[tuple[str, int]]:
+    """The EVENT lines as (label, time in ns); each one's frame and time must agree at
+    ``rate`` (the file's frame rate, once the data have confirmed it)."""
+    for (label, frame, time), line in zip(head.events, head.event_lines, strict=True):
+        what = event_problem(label, frame, time, rate)
+        if what is not None:
+            raise head.bad(what, line)
     ns = time_to_ns([t for _, _, t in head.events], head.path, where=lambda i: f"EVENT {i + 1}")
     return [(label, int(t)) for (label, _, _), t in zip(head.events, ns, strict=True)]
 
@@ -444,7 +456,10 @@ def _layout_3d(head: _Head, names: list[str]) -> tuple[int, int | None, np.ndarr
             token = next(x for x in labels if not _is_value(x))
             raise head.bad(f"{token!r} is not a number (and this is no column line)",
                            head.labels_line)
-        _check_column_markers(head, labels, names)
+        problem = column_problem(labels, names)
+        if problem is not None:
+            col, what = problem
+            raise head.bad(f"{what} (column {col + 1})", head.labels_line)
         cols = np.empty((m, 3), dtype=np.int64)
         for j, name in enumerate(names):
             for k, axis in enumerate("XYZ"):
@@ -459,47 +474,20 @@ def _layout_3d(head: _Head, names: list[str]) -> tuple[int, int | None, np.ndarr
         core -= 1                                   # a trailing tab
     if core == 3 * m:
         lead, time_col = 0, None
-    elif core == 3 * m + 2:
+    elif core == 3 * m + 2 and count(head.first[0]) is not None \
+            and finite(head.first[1]) is not None:
         lead, time_col = 2, 1                       # Frame, Time
     else:
+        why = (f", but {head.first[0].strip()!r} {head.first[1].strip()!r} are no frame number "
+               "and time" if core == 3 * m + 2 else "")
         raise head.bad(f"row has {n_fields} fields; {m} markers need {3 * m} "
-                       f"(or {3 * m + 2} with Frame and Time)", head.first_line)
+                       f"(or {3 * m + 2} with Frame and Time){why}", head.first_line)
     return n_fields, time_col, lead + np.arange(3 * m).reshape(m, 3)
 
 
-def _check_column_markers(head: _Head, labels: list[str], names: list[str]) -> None:
-    """Every marker the column line names must be one of MARKER_NAMES: a column for another
-    marker would be dropped without a word."""
-    known = set(names)
-    extra = []
-    for label in labels:
-        if label.endswith((" X", " Y", " Z")) and label[:-2] not in known \
-                and label[:-2] not in extra:
-            extra.append(label[:-2])
-    if extra:
-        raise head.bad(f"column line names marker(s) {extra[:5]} that MARKER_NAMES does not "
-                       f"list ({len(names)} names)", head.labels_line)
-
-
-def check_numeric_keys(head: _Head) -> None:
-    """Header values that must be numbers are numbers (one line naming the key otherwise)."""
-    for key in NUMERIC_KEYS:
-        v = head.scalar(key)
-        if v is None:
-            continue
-        try:
-            float(v)
-        except ValueError:
-            raise head.bad(f"{key} {v!r} is not a number", _key_line(head, key)) from None
-
-
 def _read_3d(head: _Head) -> MarkerSeries:
-    check_numeric_keys(head)
-    names = _names(head, "MARKER_NAMES", "NO_OF_MARKERS")
+    names = _check_header(head, "MARKER_NAMES", "NO_OF_MARKERS")
     types = head.keys.get("TRAJECTORY_TYPES")
-    if types is not None and len(types) != len(names):
-        raise head.bad(f"TRAJECTORY_TYPES has {len(types)} entries for {len(names)} markers",
-                       _key_line(head, "TRAJECTORY_TYPES"))
     scale, unit = _length_scale(head)
     _require_data(head)
     n_fields, time_col, cols = _layout_3d(head, names)
@@ -520,7 +508,7 @@ def _read_3d(head: _Head) -> MarkerSeries:
     if types is not None:
         meta["trajectory_types"] = [t.strip() for t in types]
     return MarkerSeries(source=str(head.path), time_ns=time_ns, labels=names,
-                        positions=positions, rate_hz=float(rate), events=_events(head),
+                        positions=positions, rate_hz=float(rate), events=_events(head, rate),
                         meta=meta)
 
 
@@ -540,10 +528,46 @@ def _body_offsets(head: _Head, labels: list[str]) -> dict[str, int]:
     return offsets
 
 
-def _layout_6d(head: _Head, bodies: int) -> tuple[int, int | None, int, int, dict[str, int]]:
+def _check_body_labels(head: _Head, names: list[str], lead: int, stride: int) -> None:
+    """The label line must describe the bodies of BODY_NAMES, in order, one group of 16 labels
+    each laid out as the first (``<body> X  Y  Z  Roll ... Rot[8]``, the body's name on any of
+    them), or, in old exports, one unnamed group for all bodies. A column line (``Frame Time
+    ...``) must be as wide as the rows."""
+    assert head.first is not None
+    labels = [s.strip() for s in head.labels or []]
+    n_fields = len(head.first)
+    shared = labels[0] != "Frame" and len(labels) <= lead + _BODY_FIELDS and len(names) > 1
+    if not shared and not (n_fields == len(labels) or (
+            n_fields == len(labels) + 1 and not head.first[-1].strip())):
+        raise head.bad(f"row has {n_fields} fields but the column line names {len(labels)}",
+                       head.first_line)
+    groups = [labels[lead + stride * b:lead + stride * b + _BODY_FIELDS]
+              for b in range(1 if shared else len(names))]   # old exports: one for all
+    layout = [label.rpartition(" ")[2] for label in groups[0]]
+    for b, group in enumerate(groups):
+        for k, label in enumerate(group):
+            body, _, word = label.rpartition(" ")
+            col = lead + stride * b + k + 1
+            if body and (shared or body != names[b]):
+                want = f"body {b + 1} is {names[b]!r}" if not shared else \
+                    f"this one label group serves all {len(names)} bodies"
+                raise head.bad(f"column line names body {body!r} in column {col} ({label!r}), "
+                               f"but in BODY_NAMES {want}", head.labels_line)
+            if word != layout[k]:
+                raise head.bad(f"column line has {label!r} in column {col} where body "
+                               f"{names[b]!r} needs its {layout[k]!r} column, as the first "
+                               "body has it", head.labels_line)
+        sep = lead + stride * b + _BODY_FIELDS
+        if stride > _BODY_FIELDS and sep < len(labels) and labels[sep]:
+            raise head.bad(f"column line has {labels[sep]!r} in column {sep + 1}, which "
+                           "separates two bodies", head.labels_line)
+
+
+def _layout_6d(head: _Head, names: list[str]) -> tuple[int, int | None, int, int,
+                                                     dict[str, int]]:
     """Fields per row, Time column, first body column, body stride (16 or 17), offsets."""
     assert head.first is not None
-    first, n_fields = head.first, len(head.first)
+    first, n_fields, bodies = head.first, len(head.first), len(names)
     offsets = dict(_BODY_DEFAULT)
     if head.labels is not None and head.labels[0].strip() == "Frame":
         labels = [s.strip() for s in head.labels]
@@ -558,8 +582,8 @@ def _layout_6d(head: _Head, bodies: int) -> tuple[int, int | None, int, int, dic
             offsets = _body_offsets(head, head.labels[lead:])
         for stride in (_BODY_FIELDS, _BODY_FIELDS + 1):
             need = lead + stride * bodies - (stride - _BODY_FIELDS)
-            if n_fields not in (need, need + 1):
-                continue
+            if not (n_fields == need or (n_fields == need + 1 and not first[-1].strip())):
+                continue                           # (need + 1: a trailing tab)
             seps = [] if stride == _BODY_FIELDS else [
                 lead + stride * b + _BODY_FIELDS for b in range(bodies)
                 if lead + stride * b + _BODY_FIELDS < n_fields]
@@ -569,17 +593,18 @@ def _layout_6d(head: _Head, bodies: int) -> tuple[int, int | None, int, int, dic
                 if not first[0].strip().isdigit():
                     continue
                 time_col = 1
+            if head.labels is not None:
+                _check_body_labels(head, names, lead, stride)
             return n_fields, time_col, lead, stride, offsets
     raise head.bad(f"row has {n_fields} fields, which does not fit {bodies} bodies of "
                    f"{_BODY_FIELDS} values", head.first_line)
 
 
 def _read_6d(head: _Head) -> BodySeries:
-    check_numeric_keys(head)
-    names = _names(head, "BODY_NAMES", "NO_OF_BODIES")
+    names = _check_header(head, "BODY_NAMES", "NO_OF_BODIES")
     scale, unit = _length_scale(head)
     _require_data(head)
-    n_fields, time_col, lead, stride, off = _layout_6d(head, len(names))
+    n_fields, time_col, lead, stride, off = _layout_6d(head, names)
     tokens = ["X", "Y", "Z", "Residual", *(f"Rot[{k}]" for k in range(9))]
     cols = np.array([[lead + stride * b + off[t] for t in tokens] for b in range(len(names))])
     t, flat = _parse_block(head, n_fields, time_col, [int(c) for c in cols.ravel()])
@@ -596,5 +621,5 @@ def _read_6d(head: _Head) -> BodySeries:
     rotations[lost] = np.nan
     return BodySeries(source=str(head.path), time_ns=time_ns, bodies=names,
                       positions=positions, rotations=rotations, residuals=residuals,
-                      rate_hz=float(rate), events=_events(head),
+                      rate_hz=float(rate), events=_events(head, rate),
                       meta=_meta(head, "qtm_tsv_6d", unit))

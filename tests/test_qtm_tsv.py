@@ -103,7 +103,8 @@ def _header(names: list[str], frames: int, rate: float = 500, key: str = "MARKER
     count = "NO_OF_MARKERS" if key == "MARKER_NAMES" else "NO_OF_BODIES"
     return [f"NO_OF_FRAMES\t{frames}", "NO_OF_CAMERAS\t8", f"{count}\t{len(names)}",
             f"FREQUENCY\t{rate:g}", "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0", "DESCRIPTION\t--",
-            "TIME_STAMP\t2026-11-21, 09:12:00", "DATA_INCLUDED\t3D", *extra,
+            "TIME_STAMP\t2026-11-21, 09:12:00",
+            "DATA_INCLUDED\t" + ("3D" if key == "MARKER_NAMES" else "6D"), *extra,
             key + "\t" + "\t".join(names)]
 
 
