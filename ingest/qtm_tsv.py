@@ -24,7 +24,6 @@ import pyarrow.csv as pcsv
 from core.errors import BadInput
 from core.series import BodySeries, MarkerSeries, frame_times_ns, time_to_ns
 from core.units import length_scale
-from ingest.sniff import check_last_line
 from ingest.qtm_header import (
     column_problem,
     count,
@@ -34,6 +33,7 @@ from ingest.qtm_header import (
     names_problem,
     rate_problem,
 )
+from ingest.sniff import check_last_line
 
 _KEY = re.compile(r"[A-Z][A-Z0-9_]*")
 _LIST_KEYS = ("MARKER_NAMES", "BODY_NAMES", "TRAJECTORY_TYPES")
