@@ -32,6 +32,7 @@ def eval_(runs: tuple[Path, ...], out: Path, scarcity: bool, scarcity_epochs: in
     of predicted beside true surfaces coloured by error and of predicted beside true force
     (--rrd, default beside --out).
     """
+    from core.atomic import atomic_output
     from train.eval_view import write_eval_recording
     from train.evaluate import evaluate_runs, table2, test_errors, write_json
 
@@ -41,7 +42,8 @@ def eval_(runs: tuple[Path, ...], out: Path, scarcity: bool, scarcity_epochs: in
         result["scarcity"] = _scarcity(runs, out, scarcity_epochs, device)
     write_json(out, result)
     table = table2(result)
-    out.with_suffix(".md").write_text(table)
+    with atomic_output(out.with_suffix(".md")) as tmp:
+        tmp.write_text(table)
     if rrd_path:
         write_eval_recording(rrd_path, test_errors(runs[0], device)[2])
     click.echo(table + f"\nwrote {out}, {out.with_suffix('.md')}"

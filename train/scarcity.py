@@ -14,6 +14,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+from core.atomic import atomic_output
 from core.progress import say
 from train.checkpoint import load_checkpoint
 from train.evaluate import metrics, test_errors
@@ -48,7 +49,8 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as f:
+    """The curve as CSV, written atomically."""
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
         w.writerows(rows)
@@ -79,5 +81,6 @@ def plot(path: Path, rows: list[dict]) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
