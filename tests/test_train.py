@@ -152,3 +152,21 @@ def test_train_bad_input_is_one_line_and_exit_2(dent, tmp_path) -> None:
     res = CliRunner().invoke(cli, ["-q", "train", "--data", str(data), "--splits", str(splits),
                                    "--fold", "7", "--out", str(tmp_path / "run")])
     assert res.exit_code == 2 and "--fold 7" in res.output
+
+
+def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp_path) -> None:
+    data, splits = dent
+    pre = tmp_path / "pre"
+    _train(dent, pre, epochs=1)
+    run = tmp_path / "tl"
+    train_run(data, splits, run, TrainOptions(epochs=1, batch=8), SMALL, init=pre / "best.pt",
+              device="cpu")
+    out = tmp_path / "metrics.json"
+    res = CliRunner().invoke(cli, ["-q", "eval", str(run), "--out", str(out), "--scarcity",
+                                   "--no-rrd"])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(out.read_text())["scarcity"]
+    n_train = len(json.loads(splits.read_text())["folds"][0]["train"]["groups"])
+    assert sorted({r["groups"] for r in rows}) == list(range(1, n_train + 1))
+    assert {r["transfer"] for r in rows} == {True, False} and len(rows) == 2 * n_train
+    assert out.with_suffix(".scarcity.png").stat().st_size > 0
