@@ -156,24 +156,47 @@ def per_example(count: int, repeats: int) -> None:
 
 def trade(model: MSM, seqs: list, truth: list, repeats: int, factor: float) -> None:
     print("\ntrade: max point error against the 1e-10 N equilibrium, and time per example")
+    rows = trade_rows(model, seqs, truth, repeats, factor)
     print("  fast path tol (N)   ms/example   max error (mm)   (rest factorisation shared)")
-    for tol in FAST_TOLS:
-        times, errs = [], []
-        solver = StaticSolver(model, tol)
-        for (node, d), exact in zip(seqs, truth, strict=True):
-            ts = [timed(simulate_sequence, model, node, d, tol=tol, solver=solver)
-                  for _ in range(repeats)]
-            times.append(statistics.median(t for t, _ in ts) / 15 + factor)
-            errs.append(_max_mm(ts[0][1], exact))
-        print(f"  {tol:16.0e}   {statistics.median(times) * 1e3:10.2f}   {max(errs):.2e}")
+    for r in (r for r in rows if r["solver"] == "fast"):
+        print(f"  {r['tol']:16.0e}   {r['ms']:10.2f}   {r['max_err_mm']:.2e}")
     print("  reference criterion (m/s and N)   ms/example   max error (mm)")
-    for crit in REF_CRITERIA:
-        times, errs = [], []
-        for (node, d), exact in zip(seqs, truth, strict=True):
-            t, (ref, _) = timed(simulate_reference, model, node, d, v_tol=crit, f_tol=crit)
-            times.append(t / 15)
-            errs.append(_max_mm(ref, exact))
-        print(f"  {crit:30.0e}   {statistics.median(times) * 1e3:10.2f}   {max(errs):.2e}")
+    for r in (r for r in rows if r["solver"] == "reference"):
+        print(f"  {r['tol']:30.0e}   {r['ms']:10.2f}   {r['max_err_mm']:.2e}")
+
+
+def trade_rows(model: MSM | None = None, seqs: list | None = None, truth: list | None = None,
+               repeats: int = 1, factor: float | None = None, count: int = 4,
+               reference: bool = True) -> list[dict]:
+    """Time per example and largest error against the 1e-10 N equilibrium, for each fast-path
+    tolerance and (``reference``) each reference criterion; the pieces not given (model,
+    ``count`` sequences, their truth, the shared factorisation) are made here."""
+    model = model or MSM()
+    seqs = seqs or sequences(count)
+    if truth is None:
+        exact = StaticSolver(model, 1e-10)
+        truth = [simulate_sequence(model, n, d, tol=1e-10, solver=exact) for n, d in seqs]
+    if factor is None:
+        factor = rest_factorisation(model, 5) / EXAMPLES_PER_LOCATION
+    rows = []
+    for tol in FAST_TOLS:
+        solver = StaticSolver(model, tol)
+        runs = [[timed(simulate_sequence, model, node, d, tol=tol, solver=solver)
+                 for _ in range(repeats)] for node, d in seqs]
+        rows.append(_trade_row("fast", tol, [statistics.median(t for t, _ in ts) / 15 + factor
+                                             for ts in runs],
+                               [ts[0][1] for ts in runs], truth))
+    for crit in REF_CRITERIA if reference else ():
+        runs = [timed(simulate_reference, model, node, d, v_tol=crit, f_tol=crit)
+                for node, d in seqs]
+        rows.append(_trade_row("reference", crit, [t / 15 for t, _ in runs],
+                               [ref for _, (ref, _) in runs], truth))
+    return rows
+
+
+def _trade_row(solver: str, tol: float, seconds: list[float], got: list, truth: list) -> dict:
+    return {"solver": solver, "tol": tol, "ms": statistics.median(seconds) * 1e3,
+            "max_err_mm": max(_max_mm(g, t) for g, t in zip(got, truth, strict=True))}
 
 
 def _max_mm(a: np.ndarray, b: np.ndarray) -> float:

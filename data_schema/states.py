@@ -67,6 +67,8 @@ STATES = H5Schema(
     ),
 )
 
+PLAUSIBLE_M = 5.0          # no phantom point or tip lies this far from the frame's origin
+PLAUSIBLE_N = 1000.0       # no phantom press reaches this force (the Nano17 reads up to ~70 N)
 REGENERATE = ("regenerate it with this version's `pipeline simulate` (MSM) or "
               "`pipeline extract` (lab)")
 
@@ -76,7 +78,9 @@ def validate_states(path: str | Path) -> None:
 
     Meaning: example indices in range, start and end in one sequence, end after start,
     single-step pairs exactly one level apart, multi-step at least two; every valid point
-    finite; one session name per session id.
+    finite; coordinates and forces of plausible size for metres and newtons (millimetres or
+    millinewtons written as metres or newtons are refused, not learned); one session name per
+    session id.
     """
     sid = read_schema_id(path)
     if sid is not None and sid[0] == STATES.name and sid[1].split(".")[0] == "1":
@@ -91,9 +95,25 @@ def validate_states(path: str | Path) -> None:
         points, valid = f["states/points"][()], f["states/valid"][()]
         if not np.isfinite(points[valid]).all():
             raise BadInput(path, "a point marked valid is not finite")
+        _check_units(path, points[valid], f["states/tip"][()], f["states/force"][()])
         seq, step = f["states/sequence"][()], f["states/step"][()]
         for name, gap in (("single", 1), ("multi", 2)):
             _check_pairs(path, name, f[f"{name}/start"][()], f[f"{name}/end"][()], seq, step, gap)
+
+
+def _check_units(path: str | Path, points: np.ndarray, tip: np.ndarray, force: np.ndarray
+                 ) -> None:
+    """Metres and newtons, not millimetres and millinewtons."""
+    for what, xyz in (("a surface point", points), ("a tip position", tip)):
+        far = float(np.abs(xyz).max()) if xyz.size else 0.0
+        if far > PLAUSIBLE_M:
+            raise BadInput(path, f"{what} lies {far:.4g} m from the phantom frame's origin "
+                                 f"(more than {PLAUSIBLE_M:g} m): are these millimetres? "
+                                 "States are in metres")
+    big = float(np.abs(force).max()) if force.size else 0.0
+    if big > PLAUSIBLE_N:
+        raise BadInput(path, f"a force of {big:.4g} N (more than {PLAUSIBLE_N:g} N): are these "
+                             "millinewtons? States are in newtons")
 
 
 def _check_pairs(path: str | Path, name: str, start: np.ndarray, end: np.ndarray,

@@ -23,6 +23,9 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--no-cond", is_flag=True, help="The noCond ablation: no condition C.")
 @click.option("--point-fraction", type=click.FloatRange(0, 1, min_open=True), default=None,
               help="The aug variant: this fraction of the points per sample in training.")
+@click.option("--rotate", is_flag=True,
+              help="Rotation augmentation: turn each training example about the surface "
+                   "normal by a random angle.")
 @click.option("--train-groups", type=click.IntRange(min=1), default=None,
               help="Train on the manifest's first N training groups only (data scarcity).")
 @click.option("--epochs", type=click.IntRange(min=1), default=250, show_default=True)
@@ -37,8 +40,8 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Write RUN_DIR/train.rrd (the loss curves).")
 @seed_option
 def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
-          point_fraction: float | None, train_groups: int | None, epochs: int, batch: int,
-          lr: float, k: int, device: str, rrd: bool, seed: int) -> None:
+          point_fraction: float | None, rotate: bool, train_groups: int | None, epochs: int,
+          batch: int, lr: float, k: int, device: str, rrd: bool, seed: int) -> None:
     """Train the cGNN on one fold (resumes a killed run in the same --out).
 
     Reads --data and --splits (refused unless the manifest was made from exactly this data:
@@ -53,7 +56,8 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
     from train.train_view import write_train_recording
 
     opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr,
-                        point_fraction=point_fraction, train_groups=train_groups, seed=seed)
+                        point_fraction=point_fraction, train_groups=train_groups, seed=seed,
+                        rotate=rotate)
     config = CGNNConfig(k=k, use_condition=not no_cond)
     best = train_run(data, splits, out, opts, config, init, device)
     if rrd and (out / "log.csv").is_file():

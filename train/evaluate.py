@@ -10,6 +10,7 @@ spread of the per-fold means is given beside.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from data_schema.hdf5 import attr_text
 from train.checkpoint import load_checkpoint, model_from
 from train.data import SETS, Batch, States, load_manifest, load_states, make_batch, role_examples
 from train.loop import Prediction, distances, predict
+from train.normalise import Normaliser
 
 SOURCE_NAMES = {"msm": "MSM", "lab": "Exp"}
 
@@ -48,14 +50,24 @@ def run_label(meta: dict, source: str) -> str:
         with h5py.File(init["data"]["file"], "r") as f:
             first = SOURCE_NAMES.get(attr_text(f.attrs["source"]), "?")
         return f"{model}/{aug}{first} (TL)"
-    return f"{model}/{'aug ' if opts['point_fraction'] else ''}{data}"
+    rot = "rot " if opts.get("rotate") else ""
+    return f"{model}/{rot}{'aug ' if opts['point_fraction'] else ''}{data}"
 
 
-@torch.no_grad()
-def test_errors(run_dir: Path, device: str = "cpu", batch: int = 64
-                ) -> tuple[ExampleErrors, dict, list[tuple[Batch, Prediction]]]:
-    """Errors of a run's best model on its fold's test examples, its meta, and a few
-    (batch, prediction) pairs for the recording."""
+@dataclass
+class LoadedRun:
+    """A run's best model with the data and test examples of its fold."""
+
+    model: torch.nn.Module
+    norm: Normaliser
+    states: States
+    test: dict[str, np.ndarray]      # set -> example ids
+    meta: dict
+    splits: Path
+
+
+def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
+    """The best checkpoint of ``run_dir``, its states and its fold's test examples."""
     state = load_checkpoint(run_dir / "best.pt", device)
     meta = state["meta"]
     data, splits = Path(meta["data"]["file"]), Path(meta["splits"])
@@ -63,28 +75,48 @@ def test_errors(run_dir: Path, device: str = "cpu", batch: int = 64
         if not p.is_file():
             raise BadInput(run_dir / "best.pt", f"its data {p} is gone")
     doc = load_manifest(splits, data)
-    states: States = load_states(data).to(device)
     model, norm = model_from(state, device)
-    ids = role_examples(doc, meta["options"]["fold"], "test")
+    return LoadedRun(model, norm, load_states(data).to(device),
+                     role_examples(doc, meta["options"]["fold"], "test"), meta, splits)
+
+
+@torch.no_grad()
+def example_errors(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
+                   predictor: Callable[[Batch], Prediction] | None = None, batch: int = 64
+                   ) -> tuple[ExampleErrors, list[tuple[Batch, Prediction]]]:
+    """Errors on the test examples, each batch first moved by ``transform`` (a robustness
+    test) and predicted by ``predictor`` (another precision; default: the model as it is);
+    and a few (batch, prediction) pairs for the recording."""
+    predictor = predictor or (lambda b: predict(run.model, run.norm, b))
     cols: dict[str, list] = {"set": [], "ld_mean": [], "ld_max": [], "force_err": []}
     shown: list[tuple[Batch, Prediction]] = []
     for name in SETS:
-        pairs = states.pairs[name][torch.as_tensor(ids[name], dtype=torch.long)]
+        pairs = run.states.pairs[name][torch.as_tensor(run.test[name], dtype=torch.long)]
         for rows in pairs.split(batch):
-            b = make_batch(states, rows)
-            p = predict(model, norm, b)
+            b = make_batch(run.states, rows)
+            b = transform(b) if transform else b
+            p = predictor(b)
             d = distances(p, b)
             cols["set"] += [name] * len(rows)
-            cols["ld_mean"].append((d.sum(1) / b.mask.sum(1).clamp(min=1)).cpu().numpy())
-            cols["ld_max"].append(d.amax(1).cpu().numpy())
-            cols["force_err"].append((p.dforce - b.dforce).cpu().numpy())
+            cols["ld_mean"].append((d.sum(1) / b.mask.sum(1).clamp(min=1)).float().cpu().numpy())
+            cols["ld_max"].append(d.amax(1).float().cpu().numpy())
+            cols["force_err"].append((p.dforce - b.dforce).float().cpu().numpy())
             if len(shown) < 2:
                 shown.append((b, p))
     if not cols["ld_mean"]:
-        raise BadInput(splits, f"fold {meta['options']['fold']} has no test example")
+        raise BadInput(run.splits, f"fold {run.meta['options']['fold']} has no test example")
     errs = ExampleErrors(np.array(cols["set"]), *(np.concatenate(cols[k]).astype(np.float64)
                                                   for k in ("ld_mean", "ld_max", "force_err")))
-    return errs, meta, shown
+    return errs, shown
+
+
+def test_errors(run_dir: Path, device: str = "cpu"
+                ) -> tuple[ExampleErrors, dict, list[tuple[Batch, Prediction]]]:
+    """Errors of a run's best model on its fold's test examples, its meta, and a few
+    (batch, prediction) pairs for the recording."""
+    run = load_run(run_dir, device)
+    errs, shown = example_errors(run)
+    return errs, run.meta, shown
 
 
 def metrics(e: ExampleErrors) -> dict[str, dict[str, float]]:

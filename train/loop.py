@@ -9,7 +9,9 @@ Each epoch's shuffle and point sampling (``point_fraction``: the paper's aug var
 fraction of the points per sample in training, all in validation and test) come from a
 generator seeded by (seed, epoch), so a run killed after epoch e and resumed from ``last.pt``
 draws exactly what the uninterrupted run drew: same weights. ``best.pt`` is the epoch with the
-lowest validation loss. A non-finite or exploding loss stops the run naming epoch and batch.
+lowest validation loss. ``rotate`` turns each training example about the surface normal by
+a random angle (drawn from the same generator), so the model cannot lean on where on the
+phantom a press was. A non-finite or exploding loss stops the run naming epoch and batch.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from torch.nn.parallel import DistributedDataParallel
 
 from core.errors import BadInput
 from core.progress import say
+from train.augment import about_normal, move_batch
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.data import (
     Batch,
@@ -57,6 +60,7 @@ class TrainOptions:
     point_fraction: float | None = None
     train_groups: int | None = None
     seed: int = 0
+    rotate: bool = False
 
 
 @dataclass
@@ -188,8 +192,12 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         idx = None
         if keep is not None:
             idx = torch.rand(len(rows), n_points, generator=g).argsort(1)[:, :keep].to(device)
+        turns = about_normal(torch.rand(len(rows), generator=g) * 2 * math.pi) \
+            if opts.rotate else None
         mine = ctx.my_slice(torch.arange(len(rows), device=device))
         batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
+        if turns is not None:
+            batch = move_batch(batch, turns[mine.cpu()], torch.tensor(run.norm.centre))
         loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha)
         value = float(loss.detach()) / max(len(mine), 1)
         first_loss = first_loss or value

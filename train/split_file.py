@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from core.atomic import atomic_output
+from core.errors import BadInput
 from core.provenance import make_provenance, sha256_file
 from data_schema.hdf5 import attr_text
 from data_schema.json_docs import FOLDS, validate_folds
@@ -45,7 +46,10 @@ def build_manifest(states: str | Path, plan: SplitPlan) -> dict:
     """The manifest document for ``states`` under ``plan`` (validated before it is written)."""
     validate_states(states)
     eg = example_groups(states, plan.group_by)
-    folds, note = make_folds(np.concatenate(list(eg.values())), plan)
+    try:
+        folds, note = make_folds(np.concatenate(list(eg.values())), plan)
+    except BadInput as e:                       # a plan that does not fit: name the file
+        raise (BadInput(states, e.what) if e.path is None else e) from None
     out = []
     for fold in folds:
         roles = examples_by_role(eg, fold["groups"])

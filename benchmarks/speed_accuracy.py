@@ -1,0 +1,341 @@
+"""The speed-accuracy report: what each cGNN setting costs and what it buys, on the same data.
+
+Every row is measured in one run on one machine, on the same test examples:
+- k (3, 5, 10, 20), the fraction of points per training sample (1 .. 0.25) and rotation
+  augmentation: cGNN/Exp runs on fold 0 of a twin session (26 points), same epochs and seed;
+- precision: the k = 5 model in float32, float64 and bfloat16 autocast (where the device has it);
+- number of points: batch-1 latency at 26 .. 4096 points; accuracy of an MSM-trained model on
+  its test surfaces resampled to 26 .. all of the grid's points;
+- robustness: the twin test set turned 90 degrees about the surface normal, tilted 10 and 30
+  degrees, and with a quarter or half of its markers left out, for the plain model and the one
+  trained with rotation augmentation (errors and their ratio to the unmoved test set);
+- the MSM fast path's solver tolerance against accuracy and time (``bench_msm.trade_rows``);
+- a Pareto table (latency against error) and the setting to pick for a 1 kHz haptic loop
+  (force only, one press at 26 points) and for 60 Hz visuals (displacements of 1024 points).
+
+Writes ``OUT/report.md``, ``OUT/results.json`` and PNG plots; runs and data are kept under OUT
+so a second call only re-measures (delete OUT/runs to retrain).
+
+    python benchmarks/speed_accuracy.py --out out/speed_accuracy --quick   (~15 min, 2 cores)
+    python benchmarks/speed_accuracy.py --out out/speed_accuracy           (paper epochs, GPU)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from bench_cgnn import median_ms
+from bench_msm import trade_rows
+from speed_accuracy_report import write_report
+
+from core.progress import set_quiet
+from sim.msm import MSMParams
+from sim.msm_dataset import Protocol, generate
+from train.augment import about_normal, move_batch, tilt
+from train.data import Batch
+from train.evaluate import LoadedRun, example_errors, load_run, metrics
+from train.loop import Prediction, TrainOptions, predict, train_run
+from train.model import CGNN, CGNNConfig
+
+HAPTIC_MS = 1.0          # a 1 kHz haptic loop's whole budget
+VISUAL_MS = 1000 / 60    # one 60 Hz frame
+POINT_COUNTS = (26, 64, 256, 1024, 4096)
+
+
+@dataclass(frozen=True)
+class Budget:
+    """How long to train: --quick fits 2 CPU cores in minutes, the default follows the paper."""
+
+    twin_epochs: int
+    msm_epochs: int
+    msm_grid: int
+    msm_locations: int
+    msm_directions: int
+    lr: float
+    repeats: int
+
+
+QUICK = Budget(twin_epochs=80, msm_epochs=15, msm_grid=16, msm_locations=12,
+               msm_directions=3, lr=1e-3, repeats=50)
+PAPER = Budget(twin_epochs=250, msm_epochs=100, msm_grid=32, msm_locations=100,
+               msm_directions=11, lr=1e-4, repeats=200)
+
+
+def pipeline(*args: str) -> None:
+    """Run one pipeline command (quiet, no recording); stop the report if it fails."""
+    subprocess.run([sys.executable, "-m", "pipeline", "-q", *args], check=True)
+
+
+def twin_data(out: Path, given: Path | None, seed: int) -> tuple[Path, Path]:
+    """States and fold manifest of a twin session: ``given`` (a demo folder) or made here."""
+    if given is not None:
+        return given / "states.h5", given / "splits.json"
+    d = out / "data"
+    states, splits = d / "states.h5", d / "splits.json"
+    if not splits.is_file():
+        d.mkdir(parents=True, exist_ok=True)
+        pipeline("synth", str(d / "session"), "--seed", str(seed), "--no-rrd")
+        pipeline("ingest", str(d / "session"), "--out", str(d / "session.mcap"), "--no-rrd")
+        pipeline("sync", str(d / "session.mcap"), "--out", str(d / "synced.h5"), "--no-rrd")
+        pipeline("extract", str(d / "synced.h5"), "--out", str(states), "--seed", str(seed),
+                 "--no-rrd")
+        pipeline("split", str(states), "--out", str(splits), "--seed", str(seed), "--no-rrd")
+    return states, splits
+
+
+def msm_data(out: Path, budget: Budget, seed: int) -> tuple[Path, Path]:
+    """An MSM set on a ``msm_grid`` x ``msm_grid`` surface, split 7:2:1 by location."""
+    d = out / "data"
+    states, splits = d / f"msm{budget.msm_grid}.h5", d / f"msm{budget.msm_grid}_splits.json"
+    if not splits.is_file():
+        d.mkdir(parents=True, exist_ok=True)
+        generate(states, Protocol(locations=budget.msm_locations,
+                                  directions=budget.msm_directions),
+                 MSMParams(n=budget.msm_grid), workers=min(2, os.cpu_count() or 1))
+        pipeline("split", str(states), "--out", str(splits), "--folds", "1", "--seed",
+                 str(seed), "--no-rrd")
+    return states, splits
+
+
+def trained(out: Path, name: str, data: tuple[Path, Path], epochs: int, budget: Budget,
+            device: str, seed: int, k: int = 5, **options: object) -> LoadedRun:
+    """Train (or resume, or reuse) one setting on fold 0; its best model, loaded."""
+    run_dir = out / "runs" / name
+    opts = TrainOptions(fold=0, epochs=epochs, lr=budget.lr, seed=seed, **options)
+    tic = time.perf_counter()
+    train_run(data[0], data[1], run_dir, opts, CGNNConfig(k=k), device=device)
+    print(f"  trained {name} ({epochs} epochs) in {time.perf_counter() - tic:.0f} s",
+          flush=True)
+    return load_run(run_dir, device)
+
+
+def train_seconds_per_epoch(name: str, out: Path) -> float:
+    """Median seconds of a training epoch, from the run's log."""
+    with open(out / "runs" / name / "log.csv") as f:
+        rows = f.read().splitlines()[1:]
+    return float(np.median([float(r.split(",")[5]) for r in rows]))
+
+
+def accuracy(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
+             predictor: Callable[[Batch], Prediction] | None = None) -> dict[str, float]:
+    """Mean L_d, mean max L_d (mm) and force absolute error (N) on the fold's test set."""
+    m = metrics(example_errors(run, transform, predictor)[0])["all"]
+    return {"ld_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
+            "force_n": m["force_abs_n"]}
+
+
+def latency(model: CGNN, n: int, device: torch.device, repeats: int, force_only: bool = False,
+            dtype: torch.dtype = torch.float32, autocast: bool = False) -> float:
+    """Median batch-1 milliseconds at ``n`` points (random points: the graph is rebuilt)."""
+    p = torch.rand(1, n, 3, device=device, dtype=dtype)
+    c = torch.rand(1, 6, device=device, dtype=dtype)
+    fn = model.forward_force if force_only else model
+    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
+
+    def call() -> object:
+        with torch.autocast(device.type, torch.bfloat16, enabled=autocast):
+            return fn(p, c)
+
+    with torch.inference_mode():
+        return median_ms(call, repeats, sync)
+
+
+def speed(model: CGNN, device: torch.device, repeats: int, **kw: object) -> dict[str, float]:
+    """Latency of one press at 26 points (force only: the haptic loop) and of 1024 points."""
+    return {"force26_ms": latency(model, 26, device, repeats, force_only=True, **kw),
+            "full26_ms": latency(model, 26, device, repeats, **kw),
+            "full1024_ms": latency(model, 1024, device, max(5, repeats // 5), **kw)}
+
+
+def k_rows(out: Path, twin: tuple[Path, Path], b: Budget, dev: str, seed: int) -> list[dict]:
+    """Accuracy and latency as k varies."""
+    rows = []
+    for k in (3, 5, 10, 20):
+        run = trained(out, f"twin_k{k}", twin, b.twin_epochs, b, dev, seed, k=k)
+        rows.append({"setting": f"k={k}", "k": k, **accuracy(run),
+                     **speed(run.model, torch.device(dev), b.repeats)})
+    return rows
+
+
+def fraction_rows(out: Path, twin: tuple[Path, Path], b: Budget, dev: str, seed: int
+                  ) -> list[dict]:
+    """Accuracy and training time as the fraction of points per training sample varies."""
+    rows = []
+    for frac in (1.0, 0.75, 0.5, 0.25):
+        name = "twin_k5" if frac == 1.0 else f"twin_frac{frac:g}"
+        run = trained(out, name, twin, b.twin_epochs, b, dev, seed,
+                      point_fraction=None if frac == 1.0 else frac)
+        rows.append({"setting": f"point fraction {frac:g}", "fraction": frac, **accuracy(run),
+                     "epoch_s": train_seconds_per_epoch(name, out)})
+    return rows
+
+
+def model_in(run: LoadedRun, dtype: torch.dtype) -> CGNN:
+    """A copy of the run's model in ``dtype``."""
+    model = CGNN(run.model.config).to(run.states.points.device)
+    model.load_state_dict(run.model.state_dict())
+    return model.to(dtype).eval()
+
+
+def cast_predictor(model: CGNN, run: LoadedRun) -> Callable[[Batch], Prediction]:
+    """Predict with ``model`` in its precision (inputs cast, outputs back to float32)."""
+    dtype = next(model.parameters()).dtype
+
+    def fn(b: Batch) -> Prediction:
+        cast = Batch(*(t.to(dtype) if t.is_floating_point() else t for t in
+                       (b.points, b.target, b.mask, b.cond, b.dforce)))
+        p = predict(model, run.norm, cast)
+        return Prediction(p.deformed.float(), p.dforce.float())
+
+    return fn
+
+
+def autocast_predictor(run: LoadedRun) -> Callable[[Batch], Prediction]:
+    """Predict under bfloat16 autocast (matrix products in bfloat16, sums in float32)."""
+    device = run.states.points.device.type
+
+    def fn(b: Batch) -> Prediction:
+        with torch.autocast(device, torch.bfloat16):
+            p = predict(run.model, run.norm, b)
+        return Prediction(p.deformed.float(), p.dforce.float())
+
+    return fn
+
+
+def precision_rows(run: LoadedRun, dev: str, repeats: int) -> list[dict]:
+    """float32, float64 and bfloat16 autocast on the same model and test set."""
+    device = torch.device(dev)
+    double = model_in(run, torch.float64)
+    rows = [{"setting": "k=5 float32", **accuracy(run), **speed(run.model, device, repeats)},
+            {"setting": "k=5 float64", **accuracy(run, predictor=cast_predictor(double, run)),
+             **speed(double, device, repeats, dtype=torch.float64)}]
+    try:
+        bf = accuracy(run, predictor=autocast_predictor(run))
+        rows.append({"setting": "k=5 bfloat16 autocast", **bf,
+                     **speed(run.model, device, repeats, autocast=True)})
+    except RuntimeError as e:         # a device without bfloat16 kernels
+        rows.append({"setting": f"bfloat16: not supported here ({e})"})
+    return rows
+
+
+def subsample(fraction: float, seed: int) -> Callable[[Batch], Batch]:
+    """Keep a random ``fraction`` of each example's points (another point density)."""
+    g = torch.Generator().manual_seed(seed)
+
+    def fn(b: Batch) -> Batch:
+        n = b.points.shape[1]
+        keep = max(1, round(fraction * n))
+        idx = torch.rand(len(b.points), n, generator=g).argsort(1)[:, :keep].to(b.points.device)
+        take = idx.unsqueeze(-1).expand(-1, -1, 3)
+        return Batch(b.points.gather(1, take), b.target.gather(1, take), b.mask.gather(1, idx),
+                     b.cond, b.dforce)
+
+    return fn
+
+
+def moved(rotations: Callable[[int], torch.Tensor], centre: torch.Tensor
+          ) -> Callable[[Batch], Batch]:
+    """Each batch turned by ``rotations(batch size)`` about ``centre``."""
+    return lambda b: move_batch(b, rotations(len(b.points)), centre)
+
+
+def robustness_rows(plain: LoadedRun, turned: LoadedRun, seed: int) -> list[dict]:
+    """Errors of both models on the moved and resampled test sets, and ratios to unmoved."""
+    centre = torch.tensor(plain.norm.centre)
+    tests: dict[str, Callable[[Batch], Batch] | None] = {
+        "unmoved": None,
+        "rotated 90 deg about the normal": moved(
+            lambda n: about_normal(torch.full((n,), math.pi / 2)), centre),
+        "tilted 10 deg": moved(lambda n: tilt(10.0, n), centre),
+        "tilted 30 deg": moved(lambda n: tilt(30.0, n), centre),
+        "75 % of the points": subsample(0.75, seed),
+        "50 % of the points": subsample(0.5, seed),
+    }
+    rows = []
+    for model_name, run in (("plain", plain), ("rotation-augmented", turned)):
+        base = None
+        for test, fn in tests.items():
+            acc = accuracy(run, fn)
+            base = base or acc
+            rows.append({"model": model_name, "test": test, **acc,
+                         "force_ratio": acc["force_n"] / base["force_n"],
+                         "ld_ratio": acc["ld_mm"] / base["ld_mm"]})
+    return rows
+
+
+def point_rows(msm: LoadedRun, dev: str, repeats: int, seed: int) -> list[dict]:
+    """Latency at 26 .. 4096 points; accuracy of the MSM model resampled to as many points."""
+    grid = msm.states.points.shape[1]
+    device = torch.device(dev)
+    rows = []
+    for n in POINT_COUNTS:
+        row = {"points": n, "full_ms": latency(msm.model, n, device, max(5, repeats // 5)),
+               "force_ms": latency(msm.model, n, device, max(5, repeats // 5),
+                                   force_only=True)}
+        if n <= grid:
+            row.update(accuracy(msm, subsample(n / grid, seed) if n < grid else None))
+        rows.append(row)
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("out/speed_accuracy"))
+    ap.add_argument("--quick", action="store_true", help="minutes on 2 CPU cores")
+    ap.add_argument("--twin", type=Path, default=None,
+                    help="a folder with states.h5 and splits.json (a `pipeline demo` output)")
+    ap.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--epochs", type=int, default=None,
+                    help="train every setting this many epochs (a smoke test)")
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    set_quiet(True)
+    b = QUICK if a.quick else PAPER
+    if a.epochs:
+        b = replace(b, twin_epochs=a.epochs, msm_epochs=a.epochs)
+    a.out.mkdir(parents=True, exist_ok=True)
+    twin = twin_data(a.out, a.twin, a.seed)
+    msm = msm_data(a.out, b, a.seed)
+    print("k ...", flush=True)
+    res = {"budget": b.__dict__, "device": device_name(a.device), "k": k_rows(a.out, twin, b,
+                                                                              a.device, a.seed)}
+    print("fraction ...", flush=True)
+    res["fraction"] = fraction_rows(a.out, twin, b, a.device, a.seed)
+    plain = load_run(a.out / "runs" / "twin_k5", a.device)
+    turned = trained(a.out, "twin_k5_rot", twin, b.twin_epochs, b, a.device, a.seed,
+                     rotate=True)
+    print("precision, robustness ...", flush=True)
+    res["precision"] = precision_rows(plain, a.device, b.repeats)
+    res["robustness"] = robustness_rows(plain, turned, a.seed)
+    msm_run = trained(a.out, f"msm{b.msm_grid}_k5", msm, b.msm_epochs, b, a.device, a.seed)
+    print("points, MSM tolerance ...", flush=True)
+    res["points"] = point_rows(msm_run, a.device, b.repeats, a.seed)
+    res["msm_tolerance"] = trade_rows(count=3, reference=not a.quick)
+    (a.out / "results.json").write_text(json.dumps(res, indent=1))
+    write_report(a.out, res, HAPTIC_MS, VISUAL_MS)
+    print((a.out / "report.md").read_text())
+
+
+def device_name(dev: str) -> str:
+    """The device and thread count the figures were measured on."""
+    if dev == "cuda":
+        return torch.cuda.get_device_name()
+    return f"CPU, {torch.get_num_threads()} threads, {os.cpu_count()} cores, torch " \
+           f"{torch.__version__}"
+
+
+if __name__ == "__main__":
+    main()
