@@ -36,10 +36,15 @@ def pareto(rows: list[dict], cost: str, error: str) -> list[dict]:
     return sorted(front, key=lambda r: r[cost])
 
 
-def pick(rows: list[dict], cost: str, budget: float, error: str) -> dict | None:
-    """The most accurate row whose ``cost`` fits ``budget``."""
+def pick(rows: list[dict], cost: str, budget: float, error: str, tie: float = 0.02
+         ) -> dict | None:
+    """The most accurate row whose ``cost`` fits ``budget``; among rows within ``tie``
+    (relative) of the best error, the cheapest (a difference that small is noise)."""
     fits = [r for r in rows if cost in r and error in r and r[cost] <= budget]
-    return min(fits, key=lambda r: r[error]) if fits else None
+    if not fits:
+        return None
+    best = min(r[error] for r in fits)
+    return min((r for r in fits if r[error] <= best * (1 + tie)), key=lambda r: r[cost])
 
 
 def choice_text(rows: list[dict], haptic_ms: float, visual_ms: float) -> str:
@@ -58,7 +63,7 @@ def choice_text(rows: list[dict], haptic_ms: float, visual_ms: float) -> str:
 
 def write_report(out: Path, res: dict, haptic_ms: float, visual_ms: float) -> None:
     """``out/report.md`` and its plots."""
-    choices = res["k"] + res["precision"]
+    choices = res["k"] + res["precision"][1:]        # float32 is the k = 5 row already
     b = res["budget"]
     md = [f"# Speed-accuracy report\n\nMeasured on {res['device']} in one run. Twin rows: "
           f"cGNN/Exp, fold 0, {b['twin_epochs']} epochs, lr {b['lr']:g}; MSM rows: "

@@ -74,8 +74,77 @@ def rrd_entities(path: str | Path) -> dict[str, set[str]]:
     return found
 
 
+def rrd_timelines(path: str | Path) -> set[str]:
+    """The timelines of a recording (a person should not have to choose among useless ones)."""
+    from rerun.chunk import RrdReader
+
+    return {c.name for c in RrdReader(str(path)).store().schema().index_columns()}
+
+
 def rrd_has_blueprint(path: str | Path) -> bool:
     """Whether the recording carries a default blueprint (the layout a person opens)."""
     from rerun.chunk import RrdReader
 
     return bool(RrdReader(str(path)).blueprints())
+
+
+# --- what every stage's views share: up axis, a camera on the phantom, named series, colours
+
+UP = rr.ViewCoordinates.RIGHT_HAND_Z_UP
+# viridis at 0, 0.25, 0.5, 0.75, 1: dark purple (none) .. yellow (most)
+_VIRIDIS = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98],
+                     [253, 231, 37]], dtype=float)
+
+
+def declare_up(rec: rr.RecordingStream, path: str = "/") -> None:
+    """Say that +z is up (the phantom frame's normal; QTM's lab frame), so 3D views start
+    upright."""
+    rec.log(path, UP, static=True)
+
+
+def phantom_eye(centre: np.ndarray, size: float, up: np.ndarray | None = None
+                ) -> rrb.EyeControls3D:
+    """A camera in front of and above a phantom of side ``size`` (m) centred at ``centre``,
+    looking down at it at about 45 degrees, so it fills the view without a horizon."""
+    up = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, float)
+    front = np.cross(up, [1.0, 0.0, 0.0])
+    front = front / (np.linalg.norm(front) or 1.0)
+    c = np.asarray(centre, float)
+    return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=c - 1.0 * size * front
+                             + 1.1 * size * up, look_target=c, eye_up=up)
+
+
+def phantom_view(name: str, contents: list[str], centre: np.ndarray, size: float,
+                 up: np.ndarray | None = None, origin: str = "/") -> rrb.Spatial3DView:
+    """A 3D view framing the phantom, grid off (it drew a horizon across the view)."""
+    return rrb.Spatial3DView(name=name, origin=origin, contents=contents,
+                             eye_controls=phantom_eye(centre, size, up),
+                             line_grid=rrb.LineGrid3D(visible=False))
+
+
+def plot(name: str, origin: str, y_range: tuple[float, float] | None = None,
+         legend: bool = True) -> rrb.TimeSeriesView:
+    """A time-series view of one quantity (its unit in ``name``), legend in the top-left
+    corner (data rise to the right), y fixed to ``y_range`` when given."""
+    return rrb.TimeSeriesView(
+        name=name, origin=origin,
+        axis_y=rrb.ScalarAxis(range=y_range, zoom_lock=False) if y_range else None,
+        plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.LeftTop, visible=legend))
+
+
+def send_series(rec: rr.RecordingStream, path: str, timeline: str, time_ns: np.ndarray,
+                values: np.ndarray, name: str, color: tuple[int, ...], width: float = 1.5
+                ) -> None:
+    """One named, coloured line of scalars over a duration timeline (int64 ns)."""
+    rec.log(path, rr.SeriesLines(names=[name], colors=[color], widths=[width]), static=True)
+    rec.send_columns(path, indexes=[time_column(timeline, time_ns)],
+                     columns=rr.Scalars.columns(scalars=np.asarray(values, np.float64)))
+
+
+def colormap(v: np.ndarray) -> np.ndarray:
+    """Viridis RGB (uint8) of values in [0, 1] (NaN as 0): for errors and displacements,
+    with the range the colours span written in the view's name."""
+    v = np.clip(np.nan_to_num(np.asarray(v, float)), 0.0, 1.0) * (len(_VIRIDIS) - 1)
+    lo = np.minimum(v.astype(int), len(_VIRIDIS) - 2)
+    frac = (v - lo)[..., None]
+    return (_VIRIDIS[lo] * (1 - frac) + _VIRIDIS[lo + 1] * frac).round().astype(np.uint8)

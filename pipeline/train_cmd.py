@@ -32,6 +32,9 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--batch", type=click.IntRange(min=1), default=32, show_default=True)
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=1e-4,
               show_default=True)
+@click.option("--alpha", type=click.FloatRange(min=0, min_open=True), default=88.0,
+              show_default=True,
+              help="Weight of the mean distance (m) against the force MSE (N^2) in the loss.")
 @click.option("--k", type=click.IntRange(min=2), default=5, show_default=True,
               help="Neighbours per point, itself included.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
@@ -41,7 +44,7 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @seed_option
 def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
           point_fraction: float | None, rotate: bool, train_groups: int | None, epochs: int,
-          batch: int, lr: float, k: int, device: str, rrd: bool, seed: int) -> None:
+          batch: int, lr: float, alpha: float, k: int, device: str, rrd: bool, seed: int) -> None:
     """Train the cGNN on one fold (resumes a killed run in the same --out).
 
     Reads --data and --splits (refused unless the manifest was made from exactly this data:
@@ -55,7 +58,7 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
     from train.model import CGNNConfig
     from train.train_view import write_train_recording
 
-    opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr,
+    opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr, alpha=alpha,
                         point_fraction=point_fraction, train_groups=train_groups, seed=seed,
                         rotate=rotate)
     config = CGNNConfig(k=k, use_condition=not no_cond)

@@ -1,16 +1,21 @@
 """The simulate recording: a few MSM sequences, the surface at every force step.
 
 What a person checks after simulate: does the surface dent where the force is applied, along
-the force, by a plausible amount, and smoothly from step to step. Timeline ``force_step``
-(sequence: t = 0 rest .. steps). Per logged sequence ``s``:
+the force, by a plausible amount, and smoothly from step to step. One timeline, ``force_step``
+(t = 0 rest .. steps; the applied force is t x fmax / steps, the same in every sequence, so it
+is written in the plot's name rather than drawn four times). Per logged sequence ``s``:
 
 - ``msm/seq_<s>/surface``: Mesh3D of the surface (the spring triangles), vertices coloured by
-  displacement from rest (dark blue 0 .. yellow at the sequence's largest displacement);
-- ``msm/seq_<s>/loaded``: Points3D, the loaded mass;
-- ``msm/seq_<s>/force``: Arrows3D ending at the loaded mass, along the force, 3 mm per N;
-- ``plots/seq_<s>/{tip_displacement_mm,force_N}``: Scalars over the force steps.
+  displacement from rest, viridis on a square-root scale from 0 (purple) to the largest
+  displacement of all logged sequences (yellow; a point load makes a narrow spike, which a
+  linear scale would show as one yellow dot on a purple sheet), that range in the view's name;
+- ``msm/seq_<s>/loaded``: Points3D, the loaded mass; ``msm/seq_<s>/force``: Arrows3D ending at
+  it, along the force, 3 mm per N;
+- ``plots/seq_<s>``: the loaded mass's displacement (mm) over the force steps, one colour per
+  sequence, the same colour as the sequence's arrow.
 
 Only a few sequences are logged (not all 1100): the view is for checking, the file is the data.
+Everything is sent as columns, so the recording has no log_time timeline to choose by mistake.
 """
 
 from __future__ import annotations
@@ -21,23 +26,27 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import recording
+from core.recording import colormap, declare_up, phantom_view, plot, recording
 
 APP_ID = "phantom-simulate"
+TIMELINE = "force_step"
 ARROW_M_PER_N = 0.003
-# viridis at 0, 0.25, 0.5, 0.75, 1
-_STOPS = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]],
-                  dtype=float)
+# one colour per logged sequence (tab10), for its arrow, its loaded mass and its curve
+SEQUENCE_COLORS = [(214, 39, 40), (31, 119, 180), (255, 127, 14), (148, 103, 189),
+                   (44, 160, 44), (140, 86, 75), (227, 119, 194), (23, 190, 207)]
 
 
-def blueprint(sequences: list[int]) -> rrb.Blueprint:
-    """One 3D view per logged sequence, and the tip displacement and force curves."""
-    views = [rrb.Spatial3DView(name=f"sequence {s}", origin=f"/msm/seq_{s:04d}")
-             for s in sequences]
+def blueprint(sequences: list[int], largest_mm: float, fmax: float, steps: int,
+              size: float) -> rrb.Blueprint:
+    """One 3D view per logged sequence framing the surface; the displacement curves."""
+    centre = np.array([size / 2, size / 2, -size * 0.05])
+    views = [phantom_view(f"sequence {s}: displacement 0 .. {largest_mm:.1f} mm (sqrt)",
+                          [f"+ /msm/seq_{s:04d}/**"], centre, size) for s in sequences]
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Grid(*views),
-            rrb.TimeSeriesView(name="tip displacement (mm) and force (N)", origin="/plots"),
+            plot(f"loaded mass displacement [mm] (force {fmax / steps:g} N per step)",
+                 "/plots"),
             column_shares=[3, 2],
         ),
         collapse_panels=False,
@@ -56,44 +65,55 @@ def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray],
     seq_of_state = arrays["states/sequence"]
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
-    with recording(APP_ID, path, blueprint(chosen)) as rec:
-        for s in chosen:
-            rows = np.flatnonzero(seq_of_state == s)
-            rows = rows[np.argsort(arrays["states/step"][rows], kind="stable")]
-            log_sequence(rec, s, arrays, rows, triangles)
+    rows = {s: _rows(arrays, s) for s in chosen}
+    largest = max((_displacement(arrays, r).max() for r in rows.values()), default=0.0)
+    force = np.linalg.norm(arrays["states/force_vector"], axis=1)
+    steps = int(arrays["states/step"].max()) if len(force) else 1
+    size = float(np.ptp(arrays["states/points"][0, :, 0])) if len(force) else 0.1
+    bp = blueprint(chosen, largest * 1e3, float(force.max(initial=0.0)), max(steps, 1), size)
+    with recording(APP_ID, path, bp) as rec:
+        declare_up(rec)
+        for i, s in enumerate(chosen):
+            log_sequence(rec, s, arrays, rows[s], triangles, largest,
+                         SEQUENCE_COLORS[i % len(SEQUENCE_COLORS)])
     return chosen
 
 
+def _rows(arrays: dict[str, np.ndarray], s: int) -> np.ndarray:
+    """The states of sequence ``s`` in step order."""
+    rows = np.flatnonzero(arrays["states/sequence"] == s)
+    return rows[np.argsort(arrays["states/step"][rows], kind="stable")]
+
+
+def _displacement(arrays: dict[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
+    """(T, N) distance of every mass from its rest position (the sequence's step 0), m."""
+    points = arrays["states/points"][rows].astype(np.float64)
+    return np.linalg.norm(points - points[0], axis=2)
+
+
 def log_sequence(rec: rr.RecordingStream, s: int, arrays: dict[str, np.ndarray],
-                 rows: np.ndarray, triangles: np.ndarray) -> None:
+                 rows: np.ndarray, triangles: np.ndarray, largest: float,
+                 color: tuple[int, int, int]) -> None:
     """Log one sequence's states (``rows`` of the states arrays, in step order)."""
     points = arrays["states/points"][rows].astype(np.float64)
     tip = arrays["states/tip"][rows].astype(np.float64)
-    fvec = arrays["states/force_vector"][rows].astype(np.float64)
-    steps = arrays["states/step"][rows]
-    disp = np.linalg.norm(points - points[0], axis=2)
-    scale = max(float(disp.max()), 1e-12)
-    root = f"msm/seq_{s:04d}"
-    for k, t in enumerate(steps):
-        rec.set_time("force_step", sequence=int(t))
-        rec.log(f"{root}/surface", rr.Mesh3D(vertex_positions=points[k],
-                                              triangle_indices=triangles,
-                                              vertex_colors=colormap(disp[k] / scale)))
-        rec.log(f"{root}/loaded", rr.Points3D(tip[k], radii=0.0012, colors=(230, 40, 40)))
-        arrow = fvec[k] * ARROW_M_PER_N
-        rec.log(f"{root}/force", rr.Arrows3D(origins=tip[k] - arrow, vectors=arrow,
-                                              colors=(230, 40, 40), radii=0.0006))
-    times = rr.TimeColumn("force_step", sequence=steps.astype(np.int64))
-    tip_mm = np.linalg.norm(tip - tip[0], axis=1) * 1e3
-    rec.send_columns(f"plots/seq_{s:04d}/tip_displacement_mm", indexes=[times],
-                     columns=rr.Scalars.columns(scalars=tip_mm))
-    rec.send_columns(f"plots/seq_{s:04d}/force_N", indexes=[times],
-                     columns=rr.Scalars.columns(scalars=np.linalg.norm(fvec, axis=1)))
-
-
-def colormap(v: np.ndarray) -> np.ndarray:
-    """Viridis-like RGB (uint8) of values in [0, 1]."""
-    v = np.clip(np.nan_to_num(v), 0.0, 1.0) * (len(_STOPS) - 1)
-    lo = np.minimum(v.astype(int), len(_STOPS) - 2)
-    frac = (v - lo)[:, None]
-    return (_STOPS[lo] * (1 - frac) + _STOPS[lo + 1] * frac).round().astype(np.uint8)
+    arrow = arrays["states/force_vector"][rows].astype(np.float64) * ARROW_M_PER_N
+    times = [rr.TimeColumn(TIMELINE, sequence=arrays["states/step"][rows].astype(np.int64))]
+    colors = colormap(np.sqrt(_displacement(arrays, rows) / max(largest, 1e-12)))
+    root, n, t = f"msm/seq_{s:04d}", points.shape[1], len(rows)
+    rec.log(f"{root}/surface", rr.Mesh3D.from_fields(triangle_indices=triangles), static=True)
+    rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Mesh3D.columns(
+        vertex_positions=points.reshape(-1, 3), vertex_colors=colors.reshape(-1, 3))
+        .partition(np.full(t, n)))
+    rec.log(f"{root}/loaded", rr.Points3D.from_fields(radii=[0.0015], colors=[color]),
+            static=True)
+    rec.send_columns(f"{root}/loaded", indexes=times,
+                     columns=rr.Points3D.columns(positions=tip))
+    rec.log(f"{root}/force", rr.Arrows3D.from_fields(radii=[0.0006], colors=[color]),
+            static=True)
+    rec.send_columns(f"{root}/force", indexes=times,
+                     columns=rr.Arrows3D.columns(origins=tip - arrow, vectors=arrow))
+    rec.log(f"plots/seq_{s:04d}", rr.SeriesLines(names=[f"sequence {s}"], colors=[color],
+                                                 widths=[2.0]), static=True)
+    rec.send_columns(f"plots/seq_{s:04d}", indexes=times, columns=rr.Scalars.columns(
+        scalars=np.linalg.norm(tip - tip[0], axis=1) * 1e3))

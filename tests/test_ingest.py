@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from core.provenance import sha256_file
-from core.recording import rrd_entities, rrd_has_blueprint
+from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
 
@@ -159,9 +159,12 @@ def test_ingest_round_trip(session, tmp_path):
     ents = rrd_entities(rrd)
     for name in PHANTOM:
         assert "Points3D" in ents[f"/mocap/phantom/{name}"]
-    assert "Points3D" in ents["/mocap/indenter/Ind\\ 1"]
+    assert "Points3D" in ents["/mocap/indenter/Ind_1"]         # path-safe, no escapes
     assert "Points3D" in ents["/mocap/other/stray"]
-    for e, kind in [("/force/raw", "Scalars"), ("/force/trigger", "Scalars"),
+    for i in range(6):                                          # one plot per unit: volts
+        assert "SeriesLines" in ents[f"/force/V/G{i}"] and "Scalars" in ents[f"/force/V/G{i}"]
+    assert "ViewCoordinates" in ents["/"] and rrd_timelines(rrd) == {"device_time"}
+    for e, kind in [("/trigger/level", "Scalars"),
                     ("/quality/missing_markers", "Scalars"), ("/trails/phantom", "LineStrips3D"),
                     ("/trails/indenter", "LineStrips3D"), ("/mocap/events", "TextLog")]:
         assert kind in ents[e], e

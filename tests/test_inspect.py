@@ -201,8 +201,10 @@ def test_raw_mcap(ingested):
 def test_recording(ingested):
     s = inspect_json(ingested[1])
     assert s["format"] == "rrd" and s["details"]["blueprint"] is True
-    assert "Scalars" in s["entities"]["/force/raw"]
-    assert "Points3D" in s["entities"]["/mocap/phantom/New\\ 0000"]
+    assert {e for e in s["entities"] if e.startswith("/force/")} == \
+        {f"/force/V/{c}" for c in "abcdef"}
+    assert all("Scalars" in s["entities"][f"/force/V/{c}"] for c in "abcdef")
+    assert "Points3D" in s["entities"]["/mocap/phantom/New_0000"]
 
 
 def test_hdf5_generic(tmp_path):

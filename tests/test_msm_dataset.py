@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from core.recording import rrd_entities, rrd_has_blueprint
+from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
 from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
 from pipeline.cli import cli
@@ -217,5 +217,7 @@ def test_recording_shows_surface_load_and_force(small):
         assert "Points3D" in entities[f"{root}/loaded"]
         assert "Arrows3D" in entities[f"{root}/force"]
         name = root.rsplit("/", 1)[1]
-        assert "Scalars" in entities[f"/plots/{name}/tip_displacement_mm"]
+        assert "Scalars" in entities[f"/plots/{name}"]
+    assert "ViewCoordinates" in entities["/"]
+    assert rrd_timelines(rrd) == {"force_step"}
     assert rrd_has_blueprint(rrd)

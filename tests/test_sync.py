@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from calib.gaps import FILLED, MISSING
 from calib.sync_accuracy import TARGETS, match_presses, sync_errors
 from calib.sync_params import SyncParams
-from core.recording import rrd_entities
+from core.recording import rrd_entities, rrd_timelines
 from ingest.session_to_mcap import ingest_session
 from pipeline.cli import cli
 from pipeline.sync_stage import run_sync
@@ -139,7 +139,13 @@ def test_press_matching_is_one_to_one() -> None:
 def test_recording_shows_alignment_tip_and_gaps(sessions: dict) -> None:
     _, _, synced = sessions[0]
     ents = rrd_entities(synced.with_suffix(".rrd"))
-    for e in ("/before/force_magnitude", "/after/force_magnitude", "/before/depth_mm",
-              "/force_vs_depth/before", "/force_vs_depth/after", "/scene/tip",
-              "/scene/cluster", "/scene/tip_path", "/quality/filled", "/quality/missing"):
-        assert e in ents, e
+    for e in ("/force/before", "/force/after", "/depth/tip", "/quality/filled",
+              "/quality/missing"):
+        assert "Scalars" in ents[e] and "SeriesLines" in ents[e], e    # named, coloured
+    assert "EncodedImage" in ents["/force_vs_depth"]          # a plot with axes
+    for e in ("/scene/tip", "/scene/phantom", "/scene/cluster"):
+        assert "Points3D" in ents[e], e
+    for e in ("/scene/surface", "/scene/shaft", "/scene/tip_path"):
+        assert "LineStrips3D" in ents[e], e
+    assert "TextLog" in ents["/presses"] and "ViewCoordinates" in ents["/"]
+    assert rrd_timelines(synced.with_suffix(".rrd")) == {"mocap_time"}

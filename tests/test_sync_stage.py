@@ -120,11 +120,11 @@ def test_sync_writes_valid_presses_and_recording(tmp_path: Path) -> None:
         assert prov["stage"] == "sync" and str(mcap) in prov["inputs"]
     rrd = tmp_path / "s.rrd"
     ents = rrd_entities(rrd)
-    for e in ("/before/force_magnitude", "/after/force_magnitude", "/after/depth_mm",
-              "/force_vs_depth/before", "/force_vs_depth/after", "/scene/tip",
-              "/scene/cluster", "/scene/phantom", "/quality/filled", "/presses"):
+    for e in ("/force/before", "/force/after", "/depth/tip", "/force_vs_depth",
+              "/scene/tip", "/scene/cluster", "/scene/phantom", "/scene/surface",
+              "/quality/filled", "/presses"):
         assert e in ents, e
-    assert "Points3D" in ents["/scene/tip"] and "Points2D" in ents["/force_vs_depth/after"]
+    assert "Points3D" in ents["/scene/tip"] and "EncodedImage" in ents["/force_vs_depth"]
     assert rrd_has_blueprint(rrd)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from core.recording import rrd_entities, rrd_has_blueprint
+from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
 from data_schema.hdf5 import validate_h5
 from data_schema.session import read_session
 from data_schema.truth import TRUTH
@@ -315,11 +315,15 @@ def test_rerun_recording_shows_a_press_beside_its_truth(skewed: Path) -> None:
     rrd = skewed / "recording.rrd"
     found = rrd_entities(rrd)
     assert "Mesh3D" in found["/phantom/surface"]
-    for entity in ("/truth/markers", "/truth/tip", "/measured/markers", "/measured/cluster",
-                   "/truth/states"):
+    for entity in ("/truth/tip", "/measured/markers", "/measured/cluster", "/truth/states"):
         assert "Points3D" in found[entity], entity
+    for entity in ("/truth/markers", "/truth/cluster"):      # cubes around the true points
+        assert "Boxes3D" in found[entity], entity
+    assert "LineStrips3D" in found["/truth/shaft"]
     for entity in ("/force/truth", "/force/measured", "/force/states"):
         assert "Scalars" in found[entity], entity
+    assert "SeriesPoints" in found["/force/states"] and "SeriesLines" in found["/force/truth"]
+    assert "ViewCoordinates" in found["/"] and rrd_timelines(rrd) == {"mocap_time"}
     assert rrd_has_blueprint(rrd)
 
 
