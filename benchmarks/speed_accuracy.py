@@ -320,6 +320,8 @@ def main() -> None:
     print("precision, robustness ...", flush=True)
     res["precision"] = precision_rows(plain, a.device, b.repeats)
     res["robustness"] = robustness_rows(plain, turned, a.seed)
+    res["augmented"] = [{"setting": "k=5 rotation-augmented", **accuracy(turned),
+                         **speed(turned.model, torch.device(a.device), b.repeats)}]
     msm_run = trained(a.out, f"msm{b.msm_grid}_k5", msm, b.msm_epochs, b, a.device, a.seed)
     print("points, MSM tolerance ...", flush=True)
     res["points"] = point_rows(msm_run, a.device, b.repeats, a.seed)

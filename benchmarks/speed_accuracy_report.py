@@ -63,7 +63,7 @@ def choice_text(rows: list[dict], haptic_ms: float, visual_ms: float) -> str:
 
 def write_report(out: Path, res: dict, haptic_ms: float, visual_ms: float) -> None:
     """``out/report.md`` and its plots."""
-    choices = res["k"] + res["precision"][1:]        # float32 is the k = 5 row already
+    choices = res["k"] + res["precision"][1:] + res.get("augmented", [])   # [0]: k=5 again
     b = res["budget"]
     md = [f"# Speed-accuracy report\n\nMeasured on {res['device']} in one run. Twin rows: "
           f"cGNN/Exp, fold 0, {b['twin_epochs']} epochs, lr {b['lr']:g}; MSM rows: "
@@ -159,19 +159,22 @@ def plot_pareto(path: Path, rows: list[dict]) -> None:
 
 
 def plot_robustness(path: Path, rows: list[dict]) -> None:
-    """Force-error ratio to the unmoved test set, per test, plain against augmented."""
+    """Per test set, plain against augmented: the force error (N) and its ratio to the
+    model's own error on the unmoved test set."""
     tests = list(dict.fromkeys(r["test"] for r in rows))
-    fig, ax = plt.subplots(figsize=(8, 3.6))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.8))
     width = 0.4
-    for i, (model, color) in enumerate((("plain", "tab:blue"),
-                                        ("rotation-augmented", "tab:orange"))):
-        ratio = {r["test"]: r["force_ratio"] for r in rows if r["model"] == model}
-        ax.bar([t + (i - 0.5) * width for t in range(len(tests))],
-               [ratio[t] for t in tests], width, color=color, label=model)
-    ax.axhline(1.2, color="tab:red", lw=1, label="goal under rotation (1.2x)")
-    ax.set_xticks(range(len(tests)), [t.replace(" about the normal", "") for t in tests],
-                  rotation=15, fontsize=8)
-    ax.set_ylabel("force error / unmoved")
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3, axis="y")
+    for ax, key, label in ((axes[0], "force_n", "force abs. error [N]"),
+                           (axes[1], "force_ratio", "force error / unmoved")):
+        for i, (model, color) in enumerate((("plain", "tab:blue"),
+                                            ("rotation-augmented", "tab:orange"))):
+            value = {r["test"]: r[key] for r in rows if r["model"] == model}
+            ax.bar([t + (i - 0.5) * width for t in range(len(tests))],
+                   [value[t] for t in tests], width, color=color, label=model)
+        ax.set_xticks(range(len(tests)), [t.replace(" about the normal", "") for t in tests],
+                      rotation=15, fontsize=8)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3, axis="y")
+    axes[1].axhline(1.2, color="tab:red", lw=1, label="goal under rotation (1.2x)")
+    axes[1].legend(fontsize=8)
     save(fig, path)

@@ -18,7 +18,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from calib.static_states import Press, PressStates
-from core.recording import recording, time_column
+from core.recording import declare_up, phantom_view, recording, time_column
 
 APP_ID = "phantom-extract"
 TIMELINE = "session_time"
@@ -27,12 +27,14 @@ COLORS = {"force": (90, 90, 90), "levels": (230, 60, 40), "tip": (220, 40, 40),
 DEPTH_RANGE_MM = 15.0
 
 
-def blueprint() -> rrb.Blueprint:
-    """The states in 3D beside the force curve with the levels marked."""
+def blueprint(size_m: tuple[float, float]) -> rrb.Blueprint:
+    """The states in 3D (framed from above) beside the force curve with the levels marked."""
+    centre = np.array([size_m[0] / 2, size_m[1] / 2, 0.0])
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(name=f"state in the phantom frame (colour: depth 0..."
-                                   f"{DEPTH_RANGE_MM:.0f} mm)", origin="/phantom"),
+            phantom_view(f"state in the phantom frame (colour: depth 0..."
+                         f"{DEPTH_RANGE_MM:.0f} mm)", ["+ /phantom/**"], centre,
+                         max(size_m), origin="/phantom"),
             rrb.Vertical(
                 rrb.TimeSeriesView(name="force magnitude [N], extracted levels", origin="/force"),
                 rrb.TextLogView(name="presses", origin="/presses"),
@@ -47,8 +49,8 @@ def blueprint() -> rrb.Blueprint:
 def write_extract_recording(path: str | Path, sessions: list[tuple[list[Press], list[PressStates]]],
                             size_m: tuple[float, float]) -> None:
     """Save the recording of every session's presses and states to ``path``."""
-    with recording(APP_ID, path, blueprint()) as rec:
-        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    with recording(APP_ID, path, blueprint(size_m)) as rec:
+        declare_up(rec)
         _outline(rec, size_m)
         offset, k = 0.0, 0
         for presses, states in sessions:

@@ -40,9 +40,10 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
     session.mcap (ingest), synced.h5 (sync), states.h5 and splits.json (extract, split),
-    msm.h5 and msm_splits.json (simulate, split), runs/msm (pre-training on MSM), runs/exp_tl_*
-    and runs/exp_notl_* (fine-tuning on the twin's states per fold, with and without transfer
-    learning), metrics.json/.md (eval), a rerun recording beside each, and a summary against
+    msm.h5 and msm_splits.json (simulate, split), runs/msm (pre-training on MSM), runs/exp_tl_*,
+    runs/exp_notl_* and runs/exp_rot_* (fine-tuning on the twin's states per fold with transfer
+    learning, without it, and without it but with rotation augmentation), metrics.json/.md
+    (eval), a rerun recording beside each, and a summary against
     the accuracy targets. Without --quick it follows the paper's settings (hours on a CPU;
     uses a GPU when there is one).
     """
@@ -95,6 +96,10 @@ def _summary(out: Path, seconds: float) -> list[str]:
         missed += [] if ok else ["transfer_learning"]
         click.echo(f"transfer learning cuts the mean distance error by {cut:.0%} (target "
                    f"{TL_CUT:.0%}, paper 23%): {'ok' if ok else 'MISSED'}")
+    rot = overall.get("cGNN/rot Exp")
+    if rot and base:
+        click.echo(f"rotation augmentation cuts it by "
+                   f"{1 - rot['ld_mean_mm'] / base['ld_mean_mm']:.0%} (no target)")
     click.echo(f"\ndemo finished in {seconds / 60:.1f} min: outputs in {out}; recordings:\n  "
                + "\n  ".join(str(p) for p in sorted(out.rglob("*.rrd"))))
     return missed

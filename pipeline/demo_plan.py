@@ -3,8 +3,8 @@
 Two settings: ``quick`` (under 10 minutes on 2 CPU cores: a small MSM set, pre-training on 10%
 of the points per sample (the paper's aug variant, its best transfer row) for a few epochs,
 short fine-tuning) and the paper's (the full MSM set, 250 epochs, batch 32; a GPU is used when
-there is one). Both fine-tune on the twin's states over 5 folds with transfer learning and
-without it (the baseline), and evaluate both.
+there is one). Both fine-tune on the twin's states over 5 folds with transfer learning, without
+it (the baseline) and without it but with rotation augmentation, and evaluate all three.
 """
 
 from __future__ import annotations
@@ -46,6 +46,12 @@ SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1,
                  pretrain_point_fraction=0.1, finetune_epochs=2, lr=1e-3, folds=2)
 
 
+# Fine-tuning variants on the twin's states: transfer learning from the MSM run, the baseline
+# without it, and the baseline with rotation augmentation (see benchmarks/speed_accuracy.py).
+VARIANTS: tuple[tuple[str, tuple[str, ...]], ...] = (("tl", ()), ("notl", ()),
+                                                     ("rot", ("--rotate",)))
+
+
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto") -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping)."""
     sd = ("--seed", str(seed))
@@ -72,15 +78,17 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto") -> list[
                       (msm, msm_splits), (pre / "best.pt",), (pre,)))
     runs = []
     for fold in range(s.folds):
-        for tag, init in (("tl", ("--init", str(pre / "best.pt"))), ("notl", ())):
+        for tag, extra in VARIANTS:
             run = out / "runs" / f"exp_{tag}_fold{fold}"
             runs.append(run)
+            init = ("--init", str(pre / "best.pt")) if tag == "tl" else ()
             inputs = (states, splits) + ((pre / "best.pt",) if init else ())
             steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
                                "--fold", str(fold), "--out", str(run), "--epochs",
-                               str(s.finetune_epochs), *init, *train), inputs,
+                               str(s.finetune_epochs), *init, *extra, *train), inputs,
                               (run / "best.pt",), (run,)))
-    steps.append(Step(("eval", str(pre), *map(str, runs), "--out", str(out / "metrics.json")),
+    # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
+    steps.append(Step(("eval", *map(str, runs), str(pre), "--out", str(out / "metrics.json")),
                       (pre / "best.pt", *(r / "best.pt" for r in runs)),
                       (out / "metrics.json",)))
     return steps

@@ -15,7 +15,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import recording
+from core.recording import declare_up, phantom_view, recording
 from train.data import Batch
 from train.loop import Prediction
 
@@ -23,10 +23,11 @@ APP_ID = "phantom-eval"
 ERROR_MM = 2.0
 
 
-def blueprint() -> rrb.Blueprint:
+def blueprint(centre: np.ndarray, size: float) -> rrb.Blueprint:
+    """The predicted beside the true surface, framed from above; the force change."""
     return rrb.Blueprint(rrb.Horizontal(
-        rrb.Spatial3DView(name=f"predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
-                               "beside true (grey)", origin="/surface"),
+        phantom_view(f"predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) beside true "
+                     "(grey)", ["+ /surface/**"], centre, size, origin="/surface"),
         rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
         column_shares=[3, 2],
     ), collapse_panels=True)
@@ -40,8 +41,10 @@ def error_colors(err_mm: np.ndarray) -> np.ndarray:
 
 def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]]) -> None:
     """Log up to the examples in ``shown`` (one run's first test batches)."""
-    with recording(APP_ID, path, blueprint()) as rec:
-        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    first = shown[0][0].target[0][shown[0][0].mask[0]].cpu().numpy() if shown else np.zeros((1, 3))
+    size = max(float(np.ptp(first[:, :2], axis=0).max()), 0.02)
+    with recording(APP_ID, path, blueprint(first.mean(axis=0), size)) as rec:
+        declare_up(rec)
         rec.log("force/true", rr.SeriesPoints(names=["true dF [N]"], colors=[(90, 90, 90)],
                                               marker_sizes=[4]), static=True)
         rec.log("force/predicted", rr.SeriesPoints(names=["predicted dF [N]"],
