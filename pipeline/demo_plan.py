@@ -37,7 +37,7 @@ class Settings:
 
 
 # Short runs need a larger step than the paper's 1e-4 to get anywhere in a few epochs.
-QUICK = Settings(msm_locations=30, msm_directions=4, pretrain_epochs=12,
+QUICK = Settings(msm_locations=20, msm_directions=4, pretrain_epochs=12,
                  pretrain_point_fraction=0.1, finetune_epochs=120, lr=1e-3)
 PAPER = Settings(msm_locations=100, msm_directions=11, pretrain_epochs=250,
                  pretrain_point_fraction=0.1, finetune_epochs=250, lr=1e-4)
