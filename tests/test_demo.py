@@ -29,11 +29,12 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
         validate_states(out / states)
     assert len(validate_folds(out / "splits.json")["folds"]) == 2
     labels = {r["label"] for r in json.loads((out / "metrics.json").read_text())["overall"]}
-    assert labels == {"cGNN/aug MSM", "cGNN/aug MSM (TL)", "cGNN/Exp"}
+    assert labels == {"cGNN/aug MSM", "cGNN/aug MSM (TL)", "cGNN/Exp", "cGNN/rot Exp"}
     for rrd in ("session/recording.rrd", "session.rrd", "synced.rrd", "states.rrd",
                 "splits.rrd", "msm.rrd", "runs/msm/train.rrd", "metrics.rrd"):
         assert rrd_entities(out / rrd), rrd
     assert "MISSED" not in res.output.split("transfer learning")[0]   # sync met its targets
+    assert "rotation augmentation cuts it by" in res.output
     again = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
     assert again.exit_code == 0, again.output
     steps = demo_steps(out, 0, SMOKE)
