@@ -16,7 +16,7 @@ Every row is measured in one run on one machine, on the same test examples:
 Writes ``OUT/report.md``, ``OUT/results.json`` and PNG plots; runs and data are kept under OUT
 so a second call only re-measures (delete OUT/runs to retrain).
 
-    python benchmarks/speed_accuracy.py --out out/speed_accuracy --quick   (~15 min, 2 cores)
+    python benchmarks/speed_accuracy.py --out out/speed_accuracy --quick   (~4 min, 2 cores)
     python benchmarks/speed_accuracy.py --out out/speed_accuracy           (paper epochs, GPU)
 """
 

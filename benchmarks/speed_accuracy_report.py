@@ -80,6 +80,8 @@ def write_report(out: Path, res: dict, haptic_ms: float, visual_ms: float) -> No
           "\n## Number of points (MSM model)\n",
           table(res["points"], [("points", "points", "d"), ("full_ms", "full [ms]", ".3f"),
                                 ("force_ms", "force only [ms]", ".3f"), *ACC]),
+          "\n## Rotation augmentation (k = 5, `pipeline train --rotate`)\n",
+          table(res.get("augmented", []), [("setting", "setting", "s"), *ACC, *SPEED]),
           "\n## Robustness (twin test set moved or resampled)\n",
           table(res["robustness"], [("model", "model", "s"), ("test", "test set", "s"), *ACC,
                                     ("force_ratio", "force error ratio", ".2f"),
