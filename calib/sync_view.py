@@ -22,6 +22,7 @@ camera frames the phantom. Entities:
 from __future__ import annotations
 
 import io
+import warnings
 from math import ceil
 from pathlib import Path
 
@@ -113,10 +114,9 @@ def log_sync(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: fl
 
 def _rest(markers: np.ndarray) -> np.ndarray:
     """Each marker's rest position: its median over the session (pressed only at times)."""
-    with np.errstate(all="ignore"):
-        finite = np.isfinite(markers).all(axis=2, keepdims=True)
-        return np.nanmedian(np.where(finite, markers, np.nan), axis=0) if finite.any() \
-            else np.full(markers.shape[1:], np.nan)
+    with warnings.catch_warnings():          # a marker never seen has no rest position: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(markers, axis=0)
 
 
 def _log_scene(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: float
@@ -133,7 +133,8 @@ def _log_scene(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: 
     cluster = s["cluster"][rows]
     _points(rec, "scene/cluster", t, cluster, np.zeros(cluster.shape[:2], bool),
             COLORS["cluster"], RADIUS_M)
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():          # a frame with no indenter marker: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
         top = np.nanmean(cluster, axis=1)
     strips = [np.stack([a, b]) for a, b in zip(tip[:, 0], top, strict=True)]
     rec.log("scene/shaft", rr.LineStrips3D.from_fields(colors=[COLORS["shaft"]],

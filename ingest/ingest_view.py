@@ -21,6 +21,7 @@ and ``pivot/indenter/<marker>`` (the pivot trial, its own view).
 from __future__ import annotations
 
 import re
+import warnings
 from math import ceil
 from pathlib import Path
 
@@ -98,7 +99,8 @@ def log_session(rec: rr.RecordingStream, s: RawSession) -> None:
 
 def _extent(positions: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre and size (m) of the points' median positions, for a camera."""
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():          # a marker never seen has no median: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
         rest = np.nanmedian(positions, axis=0) if positions.size else np.zeros((1, 3))
     rest = rest[np.isfinite(rest).all(axis=1)]
     if not len(rest):
