@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 
@@ -20,6 +21,7 @@ class BadInput(Exception):
         super().__init__(self.line())
 
     def line(self) -> str:
-        """The one-line message shown to the user."""
+        """The one-line message shown to the user (line breaks in ``what`` become spaces)."""
         head = ":".join(p for p in (self.path, self.where) if p)
-        return f"{head}: {self.what}" if head else self.what
+        what = re.sub(r"\s*\n\s*", " ", self.what.strip())
+        return f"{head}: {what}" if head else what

@@ -15,7 +15,8 @@ a name without ``/`` is a root attribute.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import contextlib
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -41,6 +42,8 @@ class Dataset:
     units: str | None = None   # the ``units`` attribute the dataset must carry
     required: bool = True
     doc: str = ""
+    finite: bool | str = False  # True: no NaN/inf; a path: finite where that bool dataset is
+    limit: float | None = None  # largest plausible |value| in ``units`` (catches mm, mN)
 
 
 @dataclass(frozen=True)
@@ -53,27 +56,42 @@ class H5Schema:
     root_attrs: tuple[str, ...] = ("provenance",)
     doc: str = ""
     group_attrs: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    fixed_attrs: dict[str, str] = field(default_factory=dict)   # root attribute -> its value
+
+
+# A scaled value's likely unit, for the message that refuses it.
+SCALED_UNIT = {"m": "millimetres", "N": "millinewtons", "m/s": "mm/s", "N*m": "mN*m"}
+READ_ERRORS: tuple[type[Exception], ...] = (OSError, KeyError, ValueError, TypeError,
+                                            RuntimeError, IndexError)
+
+
+@contextlib.contextmanager
+def h5_reading(path: str | Path) -> Iterator[None]:
+    """Turn a failure inside h5py (a damaged, truncated or odd file) into :class:`BadInput`."""
+    try:
+        yield
+    except BadInput:
+        raise
+    except READ_ERRORS as e:
+        raise BadInput(path, f"not a readable HDF5 file ({type(e).__name__}: {e})") from None
 
 
 def read_schema_id(path: str | Path) -> tuple[str, str] | None:
     """The (schema, version) an HDF5 file declares, or None when it declares none."""
-    try:
-        with h5py.File(path, "r") as f:
-            name, version = f.attrs.get("schema"), f.attrs.get("schema_version")
-    except OSError as e:
-        raise BadInput(path, f"not a readable HDF5 file ({e})") from None
+    with h5_reading(path), h5py.File(path, "r") as f:
+        name, version = f.attrs.get("schema"), f.attrs.get("schema_version")
     if name is None or version is None:
         return None
     return attr_text(name), attr_text(version)
 
 
 def validate_h5(path: str | Path, schema: H5Schema) -> None:
-    """Raise :class:`BadInput` naming the first way ``path`` departs from ``schema``."""
-    try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise BadInput(path, f"not a readable HDF5 file ({e})") from None
-    with f:
+    """Raise :class:`BadInput` naming the first way ``path`` departs from ``schema``.
+
+    Layout (attributes, datasets, dtypes, shapes, units), then values: finite where the layout
+    says so, and no larger than a dataset's plausible ``limit``.
+    """
+    with h5_reading(path), h5py.File(path, "r") as f:
         _check_root(path, f, schema)
         for grp, attrs in schema.group_attrs.items():
             for member in _expand(f, grp):
@@ -83,6 +101,10 @@ def validate_h5(path: str | Path, schema: H5Schema) -> None:
         bound: dict[str, dict[str, int]] = {}
         for ds in schema.datasets:
             _check_dataset(path, f, ds, bound)
+        for ds in schema.datasets:
+            if ds.finite or ds.limit is not None:
+                for member in _expand(f, ds.path):
+                    _check_values(path, f, member, ds)
 
 
 def _check_root(path: str | Path, f: h5py.File, schema: H5Schema) -> None:
@@ -95,6 +117,10 @@ def _check_root(path: str | Path, f: h5py.File, schema: H5Schema) -> None:
     missing = [a for a in schema.root_attrs if a not in f.attrs]
     if missing:
         raise BadInput(path, f"missing root attribute(s) {missing}")
+    for attr, want in schema.fixed_attrs.items():
+        got = attr_text(f.attrs.get(attr, ""))
+        if got != want:
+            raise BadInput(path, f"root attribute {attr} is {got!r}, expected {want!r}")
 
 
 def _check_dataset(
@@ -113,6 +139,31 @@ def _check_dataset(
         if ds.units is not None and attr_text(obj.attrs.get("units", "")) != ds.units:
             raise BadInput(path, f"{member} units are {obj.attrs.get('units')!r}, "
                                  f"expected {ds.units!r}")
+
+
+def _check_values(path: str | Path, f: h5py.File, member: str, ds: Dataset) -> None:
+    """Finite where required; within the plausible limit (a scaled unit is refused)."""
+    values = f[member][()]
+    finite = np.isfinite(values)
+    if ds.finite:
+        need = np.True_
+        if isinstance(ds.finite, str):
+            need = f[ds.finite][()]
+            need = need.reshape(need.shape + (1,) * (values.ndim - need.ndim))
+        bad = np.argwhere(~finite & need)
+        if bad.size:
+            at = tuple(int(i) for i in bad[0])
+            raise BadInput(path, f"{member} is not finite at index {at} ({values[at]})"
+                                 + (f" where {ds.finite} is True" if need is not np.True_ else ""))
+    if ds.limit is None or not finite.any():
+        return
+    big = np.abs(np.where(finite, values, 0.0))
+    at = np.unravel_index(int(np.argmax(big)), big.shape)
+    if big[at] > ds.limit:
+        raise BadInput(path, f"{member} reaches {big[at]:.4g} {ds.units} at index "
+                             f"{tuple(int(i) for i in at)}, more than a plausible {ds.limit:g} "
+                             f"{ds.units}: {SCALED_UNIT.get(ds.units or '', 'another unit')}? "
+                             f"It is stored in {ds.units}")
 
 
 def _expand(f: h5py.File, pattern: str) -> list[str]:
@@ -205,7 +256,7 @@ def read_h5(path: str | Path, schema: H5Schema, datasets: Iterable[str] | None =
     """
     validate_h5(path, schema)
     wanted = [d.path for d in schema.datasets] if datasets is None else list(datasets)
-    with h5py.File(path, "r") as f:
+    with h5_reading(path), h5py.File(path, "r") as f:
         arrays = {m: _values(f[m]) for pattern in wanted for m in _expand(f, pattern)}
         attrs: dict[str, Any] = {}
         groups = [""]

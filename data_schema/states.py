@@ -34,7 +34,19 @@ import h5py
 import numpy as np
 
 from core.errors import BadInput
-from data_schema.hdf5 import Dataset, H5Schema, attr_text, read_schema_id, validate_h5
+from data_schema.hdf5 import (
+    Dataset,
+    H5Schema,
+    attr_text,
+    h5_reading,
+    read_schema_id,
+    validate_h5,
+)
+
+PLAUSIBLE_M = 5.0          # no phantom point or tip lies this far from the frame's origin
+PLAUSIBLE_N = 1000.0       # no phantom press reaches this force (the Nano17 reads up to ~70 N)
+PLAUSIBLE_M_S = 1.0        # no hand-pressed surface moves this fast at a static state
+PLAUSIBLE_LAB_M = 50.0     # no lab frame's origin lies this far from the phantom
 
 STATES = H5Schema(
     name="phantom.states",
@@ -42,24 +54,27 @@ STATES = H5Schema(
     root_attrs=("provenance", "source", "units_length", "units_force", "step_n", "frame",
                 "session_names"),
     doc=__doc__ or "",
+    fixed_attrs={"units_length": "m", "units_force": "N", "frame": "phantom"},
     datasets=(
-        Dataset("states/points", "f4", ("S", "N", 3), "m",
+        Dataset("states/points", "f4", ("S", "N", 3), "m", finite="states/valid",
+                limit=PLAUSIBLE_M,
                 doc="surface points, phantom frame (lab: 25 markers + tip; NaN where invalid)"),
         Dataset("states/valid", "b1", ("S", "N"), doc="False where a lab marker was missing"),
-        Dataset("states/tip", "f4", ("S", 3), "m",
+        Dataset("states/tip", "f4", ("S", 3), "m", finite=True, limit=PLAUSIBLE_M,
                 doc="indenter tip (lab) or loaded mass (MSM), phantom frame"),
-        Dataset("states/force", "f4", ("S",), "N", doc="force magnitude at the state"),
+        Dataset("states/force", "f4", ("S",), "N", finite=True, limit=PLAUSIBLE_N,
+                doc="force magnitude at the state"),
         Dataset("states/step", "i4", ("S",), doc="level index t: force level t * step_n"),
         Dataset("states/sequence", "i4", ("S",), doc="press (lab) or location x direction (MSM)"),
         Dataset("states/location", "i4", ("S",), doc="global location id"),
         Dataset("states/session", "i4", ("S",), doc="index into the session_names attribute"),
         Dataset("states/mass", "i4", ("S",), required=False, doc="MSM: the loaded mass"),
-        Dataset("states/force_vector", "f4", ("S", 3), "N", required=False,
-                doc="MSM: applied force, phantom frame"),
-        Dataset("states/speed", "f4", ("S",), "m/s", required=False,
-                doc="lab: mean surface-marker speed at the state"),
-        Dataset("sessions/transform", "f8", ("P", 4, 4), "m", required=False,
-                doc="lab: each session's source frame -> phantom frame"),
+        Dataset("states/force_vector", "f4", ("S", 3), "N", required=False, finite=True,
+                limit=PLAUSIBLE_N, doc="MSM: applied force, phantom frame"),
+        Dataset("states/speed", "f4", ("S",), "m/s", required=False, limit=PLAUSIBLE_M_S,
+                doc="lab: mean surface-marker speed at the state (NaN: no marker seen)"),
+        Dataset("sessions/transform", "f8", ("P", 4, 4), "m", required=False, finite=True,
+                limit=PLAUSIBLE_LAB_M, doc="lab: each session's source frame -> phantom frame"),
         Dataset("single/start", "i4", ("E1",), doc="single-step examples: state at t"),
         Dataset("single/end", "i4", ("E1",), doc="single-step examples: state at t + 1"),
         Dataset("multi/start", "i4", ("E2",), doc="multi-step examples: state at t"),
@@ -67,8 +82,6 @@ STATES = H5Schema(
     ),
 )
 
-PLAUSIBLE_M = 5.0          # no phantom point or tip lies this far from the frame's origin
-PLAUSIBLE_N = 1000.0       # no phantom press reaches this force (the Nano17 reads up to ~70 N)
 REGENERATE = ("regenerate it with this version's `pipeline simulate` (MSM) or "
               "`pipeline extract` (lab)")
 
@@ -76,44 +89,57 @@ REGENERATE = ("regenerate it with this version's `pipeline simulate` (MSM) or "
 def validate_states(path: str | Path) -> None:
     """Check a states file's layout and meaning; raise :class:`BadInput` naming the first fault.
 
-    Meaning: example indices in range, start and end in one sequence, end after start,
-    single-step pairs exactly one level apart, multi-step at least two; every valid point
-    finite; coordinates and forces of plausible size for metres and newtons (millimetres or
-    millinewtons written as metres or newtons are refused, not learned); one session name per
-    session id.
+    Layout and values (:data:`STATES`): every valid point, tip and force finite; coordinates
+    and forces of plausible size for metres and newtons (millimetres or millinewtons written as
+    metres or newtons are refused, not learned). Meaning: ``step_n`` a positive number, one
+    session name per session id, levels not negative, the loaded mass one of the points,
+    example indices in range, start and end in one sequence, end after start, single-step
+    pairs exactly one level apart, multi-step at least two.
     """
     sid = read_schema_id(path)
     if sid is not None and sid[0] == STATES.name and sid[1].split(".")[0] == "1":
         raise BadInput(path, f"a phantom.states {sid[1]} file (no phantom frame, validity "
                              f"mask or session ids): {REGENERATE}")
     validate_h5(path, STATES)
-    with h5py.File(path, "r") as f:
-        names = json.loads(attr_text(f.attrs["session_names"]))
-        session = f["states/session"][()]
-        if session.size and (session.min() < 0 or session.max() >= len(names)):
-            raise BadInput(path, "states/session indexes beyond the session_names attribute")
-        points, valid = f["states/points"][()], f["states/valid"][()]
-        if not np.isfinite(points[valid]).all():
-            raise BadInput(path, "a point marked valid is not finite")
-        _check_units(path, points[valid], f["states/tip"][()], f["states/force"][()])
+    with h5_reading(path), h5py.File(path, "r") as f:
+        _check_attrs(path, f)
+        names = _session_names(path, f.attrs["session_names"])
+        _check_ids(path, "states/session", f["states/session"][()], len(names),
+                   "the session_names attribute")
+        _check_ids(path, "states/step", f["states/step"][()], None, "levels")
+        if "states/mass" in f:
+            _check_ids(path, "states/mass", f["states/mass"][()], f["states/points"].shape[1],
+                       "the points")
         seq, step = f["states/sequence"][()], f["states/step"][()]
         for name, gap in (("single", 1), ("multi", 2)):
             _check_pairs(path, name, f[f"{name}/start"][()], f[f"{name}/end"][()], seq, step, gap)
 
 
-def _check_units(path: str | Path, points: np.ndarray, tip: np.ndarray, force: np.ndarray
-                 ) -> None:
-    """Metres and newtons, not millimetres and millinewtons."""
-    for what, xyz in (("a surface point", points), ("a tip position", tip)):
-        far = float(np.abs(xyz).max()) if xyz.size else 0.0
-        if far > PLAUSIBLE_M:
-            raise BadInput(path, f"{what} lies {far:.4g} m from the phantom frame's origin "
-                                 f"(more than {PLAUSIBLE_M:g} m): are these millimetres? "
-                                 "States are in metres")
-    big = float(np.abs(force).max()) if force.size else 0.0
-    if big > PLAUSIBLE_N:
-        raise BadInput(path, f"a force of {big:.4g} N (more than {PLAUSIBLE_N:g} N): are these "
-                             "millinewtons? States are in newtons")
+def _check_attrs(path: str | Path, f: h5py.File) -> None:
+    step_n = f.attrs["step_n"]
+    if not (np.ndim(step_n) == 0 and np.issubdtype(np.asarray(step_n).dtype, np.number)
+            and np.isfinite(step_n) and step_n > 0):
+        raise BadInput(path, f"root attribute step_n is {step_n!r}, expected a positive number "
+                             "of newtons")
+
+
+def _session_names(path: str | Path, value: object) -> list:
+    """The ``session_names`` attribute: a JSON list of names."""
+    try:
+        names = json.loads(attr_text(value))
+    except (TypeError, ValueError):
+        names = None
+    if not isinstance(names, list):
+        raise BadInput(path, "root attribute session_names is not a JSON list of names")
+    return names
+
+
+def _check_ids(path: str | Path, name: str, ids: np.ndarray, n: int | None, of: str) -> None:
+    """Every id in ``[0, n)`` (``n`` None: not negative)."""
+    bad = np.flatnonzero((ids < 0) | (ids >= (n if n is not None else np.inf)))
+    if bad.size:
+        raise BadInput(path, f"{name}[{bad[0]}] = {ids[bad[0]]} is outside {of}"
+                             + (f" (0..{n - 1})" if n is not None else ""))
 
 
 def _check_pairs(path: str | Path, name: str, start: np.ndarray, end: np.ndarray,
