@@ -22,9 +22,9 @@ from calib.static_states import ExtractParams, Press, PressStates, example_pairs
 from core.errors import BadInput
 from core.progress import progress
 from core.provenance import make_provenance
-from data_schema.hdf5 import attr_text, read_schema_id, write_h5
+from data_schema.hdf5 import attr_text, h5_reading, read_schema_id, write_h5
 from data_schema.states import STATES, validate_states
-from data_schema.synced import SYNCED
+from data_schema.synced import SYNCED, validate_synced
 
 DEFAULT_SIZE_M = (0.1, 0.1)
 
@@ -59,11 +59,10 @@ def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
     if sid[1].split(".")[0] != SYNCED.version.split(".")[0]:
         raise BadInput(path, f"synced file of schema version {sid[1]}; this extract reads "
                              f"{SYNCED.version}: re-run `pipeline sync`")
-    with h5py.File(path, "r") as f:
+    validate_synced(path)
+    with h5_reading(path), h5py.File(path, "r") as f:
         cal = f["calibration"]
         keys = sorted(f["presses"].keys())
-        if not keys:
-            raise BadInput(path, "the synced file holds no press")
         raw = [_press(f["presses"][k]) for k in keys]
         locations = [int(f["presses"][k].attrs["location"]) for k in keys]
         rest = _rest_markers(raw)

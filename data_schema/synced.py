@@ -28,7 +28,13 @@ Root attribute ``calibration`` repeats all of it as JSON (with the clock's ``not
 Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``.
 """
 
-from data_schema.hdf5 import Dataset, H5Schema
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from core.errors import BadInput
+from data_schema.hdf5 import Dataset, H5Schema, h5_reading, validate_h5
 
 QUALITY_BITS = {"filled": 1, "missing": 2, "poor_fit": 4}
 FORCE_BITS = {"outside_log": 1, "over_range": 2}
@@ -38,35 +44,79 @@ CLOCK_ATTRS = ("clock_method", "clock_offset_s", "clock_offset_sd_s", "clock_dri
 PRESS_ATTRS = ("location", "repeat", "onset_index", "peak_index", "release_index",
                "onset_ns", "release_ns", "rest_force_n", "rest_torque_nm")
 
+LAB_M = 50.0         # no marker of a mocap volume lies this far from its origin
+BODY_M = 1.0         # no indenter marker or tip lies this far from the cluster's origin
+FORCE_N = 1000.0     # beyond any force sensor pressing a phantom (a Nano17 saturates ~70 N)
+TORQUE_NM = 100.0
+
 SYNCED = H5Schema(
     name="phantom.synced",
     version="1.1",
     root_attrs=("provenance", "source", "calibration", "quality_bits", "force_bits",
                 "units_length", "units_force", "units_time", "rate_hz"),
     doc=__doc__ or "",
+    fixed_attrs={"units_length": "m", "units_force": "N", "units_time": "ns"},
     group_attrs={"presses": ("cut_off",), "presses/*": PRESS_ATTRS,
                  "calibration": CLOCK_ATTRS + ("tip_rms_m", "tip_rotation_spread_deg")},
     datasets=(
         Dataset("point_names", "str", (26,), doc="25 phantom markers, then 'tip'"),
-        Dataset("calibration/cluster_body", "f8", ("M", 3), "m",
+        Dataset("calibration/cluster_body", "f8", ("M", 3), "m", finite=True, limit=BODY_M,
                 doc="indenter markers in the body frame (defines the frame)"),
-        Dataset("calibration/tip_body", "f8", (3,), "m", doc="tip offset in the body frame"),
-        Dataset("calibration/force_bias", "f8", (6,), doc="tare of the raw channels"),
-        Dataset("calibration/surface_point", "f8", (3,), "m",
+        Dataset("calibration/tip_body", "f8", (3,), "m", finite=True, limit=BODY_M,
+                doc="tip offset in the body frame"),
+        Dataset("calibration/force_bias", "f8", (6,), finite=True,
+                doc="tare of the raw channels"),
+        Dataset("calibration/surface_point", "f8", (3,), "m", finite=True, limit=LAB_M,
                 doc="a point of the phantom markers' rest plane (depth 0)"),
-        Dataset("calibration/surface_normal", "f8", (3,), "1",
+        Dataset("calibration/surface_normal", "f8", (3,), "1", finite=True,
                 doc="unit normal of the rest plane, out of the phantom"),
-        Dataset("locations/centre", "f8", ("L", 3), "m",
+        Dataset("locations/centre", "f8", ("L", 3), "m", finite=True, limit=LAB_M,
                 doc="mean tip contact point of each location"),
         Dataset("presses/*/time_ns", "i8", ("T",), "ns", doc="mocap clock"),
-        Dataset("presses/*/points", "f8", ("T", 26, 3), "m", doc="NaN where missing"),
-        Dataset("presses/*/force", "f8", ("T", 3), "N",
+        Dataset("presses/*/points", "f8", ("T", 26, 3), "m", limit=LAB_M,
+                doc="NaN where missing"),
+        Dataset("presses/*/force", "f8", ("T", 3), "N", finite=True, limit=FORCE_N,
                 doc="force sensor frame (not the cluster_body axes)"),
-        Dataset("presses/*/torque", "f8", ("T", 3), "N*m", required=False, doc="sensor frame"),
-        Dataset("presses/*/force_magnitude", "f8", ("T",), "N"),
-        Dataset("presses/*/depth", "f8", ("T",), "m",
+        Dataset("presses/*/torque", "f8", ("T", 3), "N*m", required=False, finite=True,
+                limit=TORQUE_NM, doc="sensor frame"),
+        Dataset("presses/*/force_magnitude", "f8", ("T",), "N", finite=True, limit=FORCE_N),
+        Dataset("presses/*/depth", "f8", ("T",), "m", limit=LAB_M,
                 doc="tip below the rest plane along its normal (positive into the phantom)"),
         Dataset("presses/*/quality", "u1", ("T", 26), doc="bitmask, see QUALITY_BITS"),
         Dataset("presses/*/force_quality", "u1", ("T",), doc="bitmask, see FORCE_BITS"),
     ),
 )
+
+
+def validate_synced(path: str | Path) -> None:
+    """Check a synced file's layout and meaning; raise :class:`BadInput` naming the first fault.
+
+    Layout and values (:data:`SYNCED`), then: at least one press; the rest-plane normal of unit
+    length; per press, time strictly increasing, ``onset <= peak < release <= frames`` and the
+    location one of ``locations/centre``.
+    """
+    validate_h5(path, SYNCED)
+    with h5_reading(path), h5py.File(path, "r") as f:
+        normal = f["calibration/surface_normal"][()]
+        if abs(float(np.linalg.norm(normal)) - 1.0) > 1e-6:
+            raise BadInput(path, f"calibration/surface_normal {normal} is not a unit vector")
+        if not len(f["presses"]):
+            raise BadInput(path, "the synced file holds no press")
+        for key, press in f["presses"].items():
+            _check_press(path, f"presses/{key}", press, len(f["locations/centre"]))
+
+
+def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int) -> None:
+    """Increasing time, ordered onset/peak/release frames, a known location."""
+    time = press["time_ns"][()]
+    back = np.flatnonzero(np.diff(time) <= 0)
+    if back.size:
+        raise BadInput(path, f"{name}/time_ns does not increase at frame {back[0] + 1}")
+    a = press.attrs
+    onset, peak, release = (int(a[k]) for k in ("onset_index", "peak_index", "release_index"))
+    if not 0 <= onset <= peak < release <= len(time):
+        raise BadInput(path, f"{name}: onset {onset}, peak {peak}, release {release} are not "
+                             f"ordered frames of its {len(time)}")
+    if not 0 <= int(a["location"]) < locations:
+        raise BadInput(path, f"{name}: location {a['location']} is not one of the "
+                             f"{locations} in locations/centre")
