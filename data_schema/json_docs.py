@@ -11,9 +11,12 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from core.errors import BadInput
 
@@ -86,7 +89,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         seen: set[int] = set()
         for role in ROLES:
             ids = fold[role].get(key)
-            if not isinstance(ids, list) or not all(isinstance(v, int) for v in ids):
+            if not _int_list(ids):
                 raise BadInput(path, f"{role}.{key} must be a list of integers", where=where)
             if seen & set(ids):
                 raise BadInput(path, f"{key} id(s) {sorted(seen & set(ids))[:5]} in two roles",
@@ -94,11 +97,52 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
             seen |= set(ids)
     train = set(fold["train"]["groups"])
     previous: set[int] = set()
-    for n, subset in enumerate(fold.get("train_subsets", []), start=1):
+    subsets = fold.get("train_subsets", [])
+    if not (isinstance(subsets, list) and all(_int_list(s) for s in subsets)):
+        raise BadInput(path, "train_subsets must be a list of lists of integers", where=where)
+    for n, subset in enumerate(subsets, start=1):
         if len(set(subset)) != n or not set(subset) <= train or not previous <= set(subset):
             raise BadInput(path, f"train subset {n} is not {n} training groups holding "
                                  f"subset {n - 1}", where=where)
         previous = set(subset)
+
+
+def check_fold_examples(path: str | Path, doc: dict[str, Any],
+                        example_group: Mapping[str, np.ndarray]) -> None:
+    """Check a validated manifest against its states file: every example id is one of the
+    file's (``example_group``: the group of each example, per set) and lies in a group of the
+    role that lists it; every group id is one of the file's."""
+    known = set(np.unique(np.concatenate([np.ravel(g) for g in example_group.values()])).tolist())
+    for i, fold in enumerate(doc["folds"]):
+        for role in ROLES:
+            part, where = fold[role], f"fold {i}"
+            strange = sorted(set(part["groups"]) - known)
+            if strange:
+                raise BadInput(path, f"{role}.groups: {doc['group_by']} {strange[0]} is not in "
+                                     "the states file", where=where)
+            for name in SETS:
+                _check_example_ids(path, f"{role}.{name}", part[name], example_group[name],
+                                   set(part["groups"]), where)
+
+
+def _check_example_ids(path: str | Path, key: str, ids: list[int], group: np.ndarray,
+                       allowed: set[int], where: str) -> None:
+    ids_a = np.asarray(ids, dtype=np.int64)
+    out = np.flatnonzero((ids_a < 0) | (ids_a >= len(group)))
+    if out.size:
+        raise BadInput(path, f"{key}: example id {ids_a[out[0]]} is outside the states file's "
+                             f"{len(group)} examples", where=where)
+    stray = np.flatnonzero(~np.isin(group[ids_a], list(allowed)))
+    if stray.size:
+        raise BadInput(path, f"{key}: example {ids_a[stray[0]]} is in group "
+                             f"{group[ids_a[stray[0]]]}, not one of this role's groups",
+                       where=where)
+
+
+def _int_list(value: Any) -> bool:
+    """A list of integers (JSON numbers without a fraction; not booleans)."""
+    return isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool)
+                                           for v in value)
 
 
 def _load(path: str | Path) -> Any:

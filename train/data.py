@@ -18,7 +18,7 @@ import torch
 
 from core.errors import BadInput
 from core.provenance import sha256_file
-from data_schema.json_docs import validate_folds
+from data_schema.json_docs import check_fold_examples, validate_folds
 from data_schema.states import validate_states
 from train.split_file import example_groups
 
@@ -66,13 +66,16 @@ def load_states(path: str | Path) -> States:
 
 
 def load_manifest(path: str | Path, data: str | Path) -> dict:
-    """A fold manifest, refused unless it was made from exactly this data file."""
+    """A fold manifest, refused unless it was made from exactly this data file and its ids
+    are the file's (the states file is checked too)."""
     doc = validate_folds(path)
     digest = sha256_file(data)
     if doc["data"]["sha256"] != digest:
         raise BadInput(path, f"was made from {doc['data']['file']} with sha256 "
                              f"{doc['data']['sha256'][:12]}..., but {data} has sha256 "
                              f"{digest[:12]}...: re-run `pipeline split` on it")
+    validate_states(data)
+    check_fold_examples(path, doc, example_groups(data, doc["group_by"]))
     return doc
 
 

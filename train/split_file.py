@@ -16,16 +16,17 @@ import numpy as np
 from core.atomic import atomic_output
 from core.errors import BadInput
 from core.provenance import make_provenance, sha256_file
-from data_schema.hdf5 import attr_text
+from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
 from data_schema.states import validate_states
 from train.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
 
 
 def source_of(states: str | Path) -> str:
-    """``lab`` or ``msm``: what the states file holds (its defaults follow)."""
-    with h5py.File(states, "r") as f:
-        return attr_text(f.attrs["source"])
+    """``lab`` or ``msm``: what the states file holds (its defaults follow; the file is
+    checked by :func:`build_manifest`)."""
+    with h5_reading(states), h5py.File(states, "r") as f:
+        return attr_text(f.attrs.get("source", ""))
 
 
 def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int, int] | None,
@@ -37,7 +38,7 @@ def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int
 
 def example_groups(states: str | Path, group_by: str) -> dict[str, np.ndarray]:
     """The group of every single- and multi-step example (that of its start state)."""
-    with h5py.File(states, "r") as f:
+    with h5_reading(states), h5py.File(states, "r") as f:
         group = f[f"states/{group_by}"][()]
         return {name: group[f[f"{name}/start"][()]] for name in ("single", "multi")}
 
