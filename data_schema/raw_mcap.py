@@ -68,6 +68,8 @@ class Field:
     units: str | None           # None: one unit per name, from the channel's ``units`` metadata
     dtype: str = "f8"
     doc: str = ""
+    finite: bool = False        # NaN refused too (inf always is: a gap is NaN)
+    limit: float | None = None  # largest plausible |value| in ``units`` (catches mm, mN)
 
 
 @dataclass(frozen=True)
@@ -114,8 +116,13 @@ class McapLayout:
         return next((c for c in self.channels if c.topic == topic), None)
 
 
-_POSITION = Field("position", ("M", 3), "m", doc="x, y, z in the mocap frame; NaN in a gap")
-_RESIDUAL = Field("residual", ("M",), "m", doc="QTM residual of each marker; NaN in a gap")
+LAB_M = 50.0        # no marker of a mocap volume lies this far from its origin
+RESIDUAL_M = 1.0    # a marker residual of a metre is no fit at all (mm written as m)
+UNIT_LIMITS = {"N": 1000.0, "N*m": 100.0}   # per-name units: beyond any phantom press
+_POSITION = Field("position", ("M", 3), "m", doc="x, y, z in the mocap frame; NaN in a gap",
+                  limit=LAB_M)
+_RESIDUAL = Field("residual", ("M",), "m", doc="QTM residual of each marker; NaN in a gap",
+                  limit=RESIDUAL_M)
 _MOCAP_RATE = "mocap frame rate (QTM FREQUENCY; 500 Hz in the lab)"
 
 RAW_MCAP = McapLayout(
@@ -128,20 +135,24 @@ RAW_MCAP = McapLayout(
         Channel("/mocap/residuals", "phantom.raw.MarkerResiduals", (_RESIDUAL,), _MOCAP_RATE,
                 dim="M", doc="residuals, when the export has them (C3D)"),
         Channel("/mocap/bodies", "phantom.raw.BodyPoses", (
-            Field("position", ("B", 3), "m", doc="body origin in the mocap frame"),
-            Field("rotation", ("B", 3, 3), "1", doc="rotation matrix, body to lab, row-major"),
-            Field("residual", ("B",), "m", doc="QTM residual; NaN when the body is lost"),
+            Field("position", ("B", 3), "m", doc="body origin in the mocap frame", limit=LAB_M),
+            Field("rotation", ("B", 3, 3), "1", doc="rotation matrix, body to lab, row-major",
+                  limit=1.0 + 1e-6),
+            Field("residual", ("B",), "m", doc="QTM residual; NaN when the body is lost",
+                  limit=RESIDUAL_M),
         ), _MOCAP_RATE, dim="B", doc="QTM 6D export of the indenter, when present"),
         Channel("/pivot/markers", "phantom.raw.MarkerPositions", (_POSITION,), _MOCAP_RATE,
                 dim="M", doc="pivot-calibration recording, when present"),
         Channel("/pivot/residuals", "phantom.raw.MarkerResiduals", (_RESIDUAL,), _MOCAP_RATE,
                 dim="M", doc="its residuals, when the export has them"),
         Channel("/force/raw", "phantom.raw.ForceChannels",
-                (Field("value", ("C",), None, doc="gauge volts or calibrated Fx..Tz"),),
+                (Field("value", ("C",), None, doc="gauge volts or calibrated Fx..Tz",
+                       finite=True),),
                 "force logger rate (1 kHz Speedgoat)", required=True, dim="C",
                 doc="the six force-log channels as logged"),
         Channel("/force/trigger", "phantom.raw.Trigger",
-                (Field("trigger", (1,), "1", doc="sync/trigger channel as logged"),),
+                (Field("trigger", (1,), "1", doc="sync/trigger channel as logged",
+                       finite=True),),
                 "force logger rate", doc="the logger's trigger column, when logged"),
     ),
     metadata={
@@ -212,6 +223,19 @@ class ChannelInfo:
     def k(self) -> int:
         return self.spec.values_per_sample(len(self.names))
 
+    def value_rules(self) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Per value of a sample: its label, whether NaN is refused, its plausible limit."""
+        labels, finite, limit = [], [], []
+        for f in self.spec.fields:
+            sizes = [len(self.names) if d == self.spec.dim else int(d) for d in f.shape]
+            for idx in np.ndindex(*sizes):
+                named = self.names[idx[0]] if f.shape[0] == self.spec.dim else idx[0]
+                unit = f.units or (self.units[idx[0]] if self.units else "")
+                labels.append(f"{f.name} {named}" + "".join(f"[{i}]" for i in idx[1:]))
+                finite.append(f.finite)
+                limit.append(f.limit or UNIT_LIMITS.get(unit, np.inf))
+        return labels, np.array(finite), np.array(limit)
+
 
 @dataclass
 class RawMcapIndex:
@@ -280,6 +304,7 @@ def iter_blocks(reader: Any, index: RawMcapIndex, path: str | Path
     must increase from block to block.
     """
     by_id = {c.id: c for c in index.channels.values()}
+    rules = {t: c.value_rules() for t, c in index.channels.items()}
     spans: dict[str, dict[int, tuple[int, int]]] = {t: {} for t in index.channels}
     for _schema, ch, msg in reader.iter_messages(log_time_order=False):
         info = by_id[ch.id]
@@ -292,6 +317,7 @@ def iter_blocks(reader: Any, index: RawMcapIndex, path: str | Path
             raise BadInput(path, f"unexpected block of {times.shape[0]} samples", where=where)
         if times.size > 1 and not (np.diff(times) > 0).all():
             raise BadInput(path, "time is not increasing", where=where)
+        _check_values(path, values, rules[info.topic], where)
         spans[info.topic][msg.sequence] = (int(times[0]), int(times[-1]))
         yield info, start, times, values
     for topic, blocks in spans.items():
@@ -301,6 +327,23 @@ def iter_blocks(reader: Any, index: RawMcapIndex, path: str | Path
         for seq in range(1, len(blocks)):
             if blocks[seq][0] <= blocks[seq - 1][1]:
                 raise BadInput(path, "time is not increasing", where=f"{topic} block {seq}")
+
+
+def _check_values(path: str | Path, values: np.ndarray,
+                  rules: tuple[list[str], np.ndarray, np.ndarray], where: str) -> None:
+    """No inf; no NaN where a field is finite; nothing beyond a field's plausible limit."""
+    labels, finite, limit = rules
+    bad = np.isinf(values) | (np.isnan(values) & finite)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise BadInput(path, f"sample {i}: {labels[j]} is {values[i, j]} (not a finite value)",
+                       where=where)
+    over = np.abs(np.nan_to_num(values)) > limit
+    if over.any():
+        i, j = np.argwhere(over)[0]
+        raise BadInput(path, f"sample {i}: {labels[j]} is {values[i, j]:.4g}, more than a "
+                             f"plausible {limit[j]:g} in SI units: millimetres or millinewtons?",
+                       where=where)
 
 
 def validate_raw_mcap(path: str | Path, deep: bool = True) -> RawMcapIndex:
