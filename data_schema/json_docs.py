@@ -6,11 +6,16 @@
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
   ``{"groups": [...], "single": [example ids], "multi": [example ids]}`` plus
   ``train_subsets`` (nested lists of 1..n training groups, for the data-scarcity study).
+- metrics (``pipeline eval --out``): ``runs`` (one row per run: run, label, fold, test_set,
+  metrics) and ``overall`` (one row per label: label, test_set, folds, metrics,
+  fold_ld_mean_sd_mm), optionally ``scarcity`` rows; ``metrics`` maps ``single``, ``multi``
+  and ``all`` to the count ``n`` and the Table-2 numbers in mm, N and N^2.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,6 +110,65 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
             raise BadInput(path, f"train subset {n} is not {n} training groups holding "
                                  f"subset {n - 1}", where=where)
         previous = set(subset)
+
+
+METRIC_ROWS = {
+    "runs": {"run": str, "label": str, "fold": int, "test_set": str, "metrics": dict},
+    "overall": {"label": str, "test_set": str, "folds": int, "metrics": dict,
+                "fold_ld_mean_sd_mm": (int, float)},
+}
+METRIC_LIMITS = {"_mm": 100.0, "_n": 1000.0, "_n2": 1e6}   # beyond the phantom's size, a press
+METRIC_SETS = ("single", "multi", "all")
+
+
+def validate_metrics(path: str | Path) -> dict[str, Any]:
+    """Read a metrics document of ``pipeline eval`` and check it; return it.
+
+    Every row has its keys with their types; every metric is a finite, non-negative number of
+    plausible size for its unit (an error in micrometres written as millimetres is refused);
+    each set counts at least one example.
+    """
+    doc = _load(path)
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in METRIC_ROWS):
+        raise BadInput(path, "not a metrics document (needs lists 'runs' and 'overall')")
+    for table, keys in METRIC_ROWS.items():
+        for i, row in enumerate(doc[table]):
+            where = f"{table}[{i}]"
+            if not isinstance(row, dict):
+                raise BadInput(path, f"{where} is not an object")
+            for key, kind in keys.items():
+                if not isinstance(row.get(key), kind) or isinstance(row.get(key), bool):
+                    raise BadInput(path, f"{where}.{key} missing or not of type {kind}")
+            _check_metric_sets(path, row["metrics"], f"{where}.metrics")
+    for i, row in enumerate(doc.get("scarcity", [])):
+        if not isinstance(row, dict):
+            raise BadInput(path, f"scarcity[{i}] is not an object")
+        _check_numbers(path, {k: v for k, v in row.items() if k != "transfer"},
+                       f"scarcity[{i}]")
+    return doc
+
+
+def _check_metric_sets(path: str | Path, metrics: dict, where: str) -> None:
+    if "all" not in metrics or set(metrics) - set(METRIC_SETS):
+        raise BadInput(path, f"{where} must hold 'all' and only {METRIC_SETS}")
+    for name, values in metrics.items():
+        if not isinstance(values, dict) or not isinstance(values.get("n"), int) or \
+                values["n"] < 1:
+            raise BadInput(path, f"{where}.{name}.n must count at least one example")
+        _check_numbers(path, values, f"{where}.{name}")
+
+
+def _check_numbers(path: str | Path, values: dict, where: str) -> None:
+    """Finite, non-negative numbers, each below the limit its unit suffix sets."""
+    for key, value in values.items():
+        if not isinstance(value, int | float) or isinstance(value, bool) or \
+                not math.isfinite(value) or value < 0:
+            raise BadInput(path, f"{where}.{key} is {value!r}: not a finite, non-negative "
+                                 "number")
+        limit = next((v for suffix, v in METRIC_LIMITS.items() if key.endswith(suffix)), None)
+        if limit is not None and value > limit:
+            raise BadInput(path, f"{where}.{key} is {value:.4g}, more than a plausible "
+                                 f"{limit:g}: in another unit?")
 
 
 def check_fold_examples(path: str | Path, doc: dict[str, Any],

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
-from data_schema.hdf5 import H5Schema
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from data_schema.hdf5 import H5Schema, validate_h5
 from data_schema.raw_mcap import RAW_MCAP, McapLayout
-from data_schema.states import STATES
-from data_schema.synced import SYNCED
+from data_schema.states import STATES, validate_states
+from data_schema.synced import SYNCED, validate_synced
 from data_schema.truth import TRUTH
 
 SCHEMAS: dict[str, H5Schema] = {s.name: s for s in (STATES, SYNCED, TRUTH)}
@@ -15,3 +19,15 @@ MCAP_SCHEMAS: dict[str, McapLayout] = {RAW_MCAP.name: RAW_MCAP}   # validate: ra
 def schema_for(name: str) -> H5Schema | None:
     """The layout registered under ``name`` (a file's ``schema`` attribute), if any."""
     return SCHEMAS.get(name)
+
+
+# The full check (layout and meaning) of each HDF5 schema; the layout alone where none is more.
+VALIDATORS: dict[str, Callable[[str | Path], Any]] = {
+    STATES.name: validate_states, SYNCED.name: validate_synced,
+    TRUTH.name: lambda path: validate_h5(path, TRUTH),
+}
+
+
+def validator_for(name: str) -> Callable[[str | Path], Any] | None:
+    """The check of a file whose ``schema`` attribute is ``name``, if the pipeline knows it."""
+    return VALIDATORS.get(name)

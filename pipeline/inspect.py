@@ -226,11 +226,9 @@ def _inspect_hdf5(path: Path) -> dict[str, Any]:
     """Root attributes and every dataset, read generically (any schema, ours or not)."""
     import h5py
 
-    try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise BadInput(path, f"not a readable HDF5 file ({e})") from None
-    with f:
+    from data_schema.hdf5 import h5_reading
+
+    with h5_reading(path), h5py.File(path, "r") as f:
         attrs = {k: _attr(v) for k, v in f.attrs.items()}
         datasets: dict[str, dict[str, Any]] = {}
         f.visititems(lambda name, obj: datasets.update({name: _dataset(obj)})
@@ -277,17 +275,22 @@ def _nan_points(ds: Any, rows: int = 1 << 16) -> int:
 
 
 def _validity(path: Path, schema: str | None) -> str | None:
-    from data_schema.hdf5 import validate_h5
-    from data_schema.registry import schema_for
+    from data_schema.registry import validator_for
 
-    layout = schema_for(schema) if schema else None
-    if layout is None:
+    check = validator_for(schema) if schema else None
+    if check is None:
         return None
-    return _valid(lambda: validate_h5(path, layout))
+    return _valid(lambda: check(path))
 
 
 def _inspect_json(path: Path) -> dict[str, Any]:
-    from data_schema.json_docs import JSON_SCHEMAS, validate_folds, validate_json_doc
+    from data_schema.json_docs import (
+        JSON_SCHEMAS,
+        METRIC_ROWS,
+        validate_folds,
+        validate_json_doc,
+        validate_metrics,
+    )
 
     try:
         doc = json.loads(path.read_text())
@@ -305,6 +308,8 @@ def _inspect_json(path: Path) -> dict[str, Any]:
                             for f in doc.get("folds", [])]
     elif doc.get("schema") in JSON_SCHEMAS:
         details["valid"] = _valid(lambda: validate_json_doc(path, JSON_SCHEMAS[doc["schema"]]))
+    elif set(METRIC_ROWS) <= set(doc):
+        details["valid"] = _valid(lambda: validate_metrics(path))
     return {"schema": doc.get("schema"), "schema_version": doc.get("schema_version"),
             "provenance": doc.get("provenance"), "details": details}
 
