@@ -129,6 +129,10 @@ def _check_dataset(
     members = _expand(f, ds.path)
     if not members and ds.required and "*" not in ds.path:
         raise BadInput(path, f"missing dataset {ds.path}")
+    if ds.required and "*" in ds.path:
+        absent = _absent_members(f, ds.path)
+        if absent:
+            raise BadInput(path, f"missing dataset {absent[0]}")
     for member in members:
         obj = f[member]
         if not isinstance(obj, h5py.Dataset):
@@ -155,7 +159,12 @@ def _check_values(path: str | Path, f: h5py.File, member: str, ds: Dataset) -> N
             at = tuple(int(i) for i in bad[0])
             raise BadInput(path, f"{member} is not finite at index {at} ({values[at]})"
                                  + (f" where {ds.finite} is True" if need is not np.True_ else ""))
-    if ds.limit is None or not finite.any():
+    if ds.limit is None:
+        return
+    inf = np.argwhere(np.isinf(values))
+    if inf.size:
+        raise BadInput(path, f"{member} is infinite at index {tuple(int(i) for i in inf[0])}")
+    if not finite.any():
         return
     big = np.abs(np.where(finite, values, 0.0))
     at = np.unravel_index(int(np.argmax(big)), big.shape)
@@ -179,6 +188,15 @@ def _expand(f: h5py.File, pattern: str) -> list[str]:
             nxt += [f"{p}/{n}" if p else n for n in names]
         paths = nxt
     return paths
+
+
+def _absent_members(f: h5py.File, pattern: str) -> list[str]:
+    """Where each member of the pattern's last ``*`` group lacks the rest of the pattern."""
+    segs = pattern.split("/")
+    last = len(segs) - 1 - segs[::-1].index("*")
+    rest = "/".join(segs[last + 1:])
+    return [f"{g}/{rest}" for g in _expand(f, "/".join(segs[: last + 1]))
+            if isinstance(f[g], h5py.Group) and rest not in f[g]]
 
 
 def _scope(pattern: str, member: str) -> str:

@@ -93,7 +93,8 @@ def validate_synced(path: str | Path) -> None:
 
     Layout and values (:data:`SYNCED`), then: at least one press; the rest-plane normal of unit
     length; per press, time strictly increasing, ``onset <= peak < release <= frames`` and the
-    location one of ``locations/centre``.
+    location one of ``locations/centre``, the depth that of its tip below the rest plane (so
+    points, depth and plane share one unit).
     """
     validate_h5(path, SYNCED)
     with h5_reading(path), h5py.File(path, "r") as f:
@@ -102,8 +103,10 @@ def validate_synced(path: str | Path) -> None:
             raise BadInput(path, f"calibration/surface_normal {normal} is not a unit vector")
         if not len(f["presses"]):
             raise BadInput(path, "the synced file holds no press")
+        plane = (f["calibration/surface_point"][()], normal)
         for key, press in f["presses"].items():
             _check_press(path, f"presses/{key}", press, len(f["locations/centre"]))
+            _check_depth(path, f"presses/{key}", press, plane)
 
 
 def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int) -> None:
@@ -120,3 +123,17 @@ def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int)
     if not 0 <= int(a["location"]) < locations:
         raise BadInput(path, f"{name}: location {a['location']} is not one of the "
                              f"{locations} in locations/centre")
+
+
+def _check_depth(path: str | Path, name: str, press: h5py.Group,
+                 plane: tuple[np.ndarray, np.ndarray]) -> None:
+    """``depth`` is the tip's (the 26th point's) depth below the rest plane, to 1 um."""
+    point, normal = plane
+    expect = (point - press["points"][:, -1]) @ normal
+    depth = press["depth"][()]
+    off = np.flatnonzero(~np.isclose(depth, expect, rtol=0, atol=1e-6, equal_nan=True))
+    if off.size:
+        i = off[0]
+        raise BadInput(path, f"{name}/depth at frame {i} is {depth[i]:.6g} m, but its tip lies "
+                             f"{expect[i]:.6g} m below the rest plane: points, depth or plane "
+                             "in another unit?")

@@ -20,6 +20,8 @@ import torch
 
 from core.atomic import atomic_output
 from core.errors import BadInput
+from data_schema.hdf5 import SCALED_UNIT
+from data_schema.states import PLAUSIBLE_M, PLAUSIBLE_N
 from train.model import CGNN, CGNNConfig
 from train.normalise import Normaliser
 
@@ -76,12 +78,18 @@ def _parsed(path: str | Path, key: str, parse: Any, value: Any) -> Any:
 
 
 def _check_norm(path: str | Path, norm: Normaliser) -> None:
-    values = {"centre": max(map(abs, norm.centre)), "scale": norm.scale,
-              "disp_scale": norm.disp_scale, "force_scale": norm.force_scale}
-    for name, value in values.items():
+    """Finite, positive scales of plausible size in metres and newtons (not mm, mN)."""
+    values = {"centre": (max(map(abs, norm.centre)), PLAUSIBLE_M, "m"),
+              "scale": (norm.scale, PLAUSIBLE_M, "m"), "extent": (norm.extent, PLAUSIBLE_M, "m"),
+              "disp_scale": (norm.disp_scale, PLAUSIBLE_M, "m"),
+              "force_scale": (norm.force_scale, PLAUSIBLE_N, "N")}
+    for name, (value, limit, unit) in values.items():
         if not math.isfinite(value) or (name != "centre" and value <= 0):
             raise BadInput(path, f"checkpoint norm.{name} is {value}: not a finite "
                                  + ("value" if name == "centre" else "positive scale"))
+        if value > limit:
+            raise BadInput(path, f"checkpoint norm.{name} is {value:.4g} {unit}, more than a "
+                                 f"plausible {limit:g} {unit}: {SCALED_UNIT[unit]}?")
 
 
 def _check_weights(path: str | Path, weights: Any, config: CGNNConfig) -> None:
