@@ -123,9 +123,11 @@ def _check_meta(path: str | Path, meta: Any) -> None:
 def _unsafe(e: Exception) -> str:
     """torch's several lines on a refused pickle, as one: what the file tried to load."""
     found = re.search(r"GLOBAL ([\w.]+)", str(e))
-    what = found.group(1) if found else "a Python object"
-    return (f"holds pickled code ({what}) that a safe load (weights_only) refuses: not a "
-            "checkpoint of `pipeline train`, and not run")
+    if found is None:
+        return ("not a torch checkpoint (a pickle that a safe load, weights_only, cannot "
+                "read)")
+    return (f"holds pickled code ({found.group(1)}) that a safe load (weights_only) refuses: "
+            "not a checkpoint of `pipeline train`, and not run")
 
 
 def _first_line(e: Exception) -> str:
