@@ -92,9 +92,9 @@ def validate_states(path: str | Path) -> None:
     Layout and values (:data:`STATES`): every valid point, tip and force finite; coordinates
     and forces of plausible size for metres and newtons (millimetres or millinewtons written as
     metres or newtons are refused, not learned). Meaning: ``step_n`` a positive number, one
-    session name per session id, levels not negative, the loaded mass one of the points,
-    example indices in range, start and end in one sequence, end after start, single-step
-    pairs exactly one level apart, multi-step at least two.
+    session name per session id, levels not negative, example indices in range, start and end
+    in one sequence, end after start, single-step pairs exactly one level apart, multi-step at
+    least two.
     """
     sid = read_schema_id(path)
     if sid is not None and sid[0] == STATES.name and sid[1].split(".")[0] == "1":
@@ -107,9 +107,6 @@ def validate_states(path: str | Path) -> None:
         _check_ids(path, "states/session", f["states/session"][()], len(names),
                    "the session_names attribute")
         _check_ids(path, "states/step", f["states/step"][()], None, "levels")
-        if "states/mass" in f:
-            _check_ids(path, "states/mass", f["states/mass"][()], f["states/points"].shape[1],
-                       "the points")
         seq, step = f["states/sequence"][()], f["states/step"][()]
         for name, gap in (("single", 1), ("multi", 2)):
             _check_pairs(path, name, f[f"{name}/start"][()], f[f"{name}/end"][()], seq, step, gap)
