@@ -654,6 +654,45 @@ def test_inspect_checks_metrics(dent, tmp_path) -> None:
     fuzz(pair, metrics_mutations(dent / "metrics.json"), tmp_path)
 
 
+def _refusal(folder: Path, clean: Path, mutation: Callable[[Path], None],
+             args: Callable[[Path], tuple]) -> str:
+    """The one line a stage prints for a damaged copy of ``clean``."""
+    folder.mkdir()
+    copy = folder / clean.name
+    shutil.copyfile(clean, copy)
+    mutation(copy)
+    res = _cli(*args(copy))
+    assert res.exit_code == 2 and res.exception is None, res.output
+    return res.stderr.strip()
+
+
+def test_each_message_names_the_dataset_index_or_key(lab, dent, tmp_path) -> None:
+    """One refusal per file type, checked word for word where it matters."""
+    out = tmp_path / "out"
+    cases = [
+        (lab / "s.mcap", next(m.apply for m in mcap_mutations(0) if m.name.startswith("force x")),
+         lambda p: ("sync", p, "--out", out),
+         "/force/raw block 3: sample 65: value Fz is 1017, more than a plausible 1000"),
+        (lab / "synced.h5", _ds("presses/000/depth", lambda a: a * 1000),
+         lambda p: ("extract", p, "--out", out), "presses/000/depth at frame 0 is "),
+        (dent / "states.h5", _ds("states/force", _set((3,), np.nan)),
+         lambda p: ("split", p, "--out", out), "states/force is not finite at index (3,) (nan)"),
+        (dent / "splits.json", _with(("folds", 0, "test", "single"), 10**6, append=True),
+         lambda p: ("train", "--data", dent / "states.h5", "--splits", p, "--out", out),
+         "fold 0: test.single: example id 1000000 is outside the states file's"),
+        (dent / "run" / "best.pt", lambda p: torch.save({"model": _Call()}, p),
+         lambda p: ("export", p, "--onnx", out),
+         "holds pickled code (print) that a safe load (weights_only) refuses"),
+        (dent / "run" / "best.pt", _ckpt_edit(_in(("norm", "centre"),
+                                                   lambda c: [x * 1000 for x in c])),
+         lambda p: ("export", p, "--onnx", out), "checkpoint norm.centre is "),
+    ]
+    for i, (clean, mutation, args, words) in enumerate(cases):
+        line = _refusal(tmp_path / f"m{i}", clean, mutation, args)
+        assert line.startswith(f"error: {tmp_path / f'm{i}' / clean.name}") and words in line, \
+            line
+
+
 def test_count_of_cases(request) -> None:
     """Every pair ran: print how many cases over how many pairs."""
     if len(COUNTS) < PAIRS:
