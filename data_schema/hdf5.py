@@ -146,33 +146,31 @@ def _check_dataset(
 
 
 def _check_values(path: str | Path, f: h5py.File, member: str, ds: Dataset) -> None:
-    """Finite where required; within the plausible limit (a scaled unit is refused)."""
+    """Finite where required; no inf and nothing beyond the plausible limit (a scaled unit)."""
     values = f[member][()]
-    finite = np.isfinite(values)
     if ds.finite:
         need = np.True_
         if isinstance(ds.finite, str):
             need = f[ds.finite][()]
             need = need.reshape(need.shape + (1,) * (values.ndim - need.ndim))
-        bad = np.argwhere(~finite & need)
-        if bad.size:
-            at = tuple(int(i) for i in bad[0])
-            raise BadInput(path, f"{member} is not finite at index {at} ({values[at]})"
-                                 + (f" where {ds.finite} is True" if need is not np.True_ else ""))
-    if ds.limit is None:
-        return
-    inf = np.argwhere(np.isinf(values))
-    if inf.size:
-        raise BadInput(path, f"{member} is infinite at index {tuple(int(i) for i in inf[0])}")
-    if not finite.any():
-        return
-    big = np.abs(np.where(finite, values, 0.0))
-    at = np.unravel_index(int(np.argmax(big)), big.shape)
-    if big[at] > ds.limit:
-        raise BadInput(path, f"{member} reaches {big[at]:.4g} {ds.units} at index "
-                             f"{tuple(int(i) for i in at)}, more than a plausible {ds.limit:g} "
-                             f"{ds.units}: {SCALED_UNIT.get(ds.units or '', 'another unit')}? "
-                             f"It is stored in {ds.units}")
+        where = f" where {ds.finite} is True" if isinstance(ds.finite, str) else ""
+        _refuse_first(path, ~np.isfinite(values) & need, f"{member} is not finite at index "
+                      "{at} ({value})" + where, values)
+    if ds.limit is not None:
+        _refuse_first(path, np.isinf(values), f"{member} is infinite at index {{at}}", values)
+        big = np.abs(np.where(np.isfinite(values), values, 0.0))
+        _refuse_first(path, big > ds.limit, f"{member} reaches {{value:.4g}} {ds.units} at "
+                      f"index {{at}}, more than a plausible {ds.limit:g} {ds.units}: "
+                      f"{SCALED_UNIT.get(ds.units or '', 'another unit')}? It is stored in "
+                      f"{ds.units}", big)
+
+
+def _refuse_first(path: str | Path, bad: np.ndarray, message: str, values: np.ndarray) -> None:
+    """Raise :class:`BadInput` with ``message`` (``{at}``, ``{value}``) at the first bad index."""
+    hits = np.argwhere(bad)
+    if hits.size:
+        at = tuple(int(i) for i in hits[0])
+        raise BadInput(path, message.format(at=at, value=values[at]))
 
 
 def _expand(f: h5py.File, pattern: str) -> list[str]:
