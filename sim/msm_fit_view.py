@@ -9,8 +9,8 @@ phantom did, and is it closer to every press than a still surface. One timeline,
 - ``fit/seq_<s>/measured``: Points3D, the measured points (orange);
 - ``fit/seq_<s>/model``: Points3D, the MSM at those points (blue), joined to the measured ones
   by red ``fit/seq_<s>/error`` segments;
-- ``distance/*``: per press (``press`` timeline, the sequence's position in the fit), the mean
-  distance of the fitted MSM, of the start constants and of a still surface, in mm.
+- ``distance/*``: bar charts (static), one bar per press in the fit's order: the mean distance
+  of the fitted MSM, of the start constants and of a still surface, in mm, side by side.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import colormap, declare_up, phantom_view, plot, recording
+from core.recording import colormap, declare_up, phantom_view, recording
 from sim.msm import MSM, MSMParams
 from sim.msm_fit import FitResult, MeasuredSequence, at_points, grid_states
 
@@ -45,9 +45,11 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
     views = [phantom_view(f"press {s.sequence}: fitted MSM 0 .. {largest * 1e3:.1f} mm (sqrt), "
                           "measured orange, model blue", [f"+ /fit/seq_{s.sequence:04d}/**"],
                           np.array([size / 2, size / 2, -size * 0.05]), size) for s in shown]
-    bp = rrb.Blueprint(rrb.Horizontal(rrb.Grid(*views),
-                                      plot("mean distance per press [mm]", "/distance"),
-                                      column_shares=[3, 2]), collapse_panels=False)
+    bars = rrb.Vertical(*(rrb.BarChartView(name=f"{name}: mean distance per press [mm]",
+                                           origin=f"/distance/{key[:-2]}")
+                          for key, name, _ in SERIES))
+    bp = rrb.Blueprint(rrb.Horizontal(rrb.Grid(*views), bars, column_shares=[3, 2]),
+                       collapse_panels=False)
     with recording(APP_ID, path, bp) as rec:
         declare_up(rec)
         for seq, grid in zip(shown, states, strict=True):
@@ -82,9 +84,6 @@ def _log_press(rec: rr.RecordingStream, model: MSM, seq: MeasuredSequence, grid:
 
 def _log_distances(rec: rr.RecordingStream, result: FitResult) -> None:
     """The mean distance per press of the fitted MSM, the start constants and stillness."""
-    press = [rr.TimeColumn("press", sequence=np.arange(len(result.per_sequence)))]
-    for key, name, color in SERIES:
-        rec.log(f"distance/{key[:-2]}", rr.SeriesPoints(names=[name], colors=[color],
-                                                        marker_sizes=[4.0]), static=True)
-        rec.send_columns(f"distance/{key[:-2]}", indexes=press, columns=rr.Scalars.columns(
-            scalars=[row[key] * 1e3 for row in result.per_sequence]))
+    for key, _, color in SERIES:
+        values = [row[key] * 1e3 for row in result.per_sequence]
+        rec.log(f"distance/{key[:-2]}", rr.BarChart(values, color=color), static=True)
