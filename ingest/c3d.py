@@ -15,6 +15,7 @@ import numpy as np
 from core.errors import BadInput
 from core.series import MarkerSeries, frame_times_ns, time_to_ns
 from core.units import length_scale
+from ingest.analog import AnalogExport, check_scales, samples_per_frame
 
 
 def _param(params: dict, group: str, name: str, path: str | Path) -> Any:
@@ -236,8 +237,8 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
                    where=f"byte {offset + pos}")
 
 
-def read_c3d(path: str | Path) -> MarkerSeries:
-    """Read the 3D points of a C3D file: metres, NaN where the residual is negative."""
+def _open(path: str | Path) -> tuple[_Header, Any]:
+    """The checked header and ezc3d's reading of the file."""
     import ezc3d
 
     if not Path(path).is_file():
@@ -247,6 +248,19 @@ def read_c3d(path: str | Path) -> MarkerSeries:
         c = ezc3d.c3d(str(path))
     except Exception as e:  # ezc3d raises bare RuntimeError/IndexError/... on bad files
         raise BadInput(path, f"not a readable C3D file ({e})") from None
+    return header, c
+
+
+def _point_rate(params: dict, path: str | Path) -> float:
+    rate = _first(params, "POINT", "RATE", path)
+    if not isinstance(rate, int | float | np.number):
+        raise BadInput(path, f"POINT:RATE {rate!r} is not a number")
+    return float(rate)
+
+
+def read_c3d(path: str | Path) -> MarkerSeries:
+    """Read the 3D points of a C3D file: metres, NaN where the residual is negative."""
+    header, c = _open(path)
     params = c["parameters"]
     points = np.asarray(c["data"]["points"], dtype=np.float64)          # (4, N, T)
     residuals = np.asarray(c["data"]["meta_points"]["residuals"], dtype=np.float64)
@@ -256,10 +270,7 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     if header.frames is not None and header.frames != n_frames:
         raise BadInput(path, f"truncated: the header says {header.frames} frames but "
                              f"{n_frames} could be read", where=f"frame {n_frames}")
-    rate = _first(params, "POINT", "RATE", path)
-    if not isinstance(rate, int | float | np.number):
-        raise BadInput(path, f"POINT:RATE {rate!r} is not a number")
-    rate = float(rate)
+    rate = _point_rate(params, path)
     time_ns = frame_times_ns(n_frames, rate, path, "POINT:RATE")
     units = str(_first(params, "POINT", "UNITS", path)).strip()
     try:
@@ -281,3 +292,57 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     events = _events(params, first_frame / rate, path)
     return MarkerSeries(source=str(path), time_ns=time_ns, labels=labels, positions=positions,
                         rate_hz=rate, residuals=res, events=events, meta=meta)
+
+
+def read_c3d_analog(path: str | Path) -> AnalogExport:
+    """Read the analog channels of a C3D file (ANALOG section) in the units it states.
+
+    ezc3d (1.7) already returns ``(raw - ANALOG:OFFSET) * ANALOG:SCALE * ANALOG:GEN_SCALE``, the
+    C3D standard's physical value (tests/test_analog.py checks it against the raw bytes of a
+    real export), so the scales are checked and recorded here, never applied a second time.
+    Missing or zero scales are bad input: the values would mean nothing.
+    """
+    _, c = _open(path)
+    params = c["parameters"]
+    analog = params.get("ANALOG")
+    values = np.asarray(c["data"]["analogs"], dtype=np.float64)         # (1, C, T)
+    n = values.shape[1] if values.ndim == 3 else 0
+    if analog is None or n == 0:
+        raise BadInput(path, "the C3D file has no analog channels (no ANALOG section data)")
+    used = _count(params, "ANALOG", "USED", path)
+    if used is not None and used != n:
+        raise BadInput(path, f"ANALOG:USED says {used} channels but the data hold {n}")
+    for name in ("SCALE", "GEN_SCALE", "OFFSET"):
+        if np.size(analog.get(name, {}).get("value", [])) == 0:
+            raise BadInput(path, f"C3D parameter ANALOG:{name} is missing: the analog values "
+                                 "cannot be scaled")
+    scales = np.ravel(np.asarray(_param(params, "ANALOG", "SCALE", path), dtype=np.float64))
+    check_scales(path, "ANALOG:SCALE", scales, n)
+    gen = np.ravel(np.asarray(_param(params, "ANALOG", "GEN_SCALE", path), dtype=np.float64))
+    check_scales(path, "ANALOG:GEN_SCALE", gen[:1], 1)
+    offsets = np.ravel(np.asarray(_param(params, "ANALOG", "OFFSET", path), dtype=np.float64))
+    if offsets.size < n:
+        raise BadInput(path, f"ANALOG:OFFSET has {offsets.size} values for {n} analog channels")
+    point_rate = _point_rate(params, path)
+    rate = float(_first(params, "ANALOG", "RATE", path))
+    samples_per_frame(path, rate, point_rate)
+    labels = _texts(analog, "LABELS", n)
+    if not all(labels):
+        raise BadInput(path, f"ANALOG:LABELS names {sum(map(bool, labels))} of {n} channels")
+    return AnalogExport(
+        source=str(path), format="c3d", labels=labels,
+        descriptions=_texts(analog, "DESCRIPTIONS", n), units=_texts(analog, "UNITS", n),
+        scales=scales[:n], offsets=offsets[:n], gen_scale=float(gen[0]), rate_hz=rate,
+        values=values[0].T.copy(), point_rate_hz=point_rate,
+        meta={"first_frame": int(c["header"]["points"]["first_frame"])})
+
+
+def _texts(group: dict, name: str, n: int) -> list[str]:
+    """A text parameter of the ANALOG group, continued in NAME2, NAME3 ... (more than 255
+    channels), as ``n`` stripped strings ("" where the file has fewer)."""
+    out = [str(s).strip() for s in group.get(name, {}).get("value", [])]
+    k = 2
+    while f"{name}{k}" in group:
+        out += [str(s).strip() for s in group[f"{name}{k}"]["value"]]
+        k += 1
+    return (out + [""] * n)[:n]
