@@ -64,7 +64,9 @@ class AnalogExport:
     def summary(self) -> dict[str, Any]:
         """What ``pipeline inspect`` lists: the rate, and each channel's name, units, scales."""
         per_frame = None if self.point_rate_hz is None else self.rate_hz / self.point_rate_hz
-        return {"rate_hz": self.rate_hz, "samples": self.samples,
+        how = ("(raw - ANALOG:OFFSET) x ANALOG:SCALE x ANALOG:GEN_SCALE" if self.format == "c3d"
+               else "as written (CHANNEL_GAIN)")
+        return {"rate_hz": self.rate_hz, "samples": self.samples, "values": how,
                 "samples_per_frame": per_frame, "gen_scale": self.gen_scale,
                 "channels": [{"number": i + 1, "name": n, "label": lab, "description": d,
                               "units": u, "scale": float(s), "offset": float(o)}
