@@ -81,6 +81,7 @@ class _Header(NamedTuple):
     frames: int | None       # words 4-5: last - first + 1; None when it cannot say (> 65535)
     rate: float              # words 11-12, a float in the processor's format
     data_start: int          # word 9: the first 512-byte block of the data section
+    parameters: frozenset[str] = frozenset()   # every GROUP:NAME the parameter section has
 
 
 def _header_float(raw: bytes, processor: int) -> float:
@@ -125,11 +126,13 @@ def _check_header(path: str | Path) -> _Header:
                              f"{data_start})")
     with open(path, "rb") as f:
         f.seek(start)
-        numbers = _check_parameters(path, f.read(params_end - start), param[3], start)
+        numbers, names = _check_parameters(path, f.read(params_end - start), param[3], start)
+    _check_analog_scales(numbers, names, path)
     first, last = int(words[3]), int(words[4])
     frames = None if last >= 65535 or last < first else last - first + 1
     header = _Header(points=int(words[1]), frames=frames,
-                     rate=_header_float(head[20:24], param[3]), data_start=int(words[8]))
+                     rate=_header_float(head[20:24], param[3]), data_start=int(words[8]),
+                     parameters=frozenset(names))
     _check_against_header(numbers, header, path)
     return header
 
@@ -183,10 +186,26 @@ def _check_against_header(numbers: dict[str, float], header: _Header,
         raise BadInput(path, f"POINT:SCALE {scale:g} is not a scale factor (a non-zero number)")
 
 
+def _check_analog_scales(numbers: dict[str, float], names: set[str] | frozenset[str],
+                         path: str | Path, required: tuple[str, ...] = ("SCALE", "OFFSET")
+                         ) -> None:
+    """A file with analog channels must say how to scale them: ezc3d (1.7) crashes on one
+    without ANALOG:SCALE or ANALOG:OFFSET (so every reader checks those), and takes a missing
+    ANALOG:GEN_SCALE as 1 (the analog reader refuses that too)."""
+    used = numbers.get("ANALOG:USED")
+    if not used:
+        return
+    for name in required:
+        if f"ANALOG:{name}" not in names:
+            raise BadInput(path, f"ANALOG:USED says {used:g} analog channels but the parameter "
+                                 f"ANALOG:{name} is missing: the analog values cannot be scaled")
+
+
 def _check_parameters(path: str | Path, section: bytes, processor: int,
-                      offset: int) -> dict[str, float]:
+                      offset: int) -> tuple[dict[str, float], set[str]]:
     """Walk the parameter records as ezc3d will, refusing any that would lead it astray; return
-    the single-number parameters as ``{"GROUP:NAME": value}``, as the file has them.
+    the single-number parameters as ``{"GROUP:NAME": value}``, as the file has them, and the
+    names (``GROUP:NAME``) of all parameters.
 
     A record: name length (int8, negative when locked; 0 ends the section), group id (int8),
     the name, the int16 offset from that field to the next record (0: the last), then a group's
@@ -198,9 +217,11 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
     order = ">" if processor == 86 else "<"
     groups: dict[int, str] = {}
     numbers: dict[tuple[int, str], float] = {}
+    present: set[tuple[int, str]] = set()
 
-    def found() -> dict[str, float]:
-        return {f"{groups.get(g, g)}:{name}": v for (g, name), v in numbers.items()}
+    def found() -> tuple[dict[str, float], set[str]]:
+        return ({f"{groups.get(g, g)}:{name}": v for (g, name), v in numbers.items()},
+                {f"{groups.get(g, g)}:{name}" for g, name in present})
 
     pos = 4
     while pos + 2 <= len(section):
@@ -217,6 +238,7 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
         if gid < 0:
             groups[-gid] = name
         elif end + 2 <= len(section):
+            present.add((gid, name))
             kind, dims = struct.unpack_from("bB", section, end)
             shape = section[end + 2:end + 2 + dims]
             size = int(np.prod(list(shape))) if dims else 1
@@ -302,7 +324,7 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     real export), so the scales are checked and recorded here, never applied a second time.
     Missing or zero scales are bad input: the values would mean nothing.
     """
-    _, c = _open(path)
+    header, c = _open(path)
     params = c["parameters"]
     analog = params.get("ANALOG")
     values = np.asarray(c["data"]["analogs"], dtype=np.float64)         # (1, C, T)
@@ -312,10 +334,8 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     used = _count(params, "ANALOG", "USED", path)
     if used is not None and used != n:
         raise BadInput(path, f"ANALOG:USED says {used} channels but the data hold {n}")
-    for name in ("SCALE", "GEN_SCALE", "OFFSET"):
-        if np.size(analog.get(name, {}).get("value", [])) == 0:
-            raise BadInput(path, f"C3D parameter ANALOG:{name} is missing: the analog values "
-                                 "cannot be scaled")
+    _check_analog_scales({"ANALOG:USED": float(n)}, header.parameters, path,
+                         ("SCALE", "OFFSET", "GEN_SCALE"))
     scales = np.ravel(np.asarray(_param(params, "ANALOG", "SCALE", path), dtype=np.float64))
     check_scales(path, "ANALOG:SCALE", scales, n)
     gen = np.ravel(np.asarray(_param(params, "ANALOG", "GEN_SCALE", path), dtype=np.float64))
