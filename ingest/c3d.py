@@ -319,10 +319,12 @@ def read_c3d(path: str | Path) -> MarkerSeries:
 def read_c3d_analog(path: str | Path) -> AnalogExport:
     """Read the analog channels of a C3D file (ANALOG section) in the units it states.
 
-    ezc3d (1.7) already returns ``(raw - ANALOG:OFFSET) * ANALOG:SCALE * ANALOG:GEN_SCALE``, the
-    C3D standard's physical value (tests/test_analog.py checks it against the raw bytes of a
-    real export), so the scales are checked and recorded here, never applied a second time.
-    Missing or zero scales are bad input: the values would mean nothing.
+    The C3D standard's physical value is ``(raw - ANALOG:OFFSET) * ANALOG:SCALE *
+    ANALOG:GEN_SCALE``. ezc3d (1.7) already applies the scales, so they are checked and recorded
+    here, never applied a second time; but it subtracts ``|OFFSET|``, which is wrong for a
+    negative offset (a signed one, or with ``ANALOG:FORMAT`` UNSIGNED one above 32767 stored as
+    int16), so the difference is added back (:func:`_offset_fix`). tests/test_analog.py checks
+    all of it against the raw bytes of a real export. Missing or zero scales are bad input.
     """
     header, c = _open(path)
     params = c["parameters"]
@@ -343,6 +345,10 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     offsets = np.ravel(np.asarray(_param(params, "ANALOG", "OFFSET", path), dtype=np.float64))
     if offsets.size < n:
         raise BadInput(path, f"ANALOG:OFFSET has {offsets.size} values for {n} analog channels")
+    offsets = offsets[:n]
+    unsigned = "UNSIGNED" in [str(v).strip().upper() for v in _texts(analog, "FORMAT", 1)]
+    true_offsets = np.where(unsigned & (offsets < 0), offsets + 65536, offsets)
+    data = values[0].T + _offset_fix(offsets, true_offsets) * scales[:n] * gen[0]
     point_rate = _point_rate(params, path)
     rate = float(_first(params, "ANALOG", "RATE", path))
     samples_per_frame(path, rate, point_rate)
@@ -352,9 +358,14 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     return AnalogExport(
         source=str(path), format="c3d", labels=labels,
         descriptions=_texts(analog, "DESCRIPTIONS", n), units=_texts(analog, "UNITS", n),
-        scales=scales[:n], offsets=offsets[:n], gen_scale=float(gen[0]), rate_hz=rate,
-        values=values[0].T.copy(), point_rate_hz=point_rate,
+        scales=scales[:n], offsets=true_offsets, gen_scale=float(gen[0]), rate_hz=rate,
+        values=data, point_rate_hz=point_rate,
         meta={"first_frame": int(c["header"]["points"]["first_frame"])})
+
+
+def _offset_fix(stored: np.ndarray, true: np.ndarray) -> np.ndarray:
+    """Per channel, the offset ezc3d 1.7 subtracted (``|stored|``) minus the standard's."""
+    return np.abs(stored) - true
 
 
 def _texts(group: dict, name: str, n: int) -> list[str]:

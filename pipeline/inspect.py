@@ -242,6 +242,7 @@ def _inspect_mcap(path: Path) -> dict[str, Any]:
                **dict(zip(s.force.channels, s.force.units, strict=True))},
         details={"session": s.name, "phantom_markers": len(s.phantom_markers),
                  "indenter_markers": len(s.indenter_markers), "force_kind": s.force.kind,
+                 "force_clock": s.force.meta.get("clock", "own (force log)"),
                  "trigger_event": s.trigger_event},
     )
     if s.calibration is not None:
@@ -357,11 +358,12 @@ def _inspect_session(path: Path) -> dict[str, Any]:
         "schema": cfg.raw.get("schema", SCHEMA), "schema_version": cfg.raw.get(
             "schema_version", VERSION),
         "markers": cfg.mocap.phantom_markers + cfg.mocap.indenter_markers,
-        "channels": cfg.force.channels,
+        "channels": [str(c) for c in cfg.force.channels],      # names, or analog numbers
         "units": {"force_channels": ",".join(cfg.force.units), "force_time": cfg.force.time_unit},
         "details": {"name": cfg.name, "phantom_markers": len(cfg.mocap.phantom_markers),
                     "indenter_markers": cfg.mocap.indenter_markers, "force_kind": cfg.force.kind,
-                    "files": {k: v.name for k, v in files.items() if v is not None}},
+                    "files": {k: v.name for k, v in files.items() if v is not None},
+                    **({"force_rate_hz": cfg.force.rate_hz} if cfg.force.rate_hz else {})},
     }
 
 
