@@ -27,8 +27,7 @@ from calib.clock import (
 from calib.presses import segment_presses
 from calib.sync_params import SyncParams
 from core.errors import BadInput
-from core.series import RawSession
-from ingest.analog import SHARED_CLOCK
+from core.series import SHARED_CLOCK, RawSession
 
 MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
 SHARED = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "shared")   # one clock: exact, nothing estimated

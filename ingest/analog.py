@@ -23,10 +23,9 @@ from typing import Any
 import numpy as np
 
 from core.errors import BadInput
-from core.series import ForceSeries
+from core.series import SHARED_CLOCK, ForceSeries
 from core.units import unit_to_si
 
-SHARED_CLOCK = "mocap"           # ForceSeries.meta["clock"] of force logged by the mocap system
 _RATE_TOLERANCE = 1e-6           # relative: an analog rate this close to k x the point rate is k
 
 

@@ -18,6 +18,7 @@ from core.errors import BadInput
 from core.progress import progress
 from core.provenance import make_provenance
 from core.series import (
+    SHARED_CLOCK,
     AtiCalibration,
     BodySeries,
     ForceSeries,
@@ -26,7 +27,7 @@ from core.series import (
 )
 from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
 from data_schema.session import ForceConfig, SessionConfig, read_session
-from ingest.analog import SHARED_CLOCK, analog_force, samples_per_frame
+from ingest.analog import analog_force, samples_per_frame
 from ingest.ati_cal import read_ati_cal
 from ingest.detect import ANALOG_FORMATS, detect_format, read_analog, read_mocap
 from ingest.force_log import read_force_log
