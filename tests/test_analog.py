@@ -314,6 +314,26 @@ def _rate_disagrees(folder: Path) -> str:
     return "session.toml says the analog rate is 2000 Hz but the file says 1000 Hz"
 
 
+def _other_capture(folder: Path) -> str:
+    """The analog export of a shorter capture: its last 1000 samples (1 s) gone."""
+    path = folder / "indentation_a.tsv"
+    rows = path.read_bytes().decode().split("\r\n")
+    rows = [r for r in rows if r][:-1000]
+    n = sum(r.split("\t")[0].isdigit() for r in rows)
+    rows = [("\t".join(["CHANNEL_SAMPLE_COUNTS"] + [str(n)] * (r.count("\t")))
+             if r.startswith("CHANNEL_SAMPLE_COUNTS") else r) for r in rows]
+    path.write_bytes(("\r\n".join(rows) + "\r\n").encode())
+    return "indentation_a.tsv: the analog channels span 8.986 s but the mocap export"
+
+
+def _numbers_for_a_log(folder: Path) -> str:
+    """Channel numbers name analog channels, not the columns of a force log."""
+    _toml(folder, 'file = "indentation_a.tsv"', 'file = "log.csv"')
+    _toml(folder, 'channels = ["Nano17 G0"', 'channels = [1')
+    (folder / "log.csv").write_text("time,a,b,c,d,e,f\n0,1,2,3,4,5,6\n0.001,1,2,3,4,5,6\n")
+    return "session.toml: channel number 1: channel numbers and rate_hz are for analog channels"
+
+
 @pytest.fixture(scope="module")
 def analog_folder(tmp_path_factory) -> Path:
     return _folder(tmp_path_factory.mktemp("analog_bad") / "s")
@@ -327,7 +347,8 @@ def _folder(out: Path) -> Path:
 
 
 @pytest.mark.parametrize("spoil", [_missing_channel, _zero_scale, _missing_scale,
-                                   _rate_not_a_multiple, _rate_disagrees])
+                                   _rate_not_a_multiple, _rate_disagrees, _other_capture,
+                                   _numbers_for_a_log])
 def test_bad_analog_input_is_one_line_exit_2_nothing_written(analog_folder, tmp_path, spoil):
     folder = tmp_path / "s"
     shutil.copytree(analog_folder, folder)
