@@ -140,21 +140,28 @@ def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
         time_column=_str(path, t, "time_column", "time", table="force"), time_unit=unit,
         kind=kind, channels=channels, units=units, calibration=cal,
         trigger_column=None if t.get("trigger_column") is None else
-        _channels(path, [t["trigger_column"]], "force.trigger_column")[0],
+        _channel(path, t["trigger_column"], "force.trigger_column"),
         rate_hz=_rate(path, t.get("rate_hz")),
     )
 
 
 def _channels(path: Path, v: object, name: str) -> list[str | int]:
     """Channel names, or (analog channels) 1-based channel numbers; distinct."""
-    ok = isinstance(v, list) and bool(v) and all(
-        (isinstance(x, str) and x.strip()) or (type(x) is int and x >= 1) for x in v)
-    if not ok:
+    if not isinstance(v, list) or not v:
         raise BadInput(path, f"{name} must be a non-empty list of names or channel numbers "
                              f"(1, 2, ...), got {v!r}")
-    if len(set(v)) != len(v):
+    out = [_channel(path, x, name) for x in v]
+    if len(set(out)) != len(out):
         raise BadInput(path, f"{name} has duplicate entries")
-    return list(v)
+    return out
+
+
+def _channel(path: Path, v: object, name: str) -> str | int:
+    """A channel name (non-empty text) or 1-based channel number."""
+    if (isinstance(v, str) and v.strip()) or (type(v) is int and v >= 1):
+        return v
+    raise BadInput(path, f"{name} must name channels by name (non-empty text) or number "
+                         f"(1, 2, ...), got {v!r}")
 
 
 def _rate(path: Path, v: object) -> float | None:

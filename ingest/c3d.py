@@ -273,10 +273,11 @@ def _open(path: str | Path) -> tuple[_Header, Any]:
     return header, c
 
 
-def _point_rate(params: dict, path: str | Path) -> float:
-    rate = _first(params, "POINT", "RATE", path)
+def _rate(params: dict, group: str, path: str | Path) -> float:
+    """POINT:RATE or ANALOG:RATE as a number."""
+    rate = _first(params, group, "RATE", path)
     if not isinstance(rate, int | float | np.number):
-        raise BadInput(path, f"POINT:RATE {rate!r} is not a number")
+        raise BadInput(path, f"{group}:RATE {rate!r} is not a number")
     return float(rate)
 
 
@@ -292,7 +293,7 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     if header.frames is not None and header.frames != n_frames:
         raise BadInput(path, f"truncated: the header says {header.frames} frames but "
                              f"{n_frames} could be read", where=f"frame {n_frames}")
-    rate = _point_rate(params, path)
+    rate = _rate(params, "POINT", path)
     time_ns = frame_times_ns(n_frames, rate, path, "POINT:RATE")
     units = str(_first(params, "POINT", "UNITS", path)).strip()
     try:
@@ -336,21 +337,10 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     used = _count(params, "ANALOG", "USED", path)
     if used is not None and used != n:
         raise BadInput(path, f"ANALOG:USED says {used} channels but the data hold {n}")
-    _check_analog_scales({"ANALOG:USED": float(n)}, header.parameters, path,
-                         ("SCALE", "OFFSET", "GEN_SCALE"))
-    scales = np.ravel(np.asarray(_param(params, "ANALOG", "SCALE", path), dtype=np.float64))
-    check_scales(path, "ANALOG:SCALE", scales, n)
-    gen = np.ravel(np.asarray(_param(params, "ANALOG", "GEN_SCALE", path), dtype=np.float64))
-    check_scales(path, "ANALOG:GEN_SCALE", gen[:1], 1)
-    offsets = np.ravel(np.asarray(_param(params, "ANALOG", "OFFSET", path), dtype=np.float64))
-    if offsets.size < n:
-        raise BadInput(path, f"ANALOG:OFFSET has {offsets.size} values for {n} analog channels")
-    offsets = offsets[:n]
+    scales, stored, gen = _analog_scales(params, header, n, path)
     unsigned = "UNSIGNED" in [str(v).strip().upper() for v in _texts(analog, "FORMAT", 1)]
-    true_offsets = np.where(unsigned & (offsets < 0), offsets + 65536, offsets)
-    data = values[0].T + _offset_fix(offsets, true_offsets) * scales[:n] * gen[0]
-    point_rate = _point_rate(params, path)
-    rate = float(_first(params, "ANALOG", "RATE", path))
+    offsets = np.where(unsigned & (stored < 0), stored + 65536, stored)
+    point_rate, rate = _rate(params, "POINT", path), _rate(params, "ANALOG", path)
     samples_per_frame(path, rate, point_rate)
     labels = _texts(analog, "LABELS", n)
     if not all(labels):
@@ -358,9 +348,27 @@ def read_c3d_analog(path: str | Path) -> AnalogExport:
     return AnalogExport(
         source=str(path), format="c3d", labels=labels,
         descriptions=_texts(analog, "DESCRIPTIONS", n), units=_texts(analog, "UNITS", n),
-        scales=scales[:n], offsets=true_offsets, gen_scale=float(gen[0]), rate_hz=rate,
-        values=data, point_rate_hz=point_rate,
-        meta={"first_frame": int(c["header"]["points"]["first_frame"])})
+        scales=scales, offsets=offsets, gen_scale=gen, rate_hz=rate,
+        values=values[0].T + _offset_fix(stored, offsets) * scales * gen,
+        point_rate_hz=point_rate, meta={"first_frame": int(c["header"]["points"]["first_frame"])})
+
+
+def _analog_scales(params: dict, header: _Header, n: int,
+                   path: str | Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """ANALOG:SCALE (n), ANALOG:OFFSET (n, as stored) and ANALOG:GEN_SCALE: each present (in
+    the file, not filled in by ezc3d), the scales finite and non-zero."""
+    _check_analog_scales({"ANALOG:USED": float(n)}, header.parameters, path,
+                         ("SCALE", "OFFSET", "GEN_SCALE"))
+
+    def numbers(name: str) -> np.ndarray:
+        return np.ravel(np.asarray(_param(params, "ANALOG", name, path), dtype=np.float64))
+
+    scales, offsets, gen = numbers("SCALE"), numbers("OFFSET"), numbers("GEN_SCALE")
+    check_scales(path, "ANALOG:SCALE", scales, n)
+    check_scales(path, "ANALOG:GEN_SCALE", gen[:1], 1)
+    if offsets.size < n:
+        raise BadInput(path, f"ANALOG:OFFSET has {offsets.size} values for {n} analog channels")
+    return scales[:n], offsets[:n], float(gen[0])
 
 
 def _offset_fix(stored: np.ndarray, true: np.ndarray) -> np.ndarray:
