@@ -33,6 +33,8 @@ from sim.twin_scene import (
 )
 from sim.twin_states import States, true_states
 
+ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (analog route)
+
 
 @dataclass
 class Twin:
@@ -56,9 +58,6 @@ class Twin:
         """Phantom-frame points (..., 3) in the lab."""
         return to_lab_frame(self.to_lab, p)
 
-
-
-ANALOG_LEAD_IN_S = 3.0
 
 
 def _lead_in(p: TwinParams) -> float:
