@@ -362,3 +362,20 @@ def test_bad_analog_input_is_one_line_exit_2_nothing_written(analog_folder, tmp_
         lines
     assert not out.parent.exists() or not list(out.parent.iterdir())
     assert _folder_hash(folder) == before
+
+
+def test_same_seed_same_analog_bytes_and_routes_replace_each_other(analog_folder, tmp_path):
+    """The analog exports are deterministic; writing the logger route over an analog session
+    (and back) leaves none of the other route's files."""
+    again = _folder(tmp_path / "again")
+    for name in ("indentation.c3d", "indentation_a.tsv", "session.toml"):
+        assert (analog_folder / name).read_bytes() == (again / name).read_bytes(), name
+    res = _cli("synth", again, "--seed", "5", "--locations", "1", "--repeats", "1", "--no-rrd")
+    assert res.exit_code == 0, res.output
+    names = {p.name for p in again.iterdir()}
+    assert {"force.csv", "force.mat"} <= names and not names & {"indentation.c3d",
+                                                               "indentation_a.tsv"}
+    _folder(again)
+    names = {p.name for p in again.iterdir()}
+    assert {"indentation.c3d", "indentation_a.tsv"} <= names
+    assert not names & {"force.csv", "force.mat"}
