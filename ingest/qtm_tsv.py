@@ -650,7 +650,10 @@ def read_qtm_analog(path: str | Path) -> AnalogExport:
         raise head.bad(what, _key_line(head, key))
     rate = _analog_rate(head, n)
     gains = _analog_list(head, "CHANNEL_GAIN", n, 1.0)
-    check_scales(path, "CHANNEL_GAIN", gains, n)
+    try:
+        check_scales(path, "CHANNEL_GAIN", gains, n)
+    except BadInput as e:
+        raise head.bad(e.what, _key_line(head, "CHANNEL_GAIN")) from None
     if np.any(gains != 1.0):
         raise head.bad("CHANNEL_GAIN other than 1: QTM writes its analog values with gain 1, "
                        "a file with other gains is not understood", _key_line(head, "CHANNEL_GAIN"))
