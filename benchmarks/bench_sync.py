@@ -1,9 +1,10 @@
 """Accuracy and speed of `pipeline sync` on default-size phantom-twin sessions.
 
 For each seed: synthesise a session (5 locations x 4 repeats), ingest it, sync it with the
-trigger clock and with the data-driven clock, and compare both with the twin's truth. Prints
-the median and worst error over seeds against the issue's targets, and the ratios against
-peers measured in the same run:
+trigger clock and with the data-driven clock, and compare both with the twin's truth; and the
+same seed with the force through the mocap's analog board (``--force-via analog``: one shared
+clock, nothing to estimate). Prints the median and worst error over seeds against the issue's
+targets, and the ratios against peers measured in the same run:
 
 * clock: the data-driven estimate against the trigger (error ratio);
 * force: our anti-aliased resampler against naive decimation (the logger sample nearest each
@@ -88,7 +89,8 @@ def long_session_force(workdir: Path) -> dict[str, tuple[float, float]]:
 
 def run(seeds: int, repeats: int, workdir: Path) -> None:
     set_quiet(True)
-    rows: dict[str, list[dict[str, float]]] = {"trigger": [], "data": [], "plain_tip": []}
+    rows: dict[str, list[dict[str, float]]] = {"trigger": [], "data": [], "plain_tip": [],
+                                               "analog": []}
     naive, times_seeds, times, times_rrd = [], [], [], []
     for seed in range(seeds):
         folder = synthesize_session(workdir / f"s{seed}", seed=seed)
@@ -106,6 +108,10 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
         plain = workdir / f"s{seed}_plain.h5"
         run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
         rows["plain_tip"].append(sync_errors(plain, truth))
+        analog = synthesize_session(workdir / f"a{seed}", seed=seed, force_via="analog")
+        ingest_session(analog, workdir / f"a{seed}.mcap")
+        run_sync(workdir / f"a{seed}.mcap", workdir / f"a{seed}.h5")
+        rows["analog"].append(sync_errors(workdir / f"a{seed}.h5", analog / "truth.h5"))
         print(f"seed {seed}: done", flush=True)
     retare = long_session_force(workdir)
     mcap = workdir / "s0.mcap"
@@ -129,12 +135,13 @@ def _report(rows: dict[str, list[dict[str, float]]], naive: list[float],
     print(f"\nsync accuracy against the twin's truth, {seeds} default-size sessions "
           "(5 locations x 4 repeats)")
     print(f"{'error':<18}{'target':>8}{'trigger med':>13}{'max':>9}{'data med':>10}{'max':>9}"
-          f"{'pass':>6}")
+          f"{'pass':>6}{'analog med':>12}{'max':>9}")
     for key, target in TARGETS.items():
         tm, tx = stat("trigger", key)
         dm, dx = stat("data", key)
+        am, ax = stat("analog", key)
         print(f"{key:<18}{target:>8.3g}{tm:>13.4f}{tx:>9.4f}{dm:>10.4f}{dx:>9.4f}"
-              f"{'yes' if tx <= target else 'NO':>6}")
+              f"{'yes' if tx <= target else 'NO':>6}{am:>12.4f}{ax:>9.4f}")
     loaded = stat("trigger", "force_rms_loaded_n")
     coverage = [r["tip_coverage"] for r in rows["trigger"]]
     print(f"force RMS from onset to release only [N]: median {loaded[0]:.4f}, max "

@@ -80,7 +80,7 @@ def pipeline(*args: str) -> None:
 def twin_data(out: Path, given: Path | None, seed: int) -> tuple[Path, Path]:
     """States and fold manifest of a twin session: ``given`` (a demo folder) or made here."""
     if given is not None:
-        return given / "states.h5", given / "splits.json"
+        return given / "session_states.h5", given / "splits.json"
     d = out / "data"
     states, splits = d / "states.h5", d / "splits.json"
     if not splits.is_file():
@@ -294,7 +294,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("out/speed_accuracy"))
     ap.add_argument("--quick", action="store_true", help="minutes on 2 CPU cores")
     ap.add_argument("--twin", type=Path, default=None,
-                    help="a folder with states.h5 and splits.json (a `pipeline demo` output)")
+                    help="a `pipeline demo` output folder (session_states.h5, splits.json)")
     ap.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)

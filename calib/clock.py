@@ -36,7 +36,7 @@ class ClockFit:
     drift_sd_ppm: float
     rms_s: float          # RMS residual of the local offsets about the line
     n: int                # number of local offsets (pulses or presses) used
-    method: str           # "trigger", "data" or "none"
+    method: str           # "trigger", "data", "shared" (one clock) or "none"
 
     def to_logger(self, t_mocap_s: np.ndarray) -> np.ndarray:
         """Logger time (s) of mocap times (s)."""

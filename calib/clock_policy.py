@@ -1,7 +1,11 @@
 """Which clock model a session gets, and the check that its two streams overlap.
 
-Trigger pulses when the session recorded them (and the user did not ask for the data), else
-the tip's motion against the force (:mod:`calib.clock` holds both estimators). With
+Force that came through the mocap system's analog board (a C3D or QTM analog export:
+``force.meta["clock"] == "mocap"``) shares the mocap's clock: with ``--clock auto`` there is no
+offset or drift to estimate (method ``shared``). Otherwise trigger pulses when the session
+recorded them (and the user did not ask for the data), else the tip's motion against the
+force (:mod:`calib.clock` holds both estimators). :func:`clock_reason` says which policy
+applied and why, for the calibration record. With
 ``--clock auto`` a dead or unplugged trigger line falls back to the data and says why; a
 trigger train that fits several offsets equally well is disambiguated by the data clock.
 """
@@ -23,9 +27,10 @@ from calib.clock import (
 from calib.presses import segment_presses
 from calib.sync_params import SyncParams
 from core.errors import BadInput
-from core.series import RawSession
+from core.series import SHARED_CLOCK, RawSession
 
 MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
+SHARED = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "shared")   # one clock: exact, nothing estimated
 
 Magnitude = Callable[[np.ndarray], np.ndarray]   # logger time (s) -> force magnitude (N)
 
@@ -38,6 +43,8 @@ def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nd
     (a dead or unplugged line) or a mocap file with fewer trigger events falls back to the
     data; the second value then says why (None otherwise).
     """
+    if p.clock == "auto" and shares_mocap_clock(raw):
+        return SHARED, None
     edges, events = _trigger(raw)
     if p.clock == "trigger" and edges is None:
         raise BadInput(raw.force.source, "--clock trigger, but the session has no trigger "
@@ -61,6 +68,27 @@ def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nd
     prior = _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
     return match_trigger(edges, events, raw.force.source, prior=prior, timing_sd_s=sd,
                          min_pulses=MIN_PULSES), None
+
+
+def shares_mocap_clock(raw: RawSession) -> bool:
+    """Whether the force was sampled by the mocap system itself (its analog board)."""
+    return raw.force.meta.get("clock") == SHARED_CLOCK
+
+
+def clock_reason(raw: RawSession, p: SyncParams, clock: ClockFit, note: str | None) -> str:
+    """Why this clock policy applied, in words, for the calibration record."""
+    f = raw.force
+    if clock.method == "shared":
+        return (f"force from the mocap system's analog board ({f.meta.get('format')} "
+                f"{f.source}, {f.rate_hz:g} Hz): one clock, no offset or drift to estimate")
+    if note is not None:
+        return note
+    if clock.method == "trigger":
+        return (f"trigger pulses in the force log matched to the {raw.trigger_event!r} events "
+                "of the mocap export")
+    if p.clock == "data":
+        return "--clock data: offset and drift from the tip motion against the force"
+    return "no trigger recorded: offset and drift from the tip motion against the force"
 
 
 def check_overlap(raw: RawSession, clock: ClockFit, t_m: np.ndarray, t_f: np.ndarray) -> None:

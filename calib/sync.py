@@ -9,8 +9,9 @@ Steps, each in its own module of :mod:`calib`:
    depth below the phantom's rest plane (:mod:`calib.surface`);
 3. the force tared from the unloaded start of the log, calibrated with the 6x6 matrix, and
    re-tared from the rest level next to every press (:mod:`calib.force_conditioning`);
-4. the clock: trigger pulses when recorded, otherwise the tip depth against the force
-   (:mod:`calib.clock_policy`);
+4. the clock: one shared clock when the force came through the mocap's analog board,
+   else trigger pulses when recorded, otherwise the tip depth against the force
+   (:mod:`calib.clock_policy`; the calibration record says which policy applied and why);
 5. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock
    (:mod:`calib.resample`);
 6. presses from contact onset to release, each with its location id and repeat number, cut
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from calib.clock import IDENTITY, ClockFit
-from calib.clock_policy import check_overlap, estimate_clock
+from calib.clock_policy import check_overlap, clock_reason, estimate_clock
 from calib.force import Tare
 from calib.force_conditioning import ConditionedForce, condition_force, over_range
 from calib.gaps import fill_gaps
@@ -151,7 +152,8 @@ def _calibration_record(raw: RawSession, pivot: PivotResult, cf: ConditionedForc
                   "matrix_source": None if raw.calibration is None else
                   str(raw.calibration.source), "source": str(f.source),
                   "retare_anchors": len(rest.time_s), "retare_max_n": float(moved.max())},
-        "clock": {**clock.as_dict(), "note": clock_note},
+        "clock": {**clock.as_dict(), "note": clock_note,
+                  "policy": clock.method, "why": clock_reason(raw, p, clock, clock_note)},
         "params": asdict(p),
     }
 

@@ -130,9 +130,14 @@ class BodySeries(_Tracked):
 
 
 
+SHARED_CLOCK = "mocap"     # ForceSeries.meta["clock"] of force sampled by the mocap system
+
+
 @dataclass
 class ForceSeries:
-    """A force-sensor log: raw channels (gauge volts or calibrated wrench) on the logger's clock."""
+    """A force-sensor log: raw channels (gauge volts or calibrated wrench) on the logger's clock,
+    or, with ``meta["clock"] == SHARED_CLOCK``, on the mocap's (its analog board sampled them;
+    time 0 at the first mocap frame)."""
 
     source: str
     time_ns: np.ndarray            # (T,) int64

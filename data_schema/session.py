@@ -15,14 +15,17 @@ Example (every path relative to the folder)::
     trigger_event = "Trigger"          # optional: EVENT label of the sync pulses in the TSV
 
     [force]
-    file = "force.csv"                 # CSV, MAT (v7 or v7.3) or Parquet
-    time_column = "time"
+    file = "force.csv"                 # CSV, MAT (v7 or v7.3) or Parquet; or the mocap
+                                       # system's analog channels: C3D or QTM analog TSV
+    time_column = "time"               # force logs only (analog samples are timed by the rate)
     time_unit = "s"                    # s | ms | us | ns
     kind = "gauge"                     # gauge: six volts + calibration; wrench: Fx..Tz
-    channels = ["G0", "G1", "G2", "G3", "G4", "G5"]
+    channels = ["G0", "G1", "G2", "G3", "G4", "G5"]   # analog: names or 1-based numbers
     units = "V"                        # gauge: V; wrench: "N,N,N,N*m,N*m,N*m" style list
+                                       # (analog: the units the export states)
+    rate_hz = 1000.0                   # optional, analog only: the analog rate (checked)
     calibration = "FT12345.cal"        # ATI .cal XML; required for kind = "gauge"
-    trigger_column = "trigger"         # optional sync/trigger channel
+    trigger_column = "trigger"         # optional sync/trigger channel (name or number)
 
     [pivot]
     file = "pivot_3d.tsv"              # optional: pivot recording for the tip offset
@@ -57,10 +60,11 @@ class ForceConfig:
     time_column: str
     time_unit: str
     kind: str
-    channels: list[str]
+    channels: list[str | int]      # column names; analog channels also by 1-based number
     units: list[str]
     calibration: Path | None = None
-    trigger_column: str | None = None
+    trigger_column: str | int | None = None
+    rate_hz: float | None = None   # the analog rate session.toml states (analog sources)
 
 
 @dataclass(frozen=True)
@@ -121,7 +125,7 @@ def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
     if unit not in TIME_UNITS:
         raise BadInput(path, f"force.time_unit must be one of {', '.join(TIME_UNITS)}, "
                              f"got {unit!r}")
-    channels = _names(path, t, "channels", table="force")
+    channels = _channels(path, t.get("channels"), "force.channels")
     if len(channels) != 6:
         raise BadInput(path, f"force.channels must name 6 columns, got {len(channels)}")
     try:
@@ -135,8 +139,38 @@ def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
         file=_file(path, folder, t, "file", "force"),
         time_column=_str(path, t, "time_column", "time", table="force"), time_unit=unit,
         kind=kind, channels=channels, units=units, calibration=cal,
-        trigger_column=_str(path, t, "trigger_column", table="force"),
+        trigger_column=None if t.get("trigger_column") is None else
+        _channel(path, t["trigger_column"], "force.trigger_column"),
+        rate_hz=_rate(path, t.get("rate_hz")),
     )
+
+
+def _channels(path: Path, v: object, name: str) -> list[str | int]:
+    """Channel names, or (analog channels) 1-based channel numbers; distinct."""
+    if not isinstance(v, list) or not v:
+        raise BadInput(path, f"{name} must be a non-empty list of names or channel numbers "
+                             f"(1, 2, ...), got {v!r}")
+    out = [_channel(path, x, name) for x in v]
+    if len(set(out)) != len(out):
+        raise BadInput(path, f"{name} has duplicate entries")
+    return out
+
+
+def _channel(path: Path, v: object, name: str) -> str | int:
+    """A channel name (non-empty text) or 1-based channel number."""
+    if (isinstance(v, str) and v.strip()) or (type(v) is int and v >= 1):
+        return v
+    raise BadInput(path, f"{name} must name channels by name (non-empty text) or number "
+                         f"(1, 2, ...), got {v!r}")
+
+
+def _rate(path: Path, v: object) -> float | None:
+    """force.rate_hz: absent, or a number > 0."""
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0 or v == float("inf"):
+        raise BadInput(path, f"force.rate_hz must be a rate in Hz (a number > 0), got {v!r}")
+    return float(v)
 
 
 def _table(path: Path, raw: dict, key: str, required: bool = True) -> dict | None:

@@ -21,9 +21,11 @@ mocap recording or of the force log cut them off (onset or release unknown).
 ``calibration/`` holds what sync measured, with its uncertainty: the cluster shape and tip
 offset (pivot calibration), the force bias and tare interval at the start of the log, the rest
 surface plane used for depth, and as attributes the clock model
-(``t_logger = offset + (1 + drift) t_mocap``) and how it was found (``trigger`` or ``data``).
-Root attribute ``calibration`` repeats all of it as JSON (with the clock's ``note`` when
-``--clock auto`` fell back from an unusable trigger to the data).
+(``t_logger = offset + (1 + drift) t_mocap``) and how it was found (``trigger``, ``data``, or
+``shared`` when the force came through the mocap's analog board: offset and drift exactly 0).
+Root attribute ``calibration`` repeats all of it as JSON; its ``clock`` says which ``policy``
+applied and ``why`` (and has a ``note`` when ``--clock auto`` fell back from an unusable trigger
+to the data).
 
 Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``.
 """

@@ -15,6 +15,7 @@ import numpy as np
 from core.errors import BadInput
 from core.series import MarkerSeries, frame_times_ns, time_to_ns
 from core.units import length_scale
+from ingest.analog import AnalogExport, check_scales, samples_per_frame
 
 
 def _param(params: dict, group: str, name: str, path: str | Path) -> Any:
@@ -80,6 +81,7 @@ class _Header(NamedTuple):
     frames: int | None       # words 4-5: last - first + 1; None when it cannot say (> 65535)
     rate: float              # words 11-12, a float in the processor's format
     data_start: int          # word 9: the first 512-byte block of the data section
+    parameters: frozenset[str] = frozenset()   # every GROUP:NAME the parameter section has
 
 
 def _header_float(raw: bytes, processor: int) -> float:
@@ -124,11 +126,13 @@ def _check_header(path: str | Path) -> _Header:
                              f"{data_start})")
     with open(path, "rb") as f:
         f.seek(start)
-        numbers = _check_parameters(path, f.read(params_end - start), param[3], start)
+        numbers, names = _check_parameters(path, f.read(params_end - start), param[3], start)
+    _check_analog_scales(numbers, names, path)
     first, last = int(words[3]), int(words[4])
     frames = None if last >= 65535 or last < first else last - first + 1
     header = _Header(points=int(words[1]), frames=frames,
-                     rate=_header_float(head[20:24], param[3]), data_start=int(words[8]))
+                     rate=_header_float(head[20:24], param[3]), data_start=int(words[8]),
+                     parameters=frozenset(names))
     _check_against_header(numbers, header, path)
     return header
 
@@ -182,10 +186,26 @@ def _check_against_header(numbers: dict[str, float], header: _Header,
         raise BadInput(path, f"POINT:SCALE {scale:g} is not a scale factor (a non-zero number)")
 
 
+def _check_analog_scales(numbers: dict[str, float], names: set[str] | frozenset[str],
+                         path: str | Path, required: tuple[str, ...] = ("SCALE", "OFFSET")
+                         ) -> None:
+    """A file with analog channels must say how to scale them: ezc3d (1.7) crashes on one
+    without ANALOG:SCALE or ANALOG:OFFSET (so every reader checks those), and takes a missing
+    ANALOG:GEN_SCALE as 1 (the analog reader refuses that too)."""
+    used = numbers.get("ANALOG:USED")
+    if not used:
+        return
+    for name in required:
+        if f"ANALOG:{name}" not in names:
+            raise BadInput(path, f"ANALOG:USED says {used:g} analog channels but the parameter "
+                                 f"ANALOG:{name} is missing: the analog values cannot be scaled")
+
+
 def _check_parameters(path: str | Path, section: bytes, processor: int,
-                      offset: int) -> dict[str, float]:
+                      offset: int) -> tuple[dict[str, float], set[str]]:
     """Walk the parameter records as ezc3d will, refusing any that would lead it astray; return
-    the single-number parameters as ``{"GROUP:NAME": value}``, as the file has them.
+    the single-number parameters as ``{"GROUP:NAME": value}``, as the file has them, and the
+    names (``GROUP:NAME``) of all parameters.
 
     A record: name length (int8, negative when locked; 0 ends the section), group id (int8),
     the name, the int16 offset from that field to the next record (0: the last), then a group's
@@ -197,9 +217,11 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
     order = ">" if processor == 86 else "<"
     groups: dict[int, str] = {}
     numbers: dict[tuple[int, str], float] = {}
+    present: set[tuple[int, str]] = set()
 
-    def found() -> dict[str, float]:
-        return {f"{groups.get(g, g)}:{name}": v for (g, name), v in numbers.items()}
+    def found() -> tuple[dict[str, float], set[str]]:
+        return ({f"{groups.get(g, g)}:{name}": v for (g, name), v in numbers.items()},
+                {f"{groups.get(g, g)}:{name}" for g, name in present})
 
     pos = 4
     while pos + 2 <= len(section):
@@ -216,6 +238,7 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
         if gid < 0:
             groups[-gid] = name
         elif end + 2 <= len(section):
+            present.add((gid, name))
             kind, dims = struct.unpack_from("bB", section, end)
             shape = section[end + 2:end + 2 + dims]
             size = int(np.prod(list(shape))) if dims else 1
@@ -236,8 +259,8 @@ def _check_parameters(path: str | Path, section: bytes, processor: int,
                    where=f"byte {offset + pos}")
 
 
-def read_c3d(path: str | Path) -> MarkerSeries:
-    """Read the 3D points of a C3D file: metres, NaN where the residual is negative."""
+def _open(path: str | Path) -> tuple[_Header, Any]:
+    """The checked header and ezc3d's reading of the file."""
     import ezc3d
 
     if not Path(path).is_file():
@@ -247,6 +270,20 @@ def read_c3d(path: str | Path) -> MarkerSeries:
         c = ezc3d.c3d(str(path))
     except Exception as e:  # ezc3d raises bare RuntimeError/IndexError/... on bad files
         raise BadInput(path, f"not a readable C3D file ({e})") from None
+    return header, c
+
+
+def _rate(params: dict, group: str, path: str | Path) -> float:
+    """POINT:RATE or ANALOG:RATE as a number."""
+    rate = _first(params, group, "RATE", path)
+    if not isinstance(rate, int | float | np.number):
+        raise BadInput(path, f"{group}:RATE {rate!r} is not a number")
+    return float(rate)
+
+
+def read_c3d(path: str | Path) -> MarkerSeries:
+    """Read the 3D points of a C3D file: metres, NaN where the residual is negative."""
+    header, c = _open(path)
     params = c["parameters"]
     points = np.asarray(c["data"]["points"], dtype=np.float64)          # (4, N, T)
     residuals = np.asarray(c["data"]["meta_points"]["residuals"], dtype=np.float64)
@@ -256,10 +293,7 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     if header.frames is not None and header.frames != n_frames:
         raise BadInput(path, f"truncated: the header says {header.frames} frames but "
                              f"{n_frames} could be read", where=f"frame {n_frames}")
-    rate = _first(params, "POINT", "RATE", path)
-    if not isinstance(rate, int | float | np.number):
-        raise BadInput(path, f"POINT:RATE {rate!r} is not a number")
-    rate = float(rate)
+    rate = _rate(params, "POINT", path)
     time_ns = frame_times_ns(n_frames, rate, path, "POINT:RATE")
     units = str(_first(params, "POINT", "UNITS", path)).strip()
     try:
@@ -281,3 +315,73 @@ def read_c3d(path: str | Path) -> MarkerSeries:
     events = _events(params, first_frame / rate, path)
     return MarkerSeries(source=str(path), time_ns=time_ns, labels=labels, positions=positions,
                         rate_hz=rate, residuals=res, events=events, meta=meta)
+
+
+def read_c3d_analog(path: str | Path) -> AnalogExport:
+    """Read the analog channels of a C3D file (ANALOG section) in the units it states.
+
+    The C3D standard's physical value is ``(raw - ANALOG:OFFSET) * ANALOG:SCALE *
+    ANALOG:GEN_SCALE``. ezc3d (1.7) already applies the scales, so they are checked and recorded
+    here, never applied a second time; but it subtracts ``|OFFSET|``, which is wrong for a
+    negative offset (a signed one, or with ``ANALOG:FORMAT`` UNSIGNED one above 32767 stored as
+    int16), so the difference is added back (:func:`_offset_fix`). tests/test_analog.py checks
+    all of it against the raw bytes of a real export. Missing or zero scales are bad input.
+    """
+    header, c = _open(path)
+    params = c["parameters"]
+    analog = params.get("ANALOG")
+    values = np.asarray(c["data"]["analogs"], dtype=np.float64)         # (1, C, T)
+    n = values.shape[1] if values.ndim == 3 else 0
+    if analog is None or n == 0:
+        raise BadInput(path, "the C3D file has no analog channels (no ANALOG section data)")
+    used = _count(params, "ANALOG", "USED", path)
+    if used is not None and used != n:
+        raise BadInput(path, f"ANALOG:USED says {used} channels but the data hold {n}")
+    scales, stored, gen = _analog_scales(params, header, n, path)
+    unsigned = "UNSIGNED" in [str(v).strip().upper() for v in _texts(analog, "FORMAT", 1)]
+    offsets = np.where(unsigned & (stored < 0), stored + 65536, stored)
+    point_rate, rate = _rate(params, "POINT", path), _rate(params, "ANALOG", path)
+    samples_per_frame(path, rate, point_rate)
+    labels = _texts(analog, "LABELS", n)
+    if not all(labels):
+        raise BadInput(path, f"ANALOG:LABELS names {sum(map(bool, labels))} of {n} channels")
+    return AnalogExport(
+        source=str(path), format="c3d", labels=labels,
+        descriptions=_texts(analog, "DESCRIPTIONS", n), units=_texts(analog, "UNITS", n),
+        scales=scales, offsets=offsets, gen_scale=gen, rate_hz=rate,
+        values=values[0].T + _offset_fix(stored, offsets) * scales * gen,
+        point_rate_hz=point_rate, meta={"first_frame": int(c["header"]["points"]["first_frame"])})
+
+
+def _analog_scales(params: dict, header: _Header, n: int,
+                   path: str | Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """ANALOG:SCALE (n), ANALOG:OFFSET (n, as stored) and ANALOG:GEN_SCALE: each present (in
+    the file, not filled in by ezc3d), the scales finite and non-zero."""
+    _check_analog_scales({"ANALOG:USED": float(n)}, header.parameters, path,
+                         ("SCALE", "OFFSET", "GEN_SCALE"))
+
+    def numbers(name: str) -> np.ndarray:
+        return np.ravel(np.asarray(_param(params, "ANALOG", name, path), dtype=np.float64))
+
+    scales, offsets, gen = numbers("SCALE"), numbers("OFFSET"), numbers("GEN_SCALE")
+    check_scales(path, "ANALOG:SCALE", scales, n)
+    check_scales(path, "ANALOG:GEN_SCALE", gen[:1], 1)
+    if offsets.size < n:
+        raise BadInput(path, f"ANALOG:OFFSET has {offsets.size} values for {n} analog channels")
+    return scales[:n], offsets[:n], float(gen[0])
+
+
+def _offset_fix(stored: np.ndarray, true: np.ndarray) -> np.ndarray:
+    """Per channel, the offset ezc3d 1.7 subtracted (``|stored|``) minus the standard's."""
+    return np.abs(stored) - true
+
+
+def _texts(group: dict, name: str, n: int) -> list[str]:
+    """A text parameter of the ANALOG group, continued in NAME2, NAME3 ... (more than 255
+    channels), as ``n`` stripped strings ("" where the file has fewer)."""
+    out = [str(s).strip() for s in group.get(name, {}).get("value", [])]
+    k = 2
+    while f"{name}{k}" in group:
+        out += [str(s).strip() for s in group[f"{name}{k}"]["value"]]
+        k += 1
+    return (out + [""] * n)[:n]

@@ -1,7 +1,8 @@
 """What is in a file, judged by its content (magic bytes, headers), not only by its extension.
 
 ``detect_format`` names every format the pipeline reads or writes; ``read_mocap`` reads any of
-the 3D marker exports (QTM TSV 3D, C3D, QTM MAT) with the reader its content calls for. The
+the 3D marker exports (QTM TSV 3D, C3D, QTM MAT) and ``read_analog`` the mocap system's analog
+channels (C3D, QTM analog TSV) with the reader its content calls for. The
 container test underneath is :func:`ingest.sniff.sniff`.
 """
 
@@ -11,14 +12,15 @@ from pathlib import Path
 
 from core.errors import BadInput
 from core.series import MarkerSeries
-from ingest.c3d import read_c3d
+from ingest.analog import AnalogExport
+from ingest.c3d import read_c3d, read_c3d_analog
 from ingest.qtm_mat import is_qtm_mat, read_qtm_mat
-from ingest.qtm_tsv import looks_like_qtm_tsv, parse_qtm_header, read_qtm_3d
+from ingest.qtm_tsv import looks_like_qtm_tsv, parse_qtm_header, read_qtm_3d, read_qtm_analog
 from ingest.sniff import head_text, read_head, sniff
 
 FORMATS = (
-    "qtm_tsv_3d", "qtm_tsv_6d", "c3d", "qtm_mat", "force_csv", "force_mat", "force_parquet",
-    "ati_cal", "mcap", "hdf5", "json", "session_toml",
+    "qtm_tsv_3d", "qtm_tsv_6d", "qtm_tsv_analog", "c3d", "qtm_mat", "force_csv", "force_mat",
+    "force_parquet", "ati_cal", "mcap", "hdf5", "json", "session_toml",
 )
 def detect_format(path: str | Path) -> str:
     """The format of ``path`` (one of ``FORMATS``) from its content; unknown -> BadInput."""
@@ -53,6 +55,8 @@ def _text_format(path: str | Path, head: str) -> str | None:
             return "qtm_tsv_3d"
         if "BODY_NAMES" in header:
             return "qtm_tsv_6d"
+        if "CHANNEL_NAMES" in header:
+            return "qtm_tsv_analog"
         return None
     lines = head.lstrip("\ufeff").splitlines()
     if len(lines) < 2:
@@ -87,3 +91,17 @@ def read_mocap(path: str | Path) -> MarkerSeries:
     if fmt == "qtm_mat":
         return read_qtm_mat(path)
     raise BadInput(path, f"not a 3D marker export (found {fmt}); expected QTM TSV 3D, C3D or MAT")
+
+
+ANALOG_FORMATS = ("c3d", "qtm_tsv_analog")
+
+
+def read_analog(path: str | Path) -> AnalogExport:
+    """Read the analog channels of a mocap export (C3D or QTM analog TSV)."""
+    fmt = detect_format(path)
+    if fmt == "c3d":
+        return read_c3d_analog(path)
+    if fmt == "qtm_tsv_analog":
+        return read_qtm_analog(path)
+    raise BadInput(path, f"not an export with analog channels (found {fmt}); expected C3D or "
+                         "a QTM analog TSV export")

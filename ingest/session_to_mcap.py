@@ -18,6 +18,7 @@ from core.errors import BadInput
 from core.progress import progress
 from core.provenance import make_provenance
 from core.series import (
+    SHARED_CLOCK,
     AtiCalibration,
     BodySeries,
     ForceSeries,
@@ -26,8 +27,9 @@ from core.series import (
 )
 from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
 from data_schema.session import ForceConfig, SessionConfig, read_session
+from ingest.analog import analog_force, samples_per_frame
 from ingest.ati_cal import read_ati_cal
-from ingest.detect import detect_format, read_mocap
+from ingest.detect import ANALOG_FORMATS, detect_format, read_analog, read_mocap
 from ingest.force_log import read_force_log
 from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
@@ -66,7 +68,7 @@ def session_inputs(cfg: SessionConfig) -> list[Path]:
     """Every file the session reads, session.toml first (for the provenance hashes)."""
     files = [cfg.folder / "session.toml", cfg.mocap.file, cfg.mocap.bodies_file,
              cfg.force.file, cfg.force.calibration, cfg.pivot_file]
-    return [f for f in files if f is not None]
+    return list(dict.fromkeys(f for f in files if f is not None))   # a C3D may serve twice
 
 
 def load_session(cfg: SessionConfig) -> RawSession:
@@ -79,6 +81,7 @@ def load_session(cfg: SessionConfig) -> RawSession:
             got[step] = _READ[step](cfg)
     markers = got["mocap"]
     _require_markers(markers, m.phantom_markers + m.indenter_markers)
+    _check_shared_clock(markers, got["force"])
     if m.trigger_event and m.trigger_event not in {e for e, _ in markers.events}:
         raise BadInput(m.file, f"no EVENT labelled {m.trigger_event!r} (session.toml "
                                f"trigger_event)")
@@ -116,9 +119,34 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
 
 
 def _read_force(cfg: SessionConfig) -> ForceSeries:
+    """The force log, or the mocap system's analog channels (C3D, QTM analog TSV)."""
     f: ForceConfig = cfg.force
-    return read_force_log(f.file, f.time_column, f.channels, time_unit=f.time_unit,
-                          units=f.units, kind=f.kind, trigger_column=f.trigger_column)
+    if detect_format(f.file) in ANALOG_FORMATS:
+        return analog_force(read_analog(f.file), f.channels, f.kind, f.rate_hz,
+                            f.trigger_column)
+    numbers = [c for c in [*f.channels, f.trigger_column] if isinstance(c, int)]
+    if numbers or f.rate_hz is not None:
+        what = f"channel number {numbers[0]}" if numbers else "force.rate_hz"
+        raise BadInput(cfg.folder / "session.toml", f"{what}: channel numbers and rate_hz are "
+                                                    "for analog channels (a C3D or QTM analog "
+                                                    f"export); {f.file.name} is a force log")
+    return read_force_log(f.file, f.time_column, [str(c) for c in f.channels],
+                          time_unit=f.time_unit, units=f.units, kind=f.kind,
+                          trigger_column=f.trigger_column)
+
+
+def _check_shared_clock(markers: MarkerSeries, force: ForceSeries) -> None:
+    """Analog channels share the mocap's clock: their rate must be a whole multiple of the
+    frame rate, and they must span the same capture (within one frame)."""
+    if force.meta.get("clock") != SHARED_CLOCK:
+        return
+    samples_per_frame(force.source, force.rate_hz, markers.rate_hz)
+    span_f = force.frames / force.rate_hz
+    span_m = markers.frames / markers.rate_hz
+    if abs(span_f - span_m) > 1.0 / markers.rate_hz:
+        raise BadInput(force.source, f"the analog channels span {span_f:.3f} s but the mocap "
+                                     f"export {markers.source} spans {span_m:.3f} s: not the "
+                                     "same capture")
 
 
 def _read_calibration(cfg: SessionConfig) -> AtiCalibration | None:

@@ -2,13 +2,19 @@
 
 Each step is skipped when its inputs, arguments and the code are unchanged since it last ran
 (content hashes, :mod:`pipeline.stage_cache`), and says so; ``--force`` runs everything.
+Independent training runs go side by side in ``--jobs`` processes of one thread each (small
+graphs keep one core busier than two threads do). The summary scores everything against its
+targets (:mod:`pipeline.demo_targets`).
 """
 
 from __future__ import annotations
 
-import json
+import os
 import shlex
 import shutil
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -18,88 +24,122 @@ from pipeline.demo_plan import PAPER, QUICK, SMOKE, Step, demo_steps
 from pipeline.options import seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
 
-TL_CUT = 0.20          # transfer learning must cut the mean distance error by this much
-
 
 @click.command()
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
               show_default=True, help="Folder for everything the demo writes.")
 @click.option("--quick", is_flag=True,
-              help="Small MSM set, short training: under 10 minutes on 2 CPU cores.")
+              help="Small MSM set, short training: under 5 minutes on 2 CPU cores.")
 @click.option("--smoke", is_flag=True,
               help="Only check the wiring: 2 folds, 2 epochs, a tiny MSM set (seconds).")
 @click.option("--force", is_flag=True, help="Run every step, even unchanged ones.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when a target is missed.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True, help="Where the cGNN trains.")
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Independent training runs side by side [default: the CPU cores; 1 on a "
+                   "GPU].")
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
-         device: str, seed: int) -> None:
+         device: str, jobs: int | None, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
-    session.mcap (ingest), synced.h5 (sync), states.h5 and splits.json (extract, split),
-    msm.h5 and msm_splits.json (simulate, split), runs/msm (pre-training on MSM), runs/exp_tl_*,
-    runs/exp_notl_* and runs/exp_rot_* (fine-tuning on the twin's states per fold with transfer
-    learning, without it, and without it but with rotation augmentation), metrics.json/.md
-    (eval), a rerun recording beside each, and a summary against
-    the accuracy targets. Without --quick it follows the paper's settings (hours on a CPU;
-    uses a GPU when there is one).
+    session.mcap, session_synced.h5, session_states.h5 and splits.json (ingest, sync, extract,
+    split); calibration/ and calibration_*.h5 (a second recording of the same phantom, other
+    presses) and msm_params.json (fit-msm on it); msm.h5 and msm_splits.json (the fitted MSM
+    sampled at the markers' layout, split); runs/msm (pre-training), runs/exp_tl_* and
+    runs/exp_notl_* (fine-tuning per fold with transfer learning and the same from scratch);
+    metrics.json/.md (eval, beside the no-learning references), scarcity/ (the data-scarcity
+    study), a rerun recording beside each, and a summary against the targets. Without
+    --quick it follows the paper's settings (hours on a CPU; uses a GPU when there is one).
     """
+    from pipeline.demo_targets import summary
+
     settings = SMOKE if smoke else QUICK if quick else PAPER
+    jobs = jobs or (1 if device == "cuda" else _cores())
     started = time.perf_counter()
-    for step in demo_steps(out, seed, settings, device):
-        _run(ctx, step, force)
-    missed = _summary(out, time.perf_counter() - started)
+    steps = demo_steps(out, seed, settings, device)
+    for batch in _batches(steps):
+        _run_batch(ctx, batch, force, jobs)
+    missed = summary(out, time.perf_counter() - started, quick=quick)
     if missed and strict:
         ctx.exit(1)
 
 
-def _run(ctx: click.Context, step: Step, force: bool) -> None:
-    """Run one step through the CLI (or say why it is skipped), then stamp it."""
-    line = f"\n$ pipeline {shlex.join(step.args)}"
-    if not force and is_fresh(step.args, step.inputs, step.outputs):
-        click.echo(f"{line}\n  (unchanged since its last run: skipped)", err=True)
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def _batches(steps: list[Step]) -> list[list[Step]]:
+    """Consecutive parallel steps together; every other step alone."""
+    out: list[list[Step]] = []
+    for step in steps:
+        if step.parallel and out and out[-1][-1].parallel:
+            out[-1].append(step)
+        else:
+            out.append([step])
+    return out
+
+
+def _run_batch(ctx: click.Context, batch: list[Step], force: bool, jobs: int) -> None:
+    """Run the stale steps of a batch: in this process, or ``jobs`` subprocesses at a time."""
+    stale = []
+    for step in batch:
+        line = f"\n$ pipeline {shlex.join(step.args)}"
+        if not force and is_fresh(step.args, step.inputs, step.outputs):
+            click.echo(f"{line}\n  (unchanged since its last run: skipped)", err=True)
+        else:
+            stale.append(step)
+    if len(stale) > 1 and jobs > 1:
+        _run_side_by_side(stale, jobs)
         return
-    click.echo(line, err=True)
+    for step in stale:
+        click.echo(f"\n$ pipeline {shlex.join(step.args)}", err=True)
+        tic = time.perf_counter()
+        _clean(step)
+        root = ctx.find_root().command
+        with root.make_context("pipeline", list(step.args), parent=ctx.find_root()) as sub:
+            root.invoke(sub)
+        write_stamp(step.args, step.inputs, step.outputs)
+        click.echo(f"  ({time.perf_counter() - tic:.1f} s)", err=True)
+
+
+def _clean(step: Step) -> None:
     for path in step.clean:
         shutil.rmtree(path, ignore_errors=True)
+
+
+def _run_side_by_side(steps: list[Step], jobs: int) -> None:
+    """``pipeline -q ARGS`` of each step in subprocesses, ``jobs`` at a time, one thread each;
+    a failing step stops the demo with its own message and exit status."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    waiting, running = list(steps), []
     tic = time.perf_counter()
-    root = ctx.find_root().command
-    sub = root.make_context("pipeline", list(step.args), parent=ctx.find_root())
-    with sub:
-        root.invoke(sub)
-    write_stamp(step.args, step.inputs, step.outputs)
+    click.echo(f"\n$ ({len(steps)} runs, {jobs} at a time)", err=True)
+    while waiting or running:
+        while waiting and len(running) < jobs:
+            step = waiting.pop(0)
+            click.echo(f"  $ pipeline {shlex.join(step.args)}", err=True)
+            _clean(step)
+            log = tempfile.TemporaryFile(mode="w+")
+            proc = subprocess.Popen([sys.executable, "-m", "pipeline", "-q", *step.args],
+                                    env=env, stdout=subprocess.DEVNULL, stderr=log, text=True)
+            running.append((step, proc, log))
+        time.sleep(0.05)
+        for item in [r for r in running if r[1].poll() is not None]:
+            running.remove(item)
+            step, proc, log = item
+            if proc.returncode != 0:
+                for _, other, _ in running:
+                    other.kill()
+                log.seek(0)
+                click.echo(log.read().rstrip(), err=True)
+                raise SystemExit(proc.returncode)
+            log.close()
+            write_stamp(step.args, step.inputs, step.outputs)
     click.echo(f"  ({time.perf_counter() - tic:.1f} s)", err=True)
-
-
-def _summary(out: Path, seconds: float) -> list[str]:
-    """Print the accuracy against the targets and the recordings; the targets missed."""
-    from calib.sync_accuracy import TARGETS, sync_errors
-
-    missed = []
-    errors = sync_errors(out / "synced.h5", out / "session" / "truth.h5")
-    click.echo("\nsync against the twin's truth (error / target):")
-    for key, target in TARGETS.items():
-        ok = errors[key] <= target
-        missed += [] if ok else [key]
-        click.echo(f"  {key:18} {errors[key]:9.4f} / {target:<6} {'ok' if ok else 'MISSED'}")
-    click.echo("\n" + (out / "metrics.md").read_text())
-    overall = {r["label"]: r["metrics"]["all"]
-               for r in json.loads((out / "metrics.json").read_text())["overall"]}
-    tl = next((v for k, v in overall.items() if k.endswith("(TL)")), None)
-    base = overall.get("cGNN/Exp")
-    if tl and base:
-        cut = 1 - tl["ld_mean_mm"] / base["ld_mean_mm"]
-        ok = cut >= TL_CUT
-        missed += [] if ok else ["transfer_learning"]
-        click.echo(f"transfer learning cuts the mean distance error by {cut:.0%} (target "
-                   f"{TL_CUT:.0%}, paper 23%): {'ok' if ok else 'MISSED'}")
-    rot = overall.get("cGNN/rot Exp")
-    if rot and base:
-        click.echo(f"rotation augmentation cuts it by "
-                   f"{1 - rot['ld_mean_mm'] / base['ld_mean_mm']:.0%} (no target)")
-    click.echo(f"\ndemo finished in {seconds / 60:.1f} min: outputs in {out}; recordings:\n  "
-               + "\n  ".join(str(p) for p in sorted(out.rglob("*.rrd"))))
-    return missed

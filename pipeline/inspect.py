@@ -7,7 +7,9 @@ so scripts can rely on them (``pipeline inspect FILE --json``):
 ``rate_hz``, ``duration_s`` (frames x mean sample interval), ``markers``, ``bodies``,
 ``channels`` (force-log channels), ``missing_samples`` (marker or body samples with no
 position; None for a force log: one with a missing value is bad input), ``units`` (quantity ->
-unit as stored in the file), ``events`` ([label, seconds]), ``schema``, ``schema_version``,
+unit as stored in the file), ``events`` ([label, seconds]), ``analog`` (the analog channels of a
+C3D or QTM analog TSV export: rate, samples per frame, GEN_SCALE, and per channel its number,
+name, label, description, units, scale and offset), ``schema``, ``schema_version``,
 ``provenance`` (the stored record), ``streams`` (MCAP topic -> frames, rate_hz, names),
 ``datasets`` (HDF5 path -> shape, dtype, units), ``entities`` (rerun entity -> archetypes),
 ``calibration`` (ATI serial, matrix etc.) and ``details`` (format-specific extras: header keys,
@@ -28,8 +30,8 @@ from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, R
 from core.text import attr_text
 
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
-        "missing_samples", "units", "events", "schema", "schema_version", "provenance",
-        "streams", "datasets", "entities", "calibration", "details")
+        "missing_samples", "units", "events", "analog", "schema", "schema_version",
+        "provenance", "streams", "datasets", "entities", "calibration", "details")
 _SHOWN = ("format", "units_in_file")      # details already shown by the text summary
 TIME_NAMES = ("time", "t", "timestamp", "time_s", "times")
 TRIGGER_NAMES = ("trigger", "sync")
@@ -65,6 +67,8 @@ def format_summary(s: dict[str, Any]) -> str:
     if s["events"]:
         lines.append(f"  events:      {len(s['events'])}: " + ", ".join(
             f"{label} @ {t:.3f} s" for label, t in s["events"][:8]))
+    if s["analog"]:
+        lines += _analog_lines(s["analog"])
     if s["calibration"]:
         c = s["calibration"]
         lines.append(f"  calibration: {c['serial']} {c['body_style']} {c['calibration']}, "
@@ -85,6 +89,19 @@ def format_summary(s: dict[str, Any]) -> str:
     if s["provenance"]:
         lines.append("  provenance:  " + _provenance_text(s["provenance"]))
     return "\n".join(lines)
+
+
+def _analog_lines(a: dict[str, Any]) -> list[str]:
+    """The analog channels, one line each: number, name, units, scale, offset."""
+    per = a["samples_per_frame"]
+    head = (f"  analog:      {len(a['channels'])} channels at {a['rate_hz']:g} Hz"
+            + (f" ({per:g} per frame)" if per else "") + f", {a['samples']} samples, "
+            f"gen. scale {a['gen_scale']:g}; values {a['values']}")
+    width = max(len(c["name"]) for c in a["channels"])
+    return [head] + [f"    {c['number']:3d} {c['name']:{width}}  {c['units'] or '-':4} "
+                     f"scale {c['scale']:g}  offset {c['offset']:g}"
+                     + (f"  (label {c['label']!r})" if c["label"] != c["name"] else "")
+                     for c in a["channels"]]
 
 
 def _detect(path: Path) -> str:
@@ -147,10 +164,20 @@ def _inspect_qtm_6d(path: Path) -> dict[str, Any]:
 
 
 def _inspect_c3d(path: Path) -> dict[str, Any]:
-    from ingest.c3d import read_c3d
+    from ingest.c3d import read_c3d, read_c3d_analog
 
     m = read_c3d(path)
-    return {**_markers(m, "mm"), "details": _plain(m.meta)}
+    analog = read_c3d_analog(path).summary() if m.meta.get("analog_rate") else None
+    return {**_markers(m, "mm"), "analog": analog, "details": _plain(m.meta)}
+
+
+def _inspect_qtm_analog(path: Path) -> dict[str, Any]:
+    from ingest.qtm_tsv import read_qtm_analog
+
+    a = read_qtm_analog(path)
+    return {"frames": a.samples, "rate_hz": a.rate_hz, "duration_s": _duration(a.time_ns()),
+            "channels": a.names, "units": dict(zip(a.names, a.units, strict=True)),
+            "analog": a.summary(), "details": _plain(a.meta)}
 
 
 def _inspect_qtm_mat(path: Path) -> dict[str, Any]:
@@ -215,6 +242,7 @@ def _inspect_mcap(path: Path) -> dict[str, Any]:
                **dict(zip(s.force.channels, s.force.units, strict=True))},
         details={"session": s.name, "phantom_markers": len(s.phantom_markers),
                  "indenter_markers": len(s.indenter_markers), "force_kind": s.force.kind,
+                 "force_clock": s.force.meta.get("clock", "own (force log)"),
                  "trigger_event": s.trigger_event},
     )
     if s.calibration is not None:
@@ -335,11 +363,12 @@ def _inspect_session(path: Path) -> dict[str, Any]:
         "schema": cfg.raw.get("schema", SCHEMA), "schema_version": cfg.raw.get(
             "schema_version", VERSION),
         "markers": cfg.mocap.phantom_markers + cfg.mocap.indenter_markers,
-        "channels": cfg.force.channels,
+        "channels": [str(c) for c in cfg.force.channels],      # names, or analog numbers
         "units": {"force_channels": ",".join(cfg.force.units), "force_time": cfg.force.time_unit},
         "details": {"name": cfg.name, "phantom_markers": len(cfg.mocap.phantom_markers),
                     "indenter_markers": cfg.mocap.indenter_markers, "force_kind": cfg.force.kind,
-                    "files": {k: v.name for k, v in files.items() if v is not None}},
+                    "files": {k: v.name for k, v in files.items() if v is not None},
+                    **({"force_rate_hz": cfg.force.rate_hz} if cfg.force.rate_hz else {})},
     }
 
 
@@ -403,6 +432,7 @@ def _provenance_text(p: Any) -> str:
 
 _INSPECT: dict[str, Callable[[Path], dict[str, Any]]] = {
     "qtm_tsv_3d": _inspect_qtm_3d, "qtm_tsv_6d": _inspect_qtm_6d, "c3d": _inspect_c3d,
+    "qtm_tsv_analog": _inspect_qtm_analog,
     "qtm_mat": _inspect_qtm_mat, "force_csv": _inspect_force, "force_mat": _inspect_force,
     "force_parquet": _inspect_force, "ati_cal": _inspect_cal, "mcap": _inspect_mcap,
     "hdf5": _inspect_hdf5, "json": _inspect_json, "rrd": _inspect_rrd,

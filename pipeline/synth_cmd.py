@@ -28,22 +28,31 @@ from pipeline.options import resolve_rrd, rrd_option, seed_option
 @click.option("--drift", "drift_ppm", type=float, default=None,
               help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--force-file", type=click.Choice(["csv", "mat"]), default="csv",
-              show_default=True, help="The force log session.toml names (both are written).")
+@click.option("--force-via", type=click.Choice(["logger", "analog"]), default="logger",
+              show_default=True,
+              help="logger: the Speedgoat log on its own clock (force.csv, force.mat); "
+                   "analog: the Nano17 through the mocap's analog board, on the mocap clock "
+                   "(indentation.c3d with markers and analog channels, indentation_a.tsv).")
+@click.option("--force-file", type=click.Choice(["csv", "mat", "tsv", "c3d"]), default=None,
+              help="The force file session.toml names: csv (default) or mat with --force-via "
+                   "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
+                   "file) with --force-via analog. Both of a route are written.")
 @click.option("--view-press", type=click.IntRange(0), default=0, show_default=True,
               help="Press shown in the rerun recording.")
 @seed_option
 @rrd_option
 def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | None,
           pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,
-          force_file: str, view_press: int, seed: int, rrd: Path | None,
+          force_via: str, force_file: str | None, view_press: int, seed: int, rrd: Path | None,
           no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
     Reads nothing. Writes OUT_DIR: session.toml; indentation.tsv and indentation_6D.tsv (QTM
     TSV 3D of 25 phantom + 4 indenter markers and 6D of the body 'Indenter', 500 Hz, noise and
     gaps); pivot.tsv (QTM TSV 3D, the tip in a divot); force.csv and force.mat (Speedgoat log
-    at 1 kHz on its own clock: six Nano17 gauge voltages with bias, and the trigger);
+    at 1 kHz on its own clock: six Nano17 gauge voltages with bias, and the trigger), or with
+    --force-via analog the same gauges at 1 kHz on the mocap clock in indentation.c3d (with
+    the markers) and indentation_a.tsv (QTM analog export);
     FT<serial>.cal (ATI calibration, SI-12-0.12); truth.h5 (noise-free markers and tip on the
     mocap clock, true force, clock offset and drift, tip offset, static states every 0.5 N);
     and a rerun recording of one press beside its truth (--rrd, default
@@ -60,7 +69,7 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
         out_dir, seed=seed, locations=locations, repeats=repeats, rrd=rrd_path,
         view_press=view_press, press_seconds=press_seconds,
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
-        force_file=force_file)
+        force_file=force_file, force_via=force_via)
     click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, seed {seed}, "
                f"in {time.perf_counter() - start:.1f} s"
                + (f"; recording {rrd_path}" if rrd_path else ""))

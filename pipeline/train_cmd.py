@@ -26,6 +26,18 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--rotate", is_flag=True,
               help="Rotation augmentation: turn each training example about the surface "
                    "normal by a random angle.")
+@click.option("--tip-offsets", is_flag=True,
+              help="Also give the first layer each point's offset from the tip's start and end "
+                   "(ours, not the paper's; see README, 'Training that learns').")
+@click.option("--loss", type=click.Choice(["paper", "balanced"]), default="paper",
+              show_default=True,
+              help="paper: alpha x mean distance (m) + force MSE (N^2); balanced: each term "
+                   "divided by its training scale, so neither swamps the other.")
+@click.option("--schedule", type=click.Choice(["constant", "cosine"]), default="constant",
+              show_default=True,
+              help="Learning rate: constant (the paper), or cosine from --lr to 1 % of it.")
+@click.option("--patience", type=click.IntRange(min=1), default=None,
+              help="Stop after this many epochs without a better validation loss.")
 @click.option("--train-groups", type=click.IntRange(min=1), default=None,
               help="Train on the manifest's first N training groups only (data scarcity).")
 @click.option("--epochs", type=click.IntRange(min=1), default=250, show_default=True)
@@ -43,25 +55,29 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Write RUN_DIR/train.rrd (the loss curves).")
 @seed_option
 def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
-          point_fraction: float | None, rotate: bool, train_groups: int | None, epochs: int,
+          point_fraction: float | None, rotate: bool, tip_offsets: bool, loss: str,
+          schedule: str, patience: int | None, train_groups: int | None, epochs: int,
           batch: int, lr: float, alpha: float, k: int, device: str, rrd: bool, seed: int) -> None:
     """Train the cGNN on one fold (resumes a killed run in the same --out).
 
     Reads --data and --splits (refused unless the manifest was made from exactly this data:
-    sha256), and --init. Loss 88 x mean distance (m) + MSE of the force change (N); Adam;
-    validation every epoch. Writes --out/best.pt (lowest validation loss) and last.pt (each
-    epoch; both atomic, loaded with weights_only), log.csv (epoch, losses, validation errors,
-    samples/s) and train.rrd. A NaN or exploding loss stops with the epoch and batch named.
-    Under torchrun it trains data-parallel (gloo on CPU, nccl on GPU).
+    sha256), and --init. Loss 88 x mean distance (m) + MSE of the force change (N), or each in
+    its scale (--loss balanced); Adam; validation every epoch. Writes --out/best.pt (lowest
+    validation loss) and last.pt (each epoch; both atomic, loaded with weights_only), log.csv
+    (epoch, losses, validation errors, samples/s) and train.rrd. A NaN or exploding loss stops
+    with the epoch and batch named. Under torchrun it trains data-parallel (gloo on CPU, nccl
+    on GPU).
     """
     from train.loop import TrainOptions, train_run
     from train.model import CGNNConfig
     from train.train_view import write_train_recording
 
+    if tip_offsets and no_cond:
+        raise click.UsageError("--tip-offsets are the condition C: not with --no-cond")
     opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr, alpha=alpha,
                         point_fraction=point_fraction, train_groups=train_groups, seed=seed,
-                        rotate=rotate)
-    config = CGNNConfig(k=k, use_condition=not no_cond)
+                        rotate=rotate, loss=loss, schedule=schedule, patience=patience)
+    config = CGNNConfig(k=k, use_condition=not no_cond, tip_offsets=tip_offsets)
     best = train_run(data, splits, out, opts, config, init, device)
     if rrd and (out / "log.csv").is_file():
         write_train_recording(out / "train.rrd", out / "log.csv")

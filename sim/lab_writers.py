@@ -9,6 +9,10 @@
   all zeros with residual -1.
 * The Speedgoat force log as a researcher exports it: CSV (``time`` in s and one column per
   signal) and MAT v7 (one column vector per signal).
+* The mocap system's own exports when the force goes through its analog board: a C3D file
+  (points in mm, residual -1 in gaps, analog channels with ``ANALOG:LABELS`` cut short and
+  repeated as real exports have them, the full names in ``ANALOG:DESCRIPTIONS``, and a channel
+  scale) and a QTM analog TSV export (``<trial>_a.tsv``).
 * ``session.toml`` (see :mod:`data_schema.session`).
 
 The ATI ``.cal`` file is written by :func:`ingest.ati_cal.write_ati_cal`. No writer puts the
@@ -103,6 +107,70 @@ def write_qtm_6d(
     with open(path, "w", newline="", encoding="utf-8") as f:
         f.write("\r\n".join(lines) + "\r\n")
         _write_rows(f, table, fmt, "\t", "\r\n")
+
+
+def write_c3d(
+    path: str | Path, names: Sequence[str], positions: np.ndarray, rate_hz: float,
+    analog: Mapping[str, np.ndarray], analog_hz: float, labels: Sequence[str],
+    units: Sequence[str], scale: float,
+) -> None:
+    """A C3D file of ``positions`` (T, M, 3) in metres (NaN: gap, residual -1) with the
+    ``analog`` channels (name -> (T * k,) values, k = analog_hz / rate_hz) named ``labels`` in
+    ``ANALOG:LABELS`` and by their full names in ``ANALOG:DESCRIPTIONS``.
+
+    ezc3d stores ``value / (scale * GEN_SCALE) + OFFSET`` and its reader undoes it (the C3D
+    standard), so ``scale`` shapes the stored numbers, not the values read back.
+    """
+    import ezc3d
+
+    frames = positions.shape[0]
+    c = ezc3d.c3d()
+    point = c["parameters"]["POINT"]
+    point["RATE"]["value"] = [rate_hz]
+    point["LABELS"]["value"] = list(names)
+    point["UNITS"]["value"] = ["mm"]
+    gaps = np.isnan(positions).any(axis=2).T                          # (M, T)
+    pts = np.ones((4, len(names), frames))
+    pts[:3] = np.nan_to_num(positions.transpose(2, 1, 0) * 1e3)
+    c["data"]["points"] = pts
+    c["data"]["meta_points"] = {"residuals": np.where(gaps, -1.0, 0.0)[None],
+                                "camera_masks": np.zeros((7, len(names), frames), bool)}
+    group = c["parameters"]["ANALOG"]
+    group["RATE"]["value"] = [analog_hz]
+    group["LABELS"]["value"] = list(labels)
+    group["DESCRIPTIONS"]["value"] = list(analog)
+    group["UNITS"]["value"] = list(units)
+    group["SCALE"]["value"] = [scale] * len(analog)
+    group["OFFSET"]["value"] = [0] * len(analog)
+    group["GEN_SCALE"]["value"] = [1.0]
+    c["data"]["analogs"] = np.stack([np.asarray(v, float) for v in analog.values()])[None]
+    path = Path(path)
+    if path.suffix.lower() == ".c3d":
+        c.write(str(path))
+        return
+    written = path.with_name(path.name + ".c3d")        # ezc3d adds .c3d to any other name
+    c.write(str(written))
+    written.replace(path)
+
+
+def write_qtm_analog(path: str | Path, analog: Mapping[str, np.ndarray], analog_hz: float,
+                     timestamp: str) -> None:
+    """A QTM analog TSV export (``<trial>_a.tsv``, FILE_VERSION 2.0.0) of one analog board:
+    header keys as QTM's manual lists them, a ``SAMPLE TIME <names>`` line, volts."""
+    names = list(analog)
+    n = len(next(iter(analog.values())))
+    lines = ["FILE_VERSION\t2.0.0", f"TOT_NO_OF_CHAN\t{len(names)}", "NO_OF_CALC_CHAN\t0",
+             f"TIME_STAMP\t{timestamp}", "DESCRIPTION\t--", "DATA_INCLUDED\tANALOG",
+             "CHANNEL_NAMES\t" + "\t".join(names),
+             "CHANNEL_GAIN\t" + "\t".join(["1"] * len(names)),
+             "CHANNEL_FREQUENCIES\t" + "\t".join([f"{analog_hz:g}"] * len(names)),
+             "CHANNEL_SAMPLE_COUNTS\t" + "\t".join([str(n)] * len(names)),
+             "SAMPLE\tTIME\t" + "\t".join(names)]
+    idx = np.arange(n, dtype=np.float64)
+    table = np.column_stack([idx + 1, idx / analog_hz, *analog.values()])
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        f.write("\r\n".join(lines) + "\r\n")
+        _write_rows(f, table, ["%d", "%.5f"] + ["%.6f"] * len(names), "\t", "\r\n")
 
 
 def write_force_csv(path: str | Path, columns: Mapping[str, np.ndarray],

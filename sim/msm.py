@@ -144,10 +144,12 @@ class MSM:
             fg[di:, dj:] -= fs
         return float(energy), f
 
-    def load(self, node: int, force: np.ndarray) -> np.ndarray:
-        """External force array (N, 3) with ``force`` on one mass."""
+    def load(self, node: int | np.ndarray, force: np.ndarray) -> np.ndarray:
+        """External force array (N, 3) with ``force`` on one mass, or shared equally among
+        the masses of an index array (a contact patch: the paper's n_n masses, F / n_n each)."""
+        where = np.atleast_1d(node)
         f_ext = np.zeros((self.N, 3))
-        f_ext[node] = force
+        f_ext[where] = np.asarray(force, dtype=float) / len(where)
         return f_ext
 
     # -- stiffness ----------------------------------------------------------------------------

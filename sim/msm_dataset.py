@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -38,6 +36,7 @@ from data_schema.hdf5 import attr_text, write_h5
 from data_schema.states import STATES, validate_states
 from sim.cone import cone_directions
 from sim.msm import MSM, MSMError, MSMParams, unit
+from sim.msm_sampling import contact_masses, sample_at
 from sim.msm_static import (
     DEFAULT_TOL,
     StaticSolver,
@@ -45,6 +44,7 @@ from sim.msm_static import (
     residual,
     simulate_sequence,
 )
+from sim.workers import worker_pool
 
 MULTI_PER_SEQUENCE = 15
 
@@ -59,6 +59,7 @@ class Protocol:
     fmax: float = 7.5
     max_angle_deg: float = 45.0
     seed: int = 0
+    contact_radius: float = 0.0     # m: the load is shared by the masses this close (n_n)
 
     def check(self, n_masses: int) -> None:
         """Refuse a protocol that cannot be simulated (one line naming the parameter)."""
@@ -72,6 +73,9 @@ class Protocol:
         if not 0 <= self.max_angle_deg <= 90:
             raise BadInput(None, f"max angle must be within 0..90 degrees, got "
                                  f"{self.max_angle_deg}")
+        if not (math.isfinite(self.contact_radius) and 0 <= self.contact_radius < 0.05):
+            raise BadInput(None, f"--contact-radius must be within [0, 0.05) m, got "
+                                 f"{self.contact_radius}")
 
     @property
     def sequences(self) -> int:
@@ -93,12 +97,14 @@ class Plan:
     multi: np.ndarray        # (L * D, M, 2) multi-step (start, end) steps of each sequence
 
 
-def draw_plan(protocol: Protocol, n_masses: int) -> Plan:
-    """Draw locations, directions and multi-step pairs from ``protocol.seed``."""
-    protocol.check(n_masses)
+def draw_plan(protocol: Protocol, n_masses: int, candidates: np.ndarray | None = None) -> Plan:
+    """Draw locations (among ``candidates``, default every mass), directions and multi-step
+    pairs from ``protocol.seed``."""
+    candidates = np.arange(n_masses) if candidates is None else np.asarray(candidates)
+    protocol.check(len(candidates))
     p = protocol
     rng = np.random.default_rng(p.seed)
-    nodes = rng.choice(n_masses, size=p.locations, replace=False)
+    nodes = candidates[rng.choice(len(candidates), size=p.locations, replace=False)]
     dirs = np.empty((p.locations, p.directions, 3))
     dirs[:, 0] = (0.0, 0.0, -1.0)
     dirs[:, 1:] = cone_directions(rng, p.max_angle_deg, (p.locations, p.directions - 1))
@@ -138,6 +144,7 @@ class Simulated:
 
     locations: np.ndarray    # (l,) location indices
     points: np.ndarray       # (l * D * (steps + 1), N, 3) float32
+    tips: np.ndarray         # (l * D * (steps + 1), 3) float32: the contact patch's centre
     max_residual: float      # N, largest force on any mass of any state (float64 solution)
     stored_residual: float   # N, the same of the states as stored (cast to float32)
     iterations: int
@@ -145,70 +152,75 @@ class Simulated:
     cpu_s: float             # CPU seconds of the solves, summed over worker processes
 
 
-def _simulate_location(args: tuple) -> tuple[np.ndarray, float, float, int, int, float]:
-    """One location, all its directions: (D, steps + 1, N, 3) float32, the worst residuals of
+def _simulate_location(args: tuple) -> tuple[np.ndarray, np.ndarray, float, float, int, int,
+                                             float]:
+    """One location, all its directions: the states (D, steps + 1, N, 3) float32 (every mass,
+    or the layout's points then the tip), the tip (D, steps + 1, 3), the worst residuals of
     the float64 and of the stored float32 states, and solver counts."""
     cpu = time.process_time()
-    params, node, directions, steps, fmax, tol = args
+    params, node, directions, steps, fmax, tol, radius, layout = args
     model = MSM(params)
     solver = StaticSolver(model, tol)
-    out = np.empty((len(directions), steps + 1, model.N, 3), dtype=np.float32)
+    contact = contact_masses(model, model.rest[node, :2], radius)
+    sampling = sample_at(model, layout[:, :2]) if layout is not None else None
+    n_out = model.N if layout is None else len(layout) + 1
+    out = np.empty((len(directions), steps + 1, n_out, 3), dtype=np.float32)
+    tips = np.empty((len(directions), steps + 1, 3), dtype=np.float32)
     stored = 0.0
     for d, direction in enumerate(directions):
-        states = simulate_sequence(model, int(node), direction, steps, fmax, tol, solver)
+        states = simulate_sequence(model, contact, direction, steps, fmax, tol, solver)
         if not np.isfinite(states).all():
             raise MSMError(f"non-finite state at mass {node}, direction {d}")
-        out[d] = states
+        tips[d] = states[:, contact].mean(axis=1)
+        if sampling is None:
+            out[d] = states
+        else:
+            out[d, :, :-1] = layout + np.stack([sampling.displace(x - model.rest)
+                                                for x in states])
+            out[d, :, -1] = tips[d]
         for t in range(1, steps + 1):
-            load = model.load(int(node), unit(direction) * fmax * t / steps)
-            stored = max(stored, residual(model, out[d, t].astype(np.float64), load))
+            load = model.load(contact, unit(direction) * fmax * t / steps)
+            x = out[d, t].astype(np.float64) if sampling is None else states[t]
+            stored = max(stored, residual(model, x, load))
     stats = solver.stats           # max_residual: of every solve, i.e. every float64 state
-    return (out, stats.max_residual, stored, stats.iterations, stats.factorizations,
+    return (out, tips, stats.max_residual, stored, stats.iterations, stats.factorizations,
             time.process_time() - cpu)
 
 
 def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
-             tol: float = DEFAULT_TOL, workers: int = 1) -> Simulated:
+             tol: float = DEFAULT_TOL, workers: int = 1, layout: np.ndarray | None = None
+             ) -> Simulated:
     """Simulate ``locations`` (default: all) of ``plan`` with the fast static path.
 
-    ``workers`` processes share the locations; the result does not depend on how many.
+    With ``layout`` (P, 3) the states hold the MSM sampled at those rest positions (a lab's
+    markers: :mod:`sim.msm_sampling`) and then the tip, not every mass. ``workers``
+    processes share the locations; the result does not depend on how many.
     """
     p = plan.protocol
     locs = np.arange(p.locations) if locations is None else np.asarray(locations)
-    jobs = [(params, plan.nodes[loc], plan.directions[loc], p.steps, p.fmax, tol)
-            for loc in locs]
+    jobs = [(params, plan.nodes[loc], plan.directions[loc], p.steps, p.fmax, tol,
+             p.contact_radius, layout) for loc in locs]
     per_loc = p.directions * (p.steps + 1)
-    points = np.empty((len(locs) * per_loc, params.n * params.n, 3), dtype=np.float32)
+    n_out = params.n * params.n if layout is None else len(layout) + 1
+    points = np.empty((len(locs) * per_loc, n_out, 3), dtype=np.float32)
+    tips = np.empty((len(locs) * per_loc, 3), dtype=np.float32)
     worst = stored = cpu = 0.0
     its = facts = 0
     workers = max(1, min(workers, len(jobs)))
-    pool = _pool(workers) if workers > 1 else None
+    pool = worker_pool(workers) if workers > 1 else None
     try:
         results = pool.imap(_simulate_location, jobs) if pool else map(_simulate_location, jobs)
         with progress(results, "simulating MSM locations", length=len(jobs)) as bar:
-            for k, (states, w, s, i, f, c) in enumerate(bar):
+            for k, (states, tip, w, s, i, f, c) in enumerate(bar):
                 points[k * per_loc:(k + 1) * per_loc] = states.reshape(per_loc, -1, 3)
+                tips[k * per_loc:(k + 1) * per_loc] = tip.reshape(per_loc, 3)
                 worst, stored = max(worst, w), max(stored, s)
                 its, facts, cpu = its + i, facts + f, cpu + c
     finally:
         if pool:
             pool.terminate()
             pool.join()
-    return Simulated(locs, points, worst, stored, its, facts, cpu)
-
-
-def _pool(workers: int) -> multiprocessing.pool.Pool:
-    methods = multiprocessing.get_all_start_methods()
-    ctx = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-    return ctx.Pool(workers)
-
-
-def default_workers() -> int:
-    """Cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
+    return Simulated(locs, points, tips, worst, stored, its, facts, cpu)
 
 
 # -- arrays and file -------------------------------------------------------------------------
@@ -230,7 +242,7 @@ def states_arrays(plan: Plan, sim: Simulated) -> dict[str, np.ndarray]:
     return {
         "states/points": sim.points,
         "states/valid": np.ones(sim.points.shape[:2], dtype=bool),
-        "states/tip": sim.points[np.arange(len(step)), nodes],
+        "states/tip": sim.tips,
         "states/force": force,
         "states/force_vector": force_vector.astype(np.float32),
         "states/step": step.astype(np.int32),
@@ -288,19 +300,61 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
 
 def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
              tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
-             command_params: dict | None = None
-             ) -> tuple[Simulated, dict[str, np.ndarray]]:
+             command_params: dict | None = None, layout: np.ndarray | None = None,
+             inputs: Sequence[Path] = ()) -> tuple[Simulated, dict[str, np.ndarray]]:
     """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
-    simulation and the arrays written."""
+    simulation and the arrays written.
+
+    With ``layout`` (a lab's rest points, :func:`lab_layout`) the states are the MSM sampled
+    at those points plus the tip, and the loads fall inside the layout's footprint (where the
+    lab pressed), so the network pre-trains on the graph it is fine-tuned on.
+    """
     check_tol(tol)
-    plan = draw_plan(protocol, params.n * params.n)
+    model = MSM(params)
+    plan = draw_plan(protocol, model.N, None if layout is None else footprint(model, layout))
     locs = shard_locations(protocol.locations, shard)
-    sim = simulate(plan, params, locs, tol, workers)
+    sim = simulate(plan, params, locs, tol, workers, layout)
     prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
-                           schema=STATES.name, schema_version=STATES.version)
+                           inputs=list(inputs), schema=STATES.name,
+                           schema_version=STATES.version)
     arrays = states_arrays(plan, sim)
-    write_states(out, arrays, file_attrs(plan, params, tol, prov, shard, sim))
+    attrs = file_attrs(plan, params, tol, prov, shard, sim)
+    if layout is not None:
+        attrs["layout"] = json.dumps(np.asarray(layout, dtype=float).round(9).tolist())
+    write_states(out, arrays, attrs)
     return sim, arrays
+
+
+def footprint(model: MSM, layout: np.ndarray) -> np.ndarray:
+    """The masses inside the bounding box of a layout's points in the plane."""
+    lo, hi = layout[:, :2].min(axis=0), layout[:, :2].max(axis=0)
+    xy = model.rest[:, :2]
+    return np.flatnonzero(((xy >= lo) & (xy <= hi)).all(axis=1))
+
+
+def lab_layout(path: str | Path) -> np.ndarray:
+    """The rest positions (P, 3) of a lab states file's surface points, phantom frame.
+
+    Each point's median over the sequences' rest states (step 0), ignoring the instants it
+    was missing; the tip (the last point, which sits at ``states/tip``) is left out.
+    """
+    path = Path(path)
+    validate_states(path)
+    with h5py.File(path, "r") as f:
+        if attr_text(f.attrs["source"]) != "lab":
+            raise BadInput(path, "--layout needs extracted lab states (source 'lab')")
+        rest = f["states/step"][()] == 0
+        points = f["states/points"][()][rest].astype(float)
+        valid = f["states/valid"][()][rest]
+        tips = f["states/tip"][()][rest].astype(float)
+    if not np.allclose(points[:, -1], tips, atol=1e-6, equal_nan=True):
+        raise BadInput(path, "its last point is not the tip: not a lab states layout")
+    points = np.where(valid[..., None], points, np.nan)[:, :-1]
+    seen = np.isfinite(points).all(axis=-1).any(axis=0)
+    if not seen.all():
+        raise BadInput(path, f"point {int(np.flatnonzero(~seen)[0])} is never seen at rest: "
+                             "no layout for it")
+    return np.nanmedian(points, axis=0)
 
 
 # -- merge -----------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ Every solve ends with the largest per-mass force below ``tol`` (1e-6 N by defaul
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -190,34 +191,51 @@ class StaticSolver:
         return x_new, e_new, g_new, step
 
 
+def solve_path(solver: StaticSolver, loads: Iterable[np.ndarray]) -> Iterator[np.ndarray]:
+    """Equilibria (N, 3) under each external force array of ``loads`` in turn, from rest.
+
+    Each solve starts from the extrapolation of the two previous equilibria (the first from
+    the rest state), so a growing load is followed like the paper's quasi-static press.
+    """
+    solver.reset()
+    prev = x = solver.model.rest
+    with blas_threads(1):
+        for f_ext in loads:
+            guess = x if x is prev else 2 * x - prev
+            prev, x = x, solver.solve(guess, f_ext)
+            yield x
+
+
 def simulate_sequence(
-    model: MSM, node: int, direction: np.ndarray, steps: int = 15, fmax: float = 7.5,
-    tol: float = DEFAULT_TOL, solver: StaticSolver | None = None,
+    model: MSM, node: int | np.ndarray, direction: np.ndarray, steps: int = 15,
+    fmax: float = 7.5, tol: float = DEFAULT_TOL, solver: StaticSolver | None = None,
 ) -> np.ndarray:
     """The paper's protocol for one sequence by static solves: states (steps + 1, N, 3).
 
-    Force step t puts ``t * fmax / steps`` along ``direction`` on mass ``node``; each solve
-    starts from the extrapolation of the two previous equilibria. A ``solver`` passed in (to
-    reuse its rest factor across sequences) must be of ``model`` and have tolerance ``tol``.
+    Force step t puts ``t * fmax / steps`` along ``direction`` on mass ``node`` (or shared
+    among the masses of an array: a contact patch); each solve starts from the extrapolation
+    of the two previous equilibria. A ``solver`` passed in (to reuse its rest factor across
+    sequences) must be of ``model`` and have tolerance ``tol``.
     """
     if solver is None:
         solver = StaticSolver(model, tol)
     elif solver.model is not model or solver.tol != tol:
         raise ValueError(f"solver of another model or tolerance (tol {solver.tol:g} N, "
                          f"asked {tol:g} N)")
-    solver.reset()
     direction = unit(direction)
+    forces = [direction * fmax * t / steps for t in range(1, steps + 1)]
     states = np.empty((steps + 1, model.N, 3))
     states[0] = model.rest
-    with blas_threads(1):
-        for t in range(1, steps + 1):
-            guess = states[t - 1] if t == 1 else 2 * states[t - 1] - states[t - 2]
-            force = direction * fmax * t / steps
-            try:
-                states[t] = solver.solve(guess, model.load(node, force))
-            except MSMError as e:
-                raise MSMError(f"mass {node}, force {np.round(force, 4).tolist()} N (step {t}): "
-                               f"{e.what}") from None
+    where = np.atleast_1d(node)
+    label = f"mass {int(where[0])}" if len(where) == 1 else f"masses {where.tolist()}"
+    done = 0                       # steps solved so far: a failure is at step done + 1
+    try:
+        for x in solve_path(solver, (model.load(node, f) for f in forces)):
+            done += 1
+            states[done] = x
+    except MSMError as e:
+        raise MSMError(f"{label}, force {np.round(forces[done], 4).tolist()} N (step "
+                       f"{done + 1}): {e.what}") from None
     return states
 
 

@@ -60,8 +60,9 @@ def pick_sequences(n_sequences: int, count: int) -> list[int]:
 
 
 def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray],
-                             triangles: np.ndarray, count: int = 4) -> list[int]:
-    """Save the recording of ``count`` sequences of a states file's arrays; returns them."""
+                             triangles: np.ndarray | None, count: int = 4) -> list[int]:
+    """Save the recording of ``count`` sequences of a states file's arrays; returns them.
+    ``triangles`` None: the states are points sampled at a lab's layout, drawn as points."""
     seq_of_state = arrays["states/sequence"]
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
@@ -92,7 +93,7 @@ def _displacement(arrays: dict[str, np.ndarray], rows: np.ndarray) -> np.ndarray
 
 
 def log_sequence(rec: rr.RecordingStream, s: int, arrays: dict[str, np.ndarray],
-                 rows: np.ndarray, triangles: np.ndarray, largest: float,
+                 rows: np.ndarray, triangles: np.ndarray | None, largest: float,
                  color: tuple[int, int, int]) -> None:
     """Log one sequence's states (``rows`` of the states arrays, in step order)."""
     points = arrays["states/points"][rows].astype(np.float64)
@@ -101,10 +102,17 @@ def log_sequence(rec: rr.RecordingStream, s: int, arrays: dict[str, np.ndarray],
     times = [rr.TimeColumn(TIMELINE, sequence=arrays["states/step"][rows].astype(np.int64))]
     colors = colormap(np.sqrt(_displacement(arrays, rows) / max(largest, 1e-12)))
     root, n, t = f"msm/seq_{s:04d}", points.shape[1], len(rows)
-    rec.log(f"{root}/surface", rr.Mesh3D.from_fields(triangle_indices=triangles), static=True)
-    rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Mesh3D.columns(
-        vertex_positions=points.reshape(-1, 3), vertex_colors=colors.reshape(-1, 3))
-        .partition(np.full(t, n)))
+    if triangles is None:             # sampled at a lab's markers: points, not a mesh
+        rec.log(f"{root}/surface", rr.Points3D.from_fields(radii=[0.0012]), static=True)
+        rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Points3D.columns(
+            positions=points.reshape(-1, 3), colors=colors.reshape(-1, 3))
+            .partition(np.full(t, n)))
+    else:
+        rec.log(f"{root}/surface", rr.Mesh3D.from_fields(triangle_indices=triangles),
+                static=True)
+        rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Mesh3D.columns(
+            vertex_positions=points.reshape(-1, 3), vertex_colors=colors.reshape(-1, 3))
+            .partition(np.full(t, n)))
     rec.log(f"{root}/loaded", rr.Points3D.from_fields(radii=[0.0015], colors=[color]),
             static=True)
     rec.send_columns(f"{root}/loaded", indexes=times,

@@ -33,6 +33,8 @@ from sim.twin_scene import (
 )
 from sim.twin_states import States, true_states
 
+ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (analog route)
+
 
 @dataclass
 class Twin:
@@ -58,6 +60,14 @@ class Twin:
 
 
 
+def _lead_in(p: TwinParams) -> float:
+    """Seconds the hand holds the indenter still before its first move. The Speedgoat log
+    starts seconds before the capture; through the analog board the force starts with the
+    capture, so the hand waits longer there: sync tares from the first 2 s when they are quiet.
+    """
+    return ANALOG_LEAD_IN_S if p.force_via == "analog" else 1.0
+
+
 def simulate(p: TwinParams) -> Twin:
     """Play the whole session in memory."""
     check_params(p)
@@ -73,7 +83,7 @@ def simulate(p: TwinParams) -> Twin:
     style = HandStyle()
     if p.press_seconds is not None:
         style = replace(style, scale=p.press_seconds / style.mean_press_s)
-    hand = plan_hand(g_hand, targets, style)
+    hand = plan_hand(g_hand, targets, style, lead_in=_lead_in(p))
     paths = solve_presses(phantom, hand, nodes, to_lab)
     indenter = make_indenter(g_build)
     sensor = make_nano17(g_build, f"FT{21000 + p.seed % 79000:05d}")

@@ -4,6 +4,10 @@ The logger's clock runs ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m`` agains
 the log starts before the mocap, with the indenter still and unloaded (so it can be tared), and
 ends after it. The sensor feels the contact wrench and the tool's weight; TTL pulses at
 irregular intervals go to the trigger channel.
+
+With ``force_via = "analog"`` the Nano17's amplifier is wired into the mocap system's analog
+board instead: the samples are on the mocap's clock (offset 0, drift 0), a whole number per
+frame, from the first frame to the last frame's end, as QTM records them.
 """
 
 from __future__ import annotations
@@ -47,10 +51,16 @@ def play_force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor
     offset = offset if p.offset_s is None else p.offset_s
     drift = drift if p.drift_ppm is None else p.drift_ppm
     lead, tail = g_clock.uniform(1.5, 3.0), g_clock.uniform(0.5, 2.0)
+    if p.force_via == "analog":
+        offset, drift = 0.0, 0.0
+        per_frame = int(round(p.logger_hz / p.rate_hz))
+        t_f = np.arange((int(round(last_frame_s * p.rate_hz)) + 1) * per_frame) / p.logger_hz
+    else:
+        scale = 1.0 + drift * 1e-6
+        first = int(np.ceil((offset - scale * lead) * p.logger_hz))
+        last = int(np.floor((offset + scale * (last_frame_s + tail)) * p.logger_hz))
+        t_f = np.arange(first, last + 1) / p.logger_hz
     scale = 1.0 + drift * 1e-6
-    first = int(np.ceil((offset - scale * lead) * p.logger_hz))
-    last = int(np.floor((offset + scale * (last_frame_s + tail)) * p.logger_hz))
-    t_f = np.arange(first, last + 1) / p.logger_hz
     t_m = (t_f - offset) / scale
 
     st = hand.state(t_m)

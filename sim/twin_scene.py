@@ -24,6 +24,7 @@ from sim.phantom import LoadPath, Phantom, PhantomSpec
 PHANTOM_MARKERS = tuple(f"P{k:02d}" for k in range(25))
 TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
 STEP_N = 0.5                        # static states every 0.5 N
+FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
 
 Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab
 
@@ -42,9 +43,16 @@ class TwinParams:
     trigger: bool = True
     offset_s: float | None = None        # None: drawn, |offset| in [0.3, 3] s, either sign
     drift_ppm: float | None = None       # None: drawn, |drift| in [10, 60] ppm, either sign
-    force_file: str = "csv"              # the log session.toml names: csv or mat
+    force_file: str | None = None        # the file session.toml names: csv or mat (logger),
+                                         # tsv (QTM analog export) or c3d (analog); None: first
+    force_via: str = "logger"            # logger: Speedgoat, own clock; analog: mocap's board
     errors: MocapErrors = field(default_factory=MocapErrors)
     phantom: PhantomSpec = field(default_factory=PhantomSpec)
+
+    @property
+    def force_source(self) -> str:
+        """The force file session.toml names (``force_file``, or the route's first)."""
+        return self.force_file or FORCE_FILES.get(self.force_via, ("csv",))[0]
 
 
 def check_params(p: TwinParams) -> None:
@@ -52,7 +60,14 @@ def check_params(p: TwinParams) -> None:
     checks = [
         ("--locations", p.locations >= 1, "must be at least 1"),
         ("--repeats", p.repeats >= 1, "must be at least 1"),
-        ("--force-file", p.force_file in ("csv", "mat"), "must be csv or mat"),
+        ("--force-via", p.force_via in FORCE_FILES, f"must be {' or '.join(FORCE_FILES)}"),
+        ("--force-file", p.force_source in FORCE_FILES.get(p.force_via, ()),
+         f"must be {' or '.join(FORCE_FILES.get(p.force_via, ()))} with --force-via "
+         f"{p.force_via}"),
+        ("--force-via", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
+         "analog needs a force rate that is a whole multiple of the frame rate"),
+        ("--offset", p.force_via != "analog" or (p.offset_s is None and p.drift_ppm is None),
+         "--offset and --drift are the logger's clock; through the analog board there is one"),
         ("--press-seconds", p.press_seconds is None or 2.0 <= p.press_seconds <= 60.0,
          "must be between 2 and 60 s"),
         ("--pivot-seconds", 2.0 <= p.pivot_seconds <= 600.0, "must be between 2 and 600 s"),

@@ -168,7 +168,11 @@ def test_session_toml_parses(tmp_path):
     ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
                'time_unit = ["s"]'}, "force.time_unit must be a non-empty string"),
     ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
-               "trigger_column = 3"}, "force.trigger_column must be a non-empty string"),
+               "trigger_column = 3.5"}, "force.trigger_column must name channels by name"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e",0]\ncalibration = "s.cal"'},
+     "force.channels must name channels by name .* or number .*got 0"),
+    ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"\n'
+               "rate_hz = -1"}, "force.rate_hz must be a rate in Hz"),
     ({"force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = 5'},
      "force.calibration must be a non-empty string"),
     ({"pivot": 'file = ""'}, "pivot.file must be a non-empty string"),

@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 import pytest
 import scipy.io
+from c3d_bytes import c3d_parameter
 from click.testing import CliRunner
 
 from core.errors import BadInput
@@ -309,34 +310,11 @@ def test_a_6d_column_line_that_contradicts_body_names(tmp_path, columns, extra, 
 # ---------------------------------------------------------------------------- C3D
 
 
-def _c3d_parameter(data: bytes, group: str, name: str) -> tuple[int, int]:
-    """(byte offset of the value, type) of a scalar parameter of an Intel C3D file, found by
-    walking the parameter records as the C3D format describes them."""
-    start = (data[0] - 1) * 512
-    pos, groups, found = start + 4, {}, {}
-    while True:
-        n = abs(struct.unpack_from("b", data, pos)[0])
-        gid = struct.unpack_from("b", data, pos + 1)[0]
-        label = data[pos + 2:pos + 2 + n].decode()
-        link = pos + 2 + n
-        step = struct.unpack_from("<h", data, link)[0]
-        if gid < 0:
-            groups[-gid] = label
-        else:
-            kind, dims = struct.unpack_from("bB", data, link + 2)
-            found[gid, label] = (link + 4 + dims, kind)
-        if step == 0 or n == 0:
-            break
-        pos = link + step
-    gid = next(g for g, label in groups.items() if label == group)
-    return found[gid, name]
-
-
 def _patched_c3d(real_samples: Path, tmp_path: Path, changes: dict[str, float],
                  points_in_header: int | None = None) -> Path:
     data = bytearray((real_samples / C3D).read_bytes())
     for key, value in changes.items():
-        offset, kind = _c3d_parameter(bytes(data), *key.split(":"))
+        offset, kind = c3d_parameter(bytes(data), *key.split(":"))
         struct.pack_into("<f" if kind == 4 else "<h", data, offset, value)
     if points_in_header is not None:
         struct.pack_into("<H", data, 2, points_in_header)              # header word 2
@@ -474,7 +452,7 @@ def _spoil_c3d(folder: Path) -> str:
     c["data"]["points"] = pts
     c.write(str(folder / "indentation.c3d"))
     data = bytearray((folder / "indentation.c3d").read_bytes())
-    offset, _ = _c3d_parameter(bytes(data), "POINT", "RATE")
+    offset, _ = c3d_parameter(bytes(data), "POINT", "RATE")
     struct.pack_into("<f", data, offset, 250.0)
     (folder / "indentation.c3d").write_bytes(bytes(data))
     return "indentation.c3d: POINT:RATE says 250 Hz but the header says 500 Hz"

@@ -168,5 +168,6 @@ def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp
     rows = json.loads(out.read_text())["scarcity"]
     n_train = len(json.loads(splits.read_text())["folds"][0]["train"]["groups"])
     assert sorted({r["groups"] for r in rows}) == list(range(1, n_train + 1))
-    assert {r["transfer"] for r in rows} == {True, False} and len(rows) == 2 * n_train
+    assert {r["predictor"] for r in rows} == {"TL", "no TL", "nothing moves", "nearest press",
+                                             "force, linear"} and len(rows) == 5 * n_train
     assert out.with_suffix(".scarcity.png").stat().st_size > 0

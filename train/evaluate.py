@@ -4,7 +4,9 @@ Per example: L_d, the mean over points of the distance between predicted and tru
 points, and its max over points; the force error |dF_pred - dF|. Per run and set (single,
 multi, both): force MSE, force absolute error mean +- sd, mean L_d mean +- sd and max L_d mean
 +- sd over examples (mm). Runs of one variant (label) are pooled over their folds, and the
-spread of the per-fold means is given beside.
+spread of the per-fold means is given beside. Every run and label is scored beside the
+no-learning references (:mod:`train.references`) on the same test examples, with its gain over
+the best of them: a model that does not beat them has learned nothing worth shipping.
 """
 
 from __future__ import annotations
@@ -22,9 +24,19 @@ from core.atomic import atomic_output
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
 from train.checkpoint import load_checkpoint, model_from
-from train.data import SETS, Batch, States, load_manifest, load_states, make_batch, role_examples
+from train.data import (
+    SETS,
+    Batch,
+    States,
+    example_pairs,
+    load_manifest,
+    load_states,
+    make_batch,
+    role_examples,
+)
 from train.loop import Prediction, distances, predict
 from train.normalise import Normaliser
+from train.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 
 SOURCE_NAMES = {"msm": "MSM", "lab": "Exp"}
 
@@ -64,6 +76,7 @@ class LoadedRun:
     test: dict[str, np.ndarray]      # set -> example ids
     meta: dict
     splits: Path
+    train: dict[str, np.ndarray]     # set -> the training example ids of the run's fold
 
 
 def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
@@ -76,8 +89,10 @@ def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
             raise BadInput(run_dir / "best.pt", f"its data {p} is gone")
     doc = load_manifest(splits, data)
     model, norm = model_from(state, device)
+    opts = meta["options"]
     return LoadedRun(model, norm, load_states(data).to(device),
-                     role_examples(doc, meta["options"]["fold"], "test"), meta, splits)
+                     role_examples(doc, opts["fold"], "test"), meta, splits,
+                     role_examples(doc, opts["fold"], "train", data, opts["train_groups"]))
 
 
 @torch.no_grad()
@@ -110,6 +125,14 @@ def example_errors(run: LoadedRun, transform: Callable[[Batch], Batch] | None = 
     return errs, shown
 
 
+def reference_errors(run: LoadedRun) -> dict[str, ExampleErrors]:
+    """The errors of each no-learning reference on the run's test examples, fitted on the
+    training examples of its fold (the same subset the run trained on)."""
+    refs = References(run.states, example_pairs(run.states, run.train))
+    return {name: example_errors(run, predictor=lambda b, n=name: refs.predict(n, b))[0]
+            for name in NAMES}
+
+
 def test_errors(run_dir: Path, device: str = "cpu"
                 ) -> tuple[ExampleErrors, dict, list[tuple[Batch, Prediction]]]:
     """Errors of a run's best model on its fold's test examples, its meta, and a few
@@ -119,8 +142,9 @@ def test_errors(run_dir: Path, device: str = "cpu"
     return errs, run.meta, shown
 
 
-def metrics(e: ExampleErrors) -> dict[str, dict[str, float]]:
-    """Table 2 metrics for single, multi and both (mm, N, N^2)."""
+def metrics(e: ExampleErrors) -> dict[str, dict[str, float | None]]:
+    """Table 2 metrics for single, multi and both (mm, N, N^2); L_d is None for a predictor
+    that moves no point (the linear force reference)."""
     out = {}
     for name, keep in (("single", e.set == "single"), ("multi", e.set == "multi"),
                        ("all", np.ones(len(e.set), bool))):
@@ -129,11 +153,11 @@ def metrics(e: ExampleErrors) -> dict[str, dict[str, float]]:
         fe = e.force_err[keep]
         out[name] = {"n": int(keep.sum()), "force_mse_n2": float(np.mean(fe**2)),
                      "force_abs_n": float(np.mean(np.abs(fe))),
-                     "force_abs_sd_n": float(np.std(np.abs(fe))),
-                     "ld_mean_mm": float(np.mean(e.ld_mean[keep]) * 1e3),
-                     "ld_mean_sd_mm": float(np.std(e.ld_mean[keep]) * 1e3),
-                     "ld_max_mm": float(np.mean(e.ld_max[keep]) * 1e3),
-                     "ld_max_sd_mm": float(np.std(e.ld_max[keep]) * 1e3)}
+                     "force_abs_sd_n": float(np.std(np.abs(fe)))}
+        for key, values in (("ld_mean", e.ld_mean[keep]), ("ld_max", e.ld_max[keep])):
+            finite = bool(np.isfinite(values).all())
+            out[name][f"{key}_mm"] = float(np.mean(values) * 1e3) if finite else None
+            out[name][f"{key}_sd_mm"] = float(np.std(values) * 1e3) if finite else None
     return out
 
 
@@ -143,38 +167,121 @@ def pool(errors: list[ExampleErrors]) -> ExampleErrors:
                            for k in ("set", "ld_mean", "ld_max", "force_err")))
 
 
+def gains(model: dict, refs: dict[str, dict]) -> dict:
+    """A model's mean L_d and force error against the best reference of each (on the "all"
+    metrics): the reference's name and value, and the model's relative gain (positive: the
+    model is better; 0.3 = 30 % lower error)."""
+    ld_name, ld_ref = best_reference(refs, "ld_mean_mm", DISPLACEMENT)
+    f_name, f_ref = best_reference(refs, "force_abs_n", FORCE)
+    return {"ld_reference": ld_name, "ld_reference_mm": ld_ref,
+            "ld_gain": 1 - model["ld_mean_mm"] / ld_ref if ld_ref > 0 else 0.0,
+            "force_reference": f_name, "force_reference_n": f_ref,
+            "force_gain": 1 - model["force_abs_n"] / f_ref if f_ref > 0 else 0.0}
+
+
 def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
-    """Metrics per run and per label (pooled over its folds, with the spread over folds)."""
+    """Metrics per run and per label (pooled over its folds, with the spread over folds),
+    each beside the no-learning references on the same test examples, and the gain over the
+    best of them."""
     runs, by_label = [], {}
-    for run in run_dirs:
-        errs, meta, _ = test_errors(run, device)
-        with h5py.File(meta["data"]["file"], "r") as f:
+    for run_dir in run_dirs:
+        run = load_run(run_dir, device)
+        errs = example_errors(run)[0]
+        refs = reference_errors(run)
+        with h5py.File(run.meta["data"]["file"], "r") as f:
             source = attr_text(f.attrs["source"])
-        label = run_label(meta, source)
         m = metrics(errs)
-        runs.append({"run": str(run), "label": label, "fold": meta["options"]["fold"],
-                     "test_set": SOURCE_NAMES.get(source, source), "metrics": m})
-        by_label.setdefault((label, runs[-1]["test_set"]), []).append((errs, m))
+        ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
+        runs.append({"run": str(run_dir), "label": run_label(run.meta, source),
+                     "fold": run.meta["options"]["fold"],
+                     "test_set": SOURCE_NAMES.get(source, source), "metrics": m,
+                     "references": ref_m, "gain": gains(m["all"], ref_m)})
+        key = (runs[-1]["label"], runs[-1]["test_set"])
+        by_label.setdefault(key, []).append((errs, refs, runs[-1]))
     overall = []
     for (label, test_set), items in by_label.items():
-        pooled = metrics(pool([e for e, _ in items]))
-        fold_ld = [m["all"]["ld_mean_mm"] for _, m in items]
+        pooled = metrics(pool([e for e, _, _ in items]))
+        ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
+        fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
         overall.append({"label": label, "test_set": test_set, "folds": len(items),
-                        "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld))})
+                        "fold_ids": [r["fold"] for _, _, r in items],
+                        "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
+                        "references": ref_m, "gain": gains(pooled["all"], ref_m),
+                        "folds_not_beating_references": [
+                            r["fold"] for _, _, r in items if r["gain"]["ld_gain"] <= 0]})
     return {"runs": runs, "overall": overall}
 
 
-def table2(result: dict) -> str:
-    """A Markdown table laid out like the paper's Table 2 (all examples, single + multi)."""
-    lines = ["| Model/Train set | Test set | Force MSE [N^2] | Force Absolute Error [N] | "
-             "Mean L_d [mm] | Max L_d [mm] | folds |",
-             "|---|---|---|---|---|---|---|"]
+def not_beating(result: dict) -> list[str]:
+    """One line per variant whose pooled mean L_d or force error does not beat the best
+    reference (what ``pipeline eval --strict`` fails on)."""
+    lines = []
     for row in result["overall"]:
-        m = row["metrics"]["all"]
-        lines.append(f"| {row['label']} | {row['test_set']} | {m['force_mse_n2']:.3g} | "
-                     f"{m['force_abs_n']:.2f} ± {m['force_abs_sd_n']:.2f} | "
-                     f"{m['ld_mean_mm']:.2f} ± {m['ld_mean_sd_mm']:.2f} | "
-                     f"{m['ld_max_mm']:.2f} ± {m['ld_max_sd_mm']:.2f} | {row['folds']} |")
+        g = row["gain"]
+        for what, gain, ref in (("mean L_d", g["ld_gain"], g["ld_reference"]),
+                                ("force error", g["force_gain"], g["force_reference"])):
+            if gain <= 0:
+                lines.append(f"{row['label']} on {row['test_set']}: {what} does not beat "
+                             f"'{ref}' ({-gain:.0%} worse)")
+    return lines
+
+
+def _cell(m: dict, key: str, sd: str) -> str:
+    """'mean ± sd' to 2 decimals, or '–' where the predictor has no such value."""
+    return "–" if m[key] is None else f"{m[key]:.2f} ± {m[sd]:.2f}"
+
+
+def _row(name: str, test_set: str, m: dict, gain: str, folds: str) -> str:
+    return (f"| {name} | {test_set} | {m['force_mse_n2']:.3g} | "
+            f"{_cell(m, 'force_abs_n', 'force_abs_sd_n')} | "
+            f"{_cell(m, 'ld_mean_mm', 'ld_mean_sd_mm')} | "
+            f"{_cell(m, 'ld_max_mm', 'ld_max_sd_mm')} | {gain} | {folds} |")
+
+
+def table2(result: dict) -> str:
+    """A Markdown table laid out like the paper's Table 2 (all examples, single + multi), with
+    the no-learning references on the same test examples in italics below each test set's
+    variants, each variant's gain over the best of them, and mean L_d per fold."""
+    lines = ["| Model/Train set | Test set | Force MSE [N^2] | Force Absolute Error [N] | "
+             "Mean L_d [mm] | Max L_d [mm] | gain over best reference (L_d / force) | folds |",
+             "|---|---|---|---|---|---|---|---|"]
+    shown = set()
+    for row in result["overall"]:
+        g = row["gain"]
+        lines.append(_row(row["label"], row["test_set"], row["metrics"]["all"],
+                          f"{g['ld_gain']:+.0%} / {g['force_gain']:+.0%}", str(row["folds"])))
+        key = (row["test_set"], tuple(row["fold_ids"]))
+        if key in shown:
+            continue
+        shown.add(key)
+        for name in NAMES:
+            lines.append(_row(f"*reference: {name}*", row["test_set"], row["references"][name],
+                              "", str(row["folds"])))
+    return "\n".join(lines) + "\n" + _fold_table(result)
+
+
+def _fold_table(result: dict) -> str:
+    """Mean L_d per fold of every variant tested on more than one fold, beside the
+    references of that fold (empty when no variant has several folds)."""
+    labels = [r["label"] for r in result["overall"] if r["folds"] > 1]
+    if not labels:
+        return ""
+    by_fold: dict[int, dict] = {}
+    for run in result["runs"]:
+        if run["label"] in labels:
+            by_fold.setdefault(run["fold"], {"refs": run["references"]})[run["label"]] = run
+    head = ["fold", *labels, *(f"*{n}*" for n in DISPLACEMENT)]
+    lines = ["", "Mean L_d per fold [mm] (in brackets: gain over the best reference)", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for fold in sorted(by_fold):
+        cells = [str(fold)]
+        for label in labels:
+            run = by_fold[fold].get(label)
+            cells.append("–" if run is None else f"{run['metrics']['all']['ld_mean_mm']:.3f} "
+                                                 f"({run['gain']['ld_gain']:+.0%})")
+        refs = by_fold[fold]["refs"]
+        cells += [f"{refs[n]['ld_mean_mm']:.3f}" for n in DISPLACEMENT]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

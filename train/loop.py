@@ -61,6 +61,9 @@ class TrainOptions:
     train_groups: int | None = None
     seed: int = 0
     rotate: bool = False
+    loss: str = "paper"              # "paper": alpha L_d + MSE; "balanced": each in its scale
+    schedule: str = "constant"       # "constant" or "cosine" (to 1 % of lr at the last epoch)
+    patience: int | None = None      # stop after this many epochs without a better validation
 
 
 @dataclass
@@ -87,9 +90,26 @@ def mean_distance(p: Prediction, b: Batch) -> torch.Tensor:
     return distances(p, b).sum(1) / b.mask.sum(1).clamp(min=1)
 
 
-def loss_sum(p: Prediction, b: Batch, alpha: float) -> torch.Tensor:
-    """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean)."""
-    return (alpha * mean_distance(p, b) + (p.dforce - b.dforce) ** 2).sum()
+def loss_sum(p: Prediction, b: Batch, alpha: float, norm: Normaliser | None = None
+             ) -> torch.Tensor:
+    """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean).
+
+    With ``norm`` (the "balanced" loss) each term is in its training scale instead:
+    ``L_d / disp_scale + (dF error / force_scale)^2``, so neither swamps the other whatever
+    the units and data (on the MSM the paper's weights make the force term ~800x the other).
+    """
+    if norm is None:
+        return (alpha * mean_distance(p, b) + (p.dforce - b.dforce) ** 2).sum()
+    return (mean_distance(p, b) / norm.disp_scale
+            + ((p.dforce - b.dforce) / norm.force_scale) ** 2).sum()
+
+
+def learning_rate(opts: TrainOptions, epoch: int) -> float:
+    """The step size of an epoch: constant, or cosine from ``lr`` to 1 % of it."""
+    if opts.schedule == "constant" or opts.epochs <= 1:
+        return opts.lr
+    t = epoch / (opts.epochs - 1)
+    return opts.lr * (0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * t)))
 
 
 def seeded(seed: int, epoch: int, device: torch.device) -> torch.Generator:
@@ -129,6 +149,7 @@ class Run:
     start_epoch: int
     best_val: float
     meta: dict
+    best_epoch: int = -1
 
 
 def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
@@ -167,8 +188,22 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         optimizer.load_state_dict(state["optimizer"])
         norm = Normaliser.from_dict(state["norm"])
         start, best = state["epoch"] + 1, state["best_val"]
+        best_epoch = int(state.get("best_epoch", state["epoch"]))
     return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
-               start, best, meta)
+               start, best, meta, best_epoch if start else -1)
+
+
+def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
+    """The normaliser that puts the loss terms in their scales ("balanced"), or None."""
+    if opts.loss not in ("paper", "balanced"):
+        raise BadInput(None, f"--loss must be paper or balanced, got {opts.loss!r}")
+    return run.norm if opts.loss == "balanced" else None
+
+
+def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
+    """True once ``patience`` epochs have passed without a better validation loss."""
+    return opts.patience is not None and run.best_epoch >= 0 \
+        and epoch - run.best_epoch > opts.patience
 
 
 def _resumable(meta: dict) -> dict:
@@ -186,6 +221,8 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
     keep = max(run.model.config.k + 1, math.ceil(opts.point_fraction * n_points)) \
         if opts.point_fraction else None
     net.train()
+    for group in run.optimizer.param_groups:
+        group["lr"] = learning_rate(opts, epoch)
     total = torch.zeros(2, device=device)
     for b, rows in enumerate(perm.split(opts.batch)):
         pairs = run.train[rows]
@@ -198,7 +235,7 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
         if turns is not None:
             batch = move_batch(batch, turns[mine.cpu()], torch.tensor(run.norm.centre))
-        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha)
+        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha, balance(run, opts))
         value = float(loss.detach()) / max(len(mine), 1)
         first_loss = first_loss or value
         if not math.isfinite(value) or value > EXPLODE * first_loss:
@@ -214,14 +251,16 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
 
 @torch.no_grad()
 def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: States,
-                   pairs: torch.Tensor, alpha: float, batch: int = 64) -> dict[str, float]:
+                   pairs: torch.Tensor, alpha: float, batch: int = 64,
+                   balanced: bool = False) -> dict[str, float]:
     """Mean loss, L_d (mm) and force error (N) over ``pairs`` (all points)."""
     model.eval()
     sums = torch.zeros(4, device=pairs.device)
     for rows in torch.arange(len(pairs), device=pairs.device).split(batch):
         b = make_batch(states, pairs[rows])
         p = predict(model, norm, b)
-        sums += torch.stack([loss_sum(p, b, alpha), mean_distance(p, b).sum(),
+        sums += torch.stack([loss_sum(p, b, alpha, norm if balanced else None),
+                             mean_distance(p, b).sum(),
                              (p.dforce - b.dforce).abs().sum(), torch.tensor(float(len(rows)))])
     n = max(float(sums[3]), 1.0)
     return {"val_loss": float(sums[0]) / n, "val_ld_mm": float(sums[1]) / n * 1e3,
@@ -241,15 +280,21 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
         out.mkdir(parents=True, exist_ok=True)
     first = None
     for epoch in range(run.start_epoch, opts.epochs):
+        if stopped_early(run, opts, epoch):
+            say(f"stopped after epoch {epoch}: no better validation in {opts.patience} epochs "
+                f"(best: epoch {run.best_epoch + 1})")
+            break
         tic = time.perf_counter()
         train_loss = train_epoch(run, net, opts, epoch, ctx, first)
         first = first or train_loss
-        metrics = evaluate_pairs(run.model, run.norm, run.states, run.val, opts.alpha) \
+        metrics = evaluate_pairs(run.model, run.norm, run.states, run.val, opts.alpha,
+                                 balanced=balance(run, opts) is not None) \
             if len(run.val) else {"val_loss": train_loss, "val_ld_mm": math.nan,
                                   "val_force_abs_n": math.nan}
         secs = time.perf_counter() - tic
         row = {"epoch": epoch, "train_loss": train_loss, **metrics, "seconds": secs,
                "samples_per_s": len(run.train) / secs}
+        _track_best(run, epoch, row["val_loss"])
         if ctx.main:
             _checkpoint(run, out, epoch, row)
             say(f"epoch {epoch + 1}/{opts.epochs}: train {train_loss:.5f}, val "
@@ -258,14 +303,18 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
     return out / "best.pt"
 
 
+def _track_best(run: Run, epoch: int, val_loss: float) -> None:
+    """Remember the best validation loss and its epoch (every rank alike)."""
+    if val_loss < run.best_val or run.best_epoch < 0:
+        run.best_val, run.best_epoch = min(run.best_val, val_loss), epoch
+
+
 def _checkpoint(run: Run, out: Path, epoch: int, row: dict) -> None:
     """Append the log row; write last.pt, and best.pt when validation improved."""
-    improved = row["val_loss"] < run.best_val
-    run.best_val = min(run.best_val, row["val_loss"])
     state = {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(),
-             "epoch": epoch, "best_val": run.best_val, "config": run.meta["config"],
-             "norm": run.norm.to_dict(), "meta": run.meta}
-    if improved or not (out / "best.pt").exists():
+             "epoch": epoch, "best_val": run.best_val, "best_epoch": run.best_epoch,
+             "config": run.meta["config"], "norm": run.norm.to_dict(), "meta": run.meta}
+    if run.best_epoch == epoch or not (out / "best.pt").exists():
         save_checkpoint(out / "best.pt", state)
     save_checkpoint(out / "last.pt", state)
     log = out / "log.csv"

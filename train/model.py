@@ -7,7 +7,10 @@ points (B, N, 3) and condition C = [tip start, tip end] (B, 6), both normalised:
     global = [max over points, mean over points] of [x1, x2, x3], C       (B, 384 + 6)
     dforce = MLP 128-64-32-1 (global): four linear layers                 (B,)
 noCond (``use_condition=False``) removes C from both heads. Missing points (``mask`` False)
-are never neighbours and never pooled.
+are never neighbours and never pooled. ``tip_offsets`` (ours, not the paper's) also gives the
+first layer each point's offset from the tip's start and end, [p, p - c_start, p - c_end]
+(B, N, 9): how a point moves depends mostly on where it is relative to the tip, which the
+paper's network has to learn from absolute positions (the follow-up cEGCL feeds the same).
 """
 
 from __future__ import annotations
@@ -32,6 +35,11 @@ class CGNNConfig:
     disp_widths: tuple[int, ...] = (256, 128)
     force_widths: tuple[int, ...] = (128, 64, 32)
     use_condition: bool = True
+    tip_offsets: bool = False
+
+    def __post_init__(self) -> None:
+        if self.tip_offsets and not self.use_condition:
+            raise ValueError("tip offsets are the condition C: noCond cannot have them")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for a checkpoint loaded with ``weights_only``."""
@@ -44,7 +52,8 @@ class CGNNConfig:
     def from_dict(cls, d: dict[str, Any]) -> CGNNConfig:
         return cls(k=int(d["k"]), edge_widths=tuple(tuple(w) for w in d["edge_widths"]),
                    disp_widths=tuple(d["disp_widths"]), force_widths=tuple(d["force_widths"]),
-                   use_condition=bool(d["use_condition"]))
+                   use_condition=bool(d["use_condition"]),
+                   tip_offsets=bool(d.get("tip_offsets", False)))
 
 
 def mlp(widths: list[int]) -> nn.Sequential:
@@ -72,7 +81,7 @@ class CGNN(nn.Module):
     def __init__(self, config: CGNNConfig | None = None) -> None:
         super().__init__()
         self.config = config = config or CGNNConfig()
-        convs, width = [], 3
+        convs, width = [], 9 if config.tip_offsets else 3
         for hidden, out in config.edge_widths:
             convs.append(DynamicEdgeConv(width, hidden, out, config.k))
             width = out
@@ -86,6 +95,9 @@ class CGNN(nn.Module):
                  mask: torch.Tensor | None = None) -> Features:
         """The three edge convolutions' outputs, concatenated."""
         x, outs = points, []
+        if self.config.tip_offsets:
+            tips = cond.reshape(-1, 1, 2, 3)
+            x = torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
         for conv in self.convs:
             x = torch.relu(conv(x, mask))                                   # (B, N, O)
             outs.append(x)

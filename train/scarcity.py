@@ -3,8 +3,10 @@ with and without transfer learning, and evaluate each on the fold's test example
 
 For a run, the curve retrains its fold with the nested subsets of the manifest
 (``train_subsets``), once from scratch and, when the run was fine-tuned from a pre-trained model
-(``--init``), once from that model too. Written as ``scarcity.json``, ``scarcity.csv`` and a
-three-panel ``scarcity.png`` (mean L_d, max L_d, force error over training groups).
+(``--init``), once from that model too; beside them, at each subset, the no-learning references
+fitted on the same training groups (:mod:`train.references`). Written as ``scarcity.json``,
+``scarcity.csv`` and a three-panel ``scarcity.png`` (mean L_d, max L_d, force error over
+training groups; the references dashed).
 """
 
 from __future__ import annotations
@@ -14,19 +16,23 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
+
 from core.atomic import atomic_output
 from core.progress import say
 from train.checkpoint import load_checkpoint
-from train.evaluate import metrics, test_errors
+from train.evaluate import ExampleErrors, example_errors, load_run, metrics, reference_errors
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
 
-FIELDS = ("fold", "groups", "transfer", "ld_mean_mm", "ld_max_mm", "force_abs_n")
+FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n")
+MODELS = {False: "no TL", True: "TL"}
 
 
-def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str = "cpu"
-                  ) -> list[dict]:
-    """Retrain ``run_dir``'s fold on 1..n groups (with and without its --init); the errors."""
+def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str = "cpu",
+                  most: int | None = None) -> list[dict]:
+    """Retrain ``run_dir``'s fold on 1..n groups (at most ``most``), with and without its
+    --init, and score each beside the references fitted on the same groups."""
     meta = load_checkpoint(run_dir / "best.pt")["meta"]
     opts = TrainOptions(**meta["options"])
     opts = dataclasses.replace(opts, epochs=epochs or opts.epochs)
@@ -35,17 +41,35 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
     n_groups = len(json.loads(splits.read_text())["folds"][opts.fold]["train_subsets"])
     inits = [None] + ([Path(meta["init"])] if meta["init"] else [])
     rows = []
-    for n in range(1, n_groups + 1):
+    for n in range(1, min(n_groups, most or n_groups) + 1):
         for init in inits:
             tag = f"fold{opts.fold}_n{n:02d}_{'tl' if init else 'notl'}"
             say(f"scarcity: {tag}")
             sub = dataclasses.replace(opts, train_groups=n)
             train_run(data, splits, out_dir / tag, sub, config, init, device)
-            m = metrics(test_errors(out_dir / tag, device)[0])["all"]
-            rows.append({"fold": opts.fold, "groups": n, "transfer": init is not None,
-                         "ld_mean_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
-                         "force_abs_n": m["force_abs_n"]})
+            run = load_run(out_dir / tag, device)
+            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0]))
+        rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
     return rows
+
+
+def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors) -> dict:
+    m = metrics(errors)["all"]
+    return {"fold": fold, "groups": groups, "predictor": predictor,
+            "ld_mean_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
+            "force_abs_n": m["force_abs_n"]}
+
+
+def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[float]]:
+    """Training groups and the mean of ``key`` over folds for one predictor (None skipped)."""
+    sel = [r for r in rows if r["predictor"] == predictor and r[key] is not None]
+    groups = sorted({r["groups"] for r in sel})
+    return groups, [float(np.mean([r[key] for r in sel if r["groups"] == g])) for g in groups]
+
+
+LINES = (("no TL", "tab:red", "o-"), ("TL", "tab:blue", "o-"),
+         ("nothing moves", "tab:gray", "s--"), ("nearest press", "tab:green", "^--"),
+         ("force, linear", "tab:olive", "v--"))
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
@@ -67,19 +91,14 @@ def plot(path: Path, rows: list[dict]) -> None:
     panels = (("ld_mean_mm", "mean $L_d$ [mm]"), ("ld_max_mm", "max $L_d$ [mm]"),
               ("force_abs_n", "force absolute error [N]"))
     for ax, (key, label) in zip(axes, panels, strict=True):
-        for transfer, name, color in ((False, "Exp no TL", "tab:red"), (True, "Exp TL",
-                                                                        "tab:blue")):
-            sel = [r for r in rows if r["transfer"] == transfer]
-            groups = sorted({r["groups"] for r in sel})
-            if not groups:
-                continue
-            mean = [sum(r[key] for r in sel if r["groups"] == g)
-                    / sum(1 for r in sel if r["groups"] == g) for g in groups]
-            ax.plot(groups, mean, "o-", color=color, label=name)
+        for name, color, style in LINES:
+            groups, mean = curve(rows, name, key)
+            if groups:
+                ax.plot(groups, mean, style, color=color, label=name)
         ax.set_xlabel("training groups")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0].legend()
+    axes[0].legend(fontsize=8)
     fig.tight_layout()
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=120, format="png")

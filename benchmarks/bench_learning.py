@@ -1,0 +1,106 @@
+"""Does the model learn? The quick demo's protocol on several twin seeds, scored beside the
+predictors that learn nothing (issue 16's table), so anyone can re-measure it.
+
+    python benchmarks/bench_learning.py --seeds 0 1 2 [--out /tmp/bench_learning] [--jobs 2]
+
+Per seed it runs ``pipeline demo --quick --seed S`` (each seed its own phantom session and
+calibration presses; unchanged steps are skipped on a second run) and prints, from its
+metrics.json and scarcity study:
+
+- per variant (the references, scratch "cGNN/Exp", transfer learning "TL", the MSM model on
+  its own test set): mean L_d as the mean of the folds' means, the folds worse than "nothing
+  moves" and than "nearest press", the force absolute error;
+- TL against scratch (pooled mean L_d, folds better) and the scarcity curve;
+- the demo's wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from pipeline.demo_targets import variant_of  # noqa: E402
+from train.scarcity import curve  # noqa: E402
+
+REFS = ("nothing moves", "nearest press", "force, linear")
+
+
+def run_demo(out: Path, seed: int, jobs: int | None) -> float:
+    """``pipeline demo --quick`` for one seed; its wall time (s)."""
+    cmd = [sys.executable, "-m", "pipeline", "-q", "demo", "--quick", "--out", str(out),
+           "--seed", str(seed)] + (["--jobs", str(jobs)] if jobs else [])
+    tic = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - tic
+
+
+def variant_row(runs: list[dict], name: str) -> str:
+    """One table row: fold-mean L_d, folds worse than each reference, force error."""
+    ld = [r["metrics"]["all"]["ld_mean_mm"] for r in runs]
+    worse = [sum(r["metrics"]["all"]["ld_mean_mm"] > r["references"][ref]["ld_mean_mm"]
+                 for r in runs) for ref in REFS[:2]]
+    force = np.mean([r["metrics"]["all"]["force_abs_n"] for r in runs])
+    return (f"| {name} | {np.mean(ld):.3f} | {worse[0]} of {len(runs)} | {worse[1]} of "
+            f"{len(runs)} | {force:.3f} |")
+
+
+def reference_row(runs: list[dict]) -> str:
+    """The references' row on the same folds."""
+    ld = [np.mean([r["references"][ref]["ld_mean_mm"] for r in runs]) for ref in REFS[:2]]
+    force = np.mean([r["references"]["force, linear"]["force_abs_n"] for r in runs])
+    return (f"| nothing moves / nearest press / force, linear | {ld[0]:.3f} / {ld[1]:.3f} | – "
+            f"| – | {force:.3f} (linear) |")
+
+
+def report(out: Path, seed: int, seconds: float) -> None:
+    """Print one seed's table from its demo folder."""
+    doc = json.loads((out / "metrics.json").read_text())
+    by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
+          for v in ("notl", "tl", "msm")}
+    print(f"\n## seed {seed}: quick demo {seconds / 60:.1f} min\n")
+    print("| run | mean L_d [mm], mean of folds | folds worse than nothing moves | folds "
+          "worse than nearest press | force abs. error [N] |")
+    print("|---|---|---|---|---|")
+    print(reference_row(by["notl"]))
+    print(variant_row(by["notl"], "cGNN/Exp (scratch)"))
+    print(variant_row(by["tl"], "cGNN/MSM (TL)"))
+    msm = by["msm"][0]
+    print(variant_row(by["msm"], "cGNN/MSM on the MSM test set")
+          + f" (nothing moves {msm['references']['nothing moves']['ld_mean_mm']:.3f} mm, "
+          f"linear force {msm['references']['force, linear']['force_abs_n']:.3f} N)")
+    tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
+    sc = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
+    gains = [f"{r['gain']['ld_gain']:+.0%}" for r in by["tl"]]
+    print(f"\nTL vs scratch: fold means {1 - np.mean(tl) / np.mean(sc):.0%} lower, better in "
+          f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; TL gain over "
+          f"the best reference per fold: {', '.join(gains)}")
+    rows = [r for p in sorted((out / "scarcity").glob("fold*.json"))
+            for r in json.loads(p.read_text()).get("scarcity", [])]
+    for name in ("TL", "no TL", "nothing moves", "nearest press"):
+        groups, ld = curve(rows, name, "ld_mean_mm")
+        print(f"scarcity {name:13}: " + ", ".join(f"{g}: {v:.3f}" for g, v in
+                                                    zip(groups, ld, strict=True)) + " mm")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--out", type=Path, default=Path("/tmp/bench_learning"))
+    ap.add_argument("--jobs", type=int, default=None)
+    a = ap.parse_args()
+    for seed in a.seeds:
+        out = a.out / f"seed{seed}"
+        report(out, seed, run_demo(out, seed, a.jobs))
+
+
+if __name__ == "__main__":
+    main()

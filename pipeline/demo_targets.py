@@ -1,0 +1,136 @@
+"""The demo's summary: every result beside its target, so a miss is impossible to overlook.
+
+Targets (issues 16 and 21; the references are the predictors that learn nothing, scored on
+the same test examples, :mod:`train.references`):
+
+- sync against the twin's truth (:data:`calib.sync_accuracy.TARGETS`);
+- the fitted MSM at most half as far from the calibration presses as a still surface;
+- the MSM-trained model on its own test set: mean L_d at most half of "nothing moves", force
+  error below the linear reference;
+- fine-tuned with transfer learning (TL) and from scratch: mean L_d at least 30 % below the
+  best reference in every fold; force error at most half the linear reference's;
+- TL: pooled mean L_d at least 20 % below scratch, better in all folds but one; in the
+  data-scarcity study, at least 30 % below scratch at every number of training presses shown;
+- the quick demo under 5 minutes.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
+TL_CUT = 0.20           # pooled: TL this far below scratch
+SCARCITY_CUT = 0.30     # scarcity study: TL this far below scratch at each size
+FORCE_VS_LINEAR = 0.5   # force error at most this fraction of the linear reference's
+MSM_VS_STILL = 0.5      # MSM model (and the fit) at most this fraction of a still surface's
+QUICK_MINUTES = 5.0
+
+
+def summary(out: Path, seconds: float, quick: bool) -> list[str]:
+    """Print every result against its target; return the names of the targets missed."""
+    checks: list[tuple[str, bool, str]] = []
+    checks += _sync(out)
+    checks += _fit(out)
+    click.echo("\n" + (out / "metrics.md").read_text())
+    doc = json.loads((out / "metrics.json").read_text())
+    checks += _msm_model(doc)
+    checks += _fine_tuned(doc)
+    checks += _scarcity(out)
+    if quick:
+        checks.append(("quick demo time", seconds <= QUICK_MINUTES * 60,
+                       f"{seconds / 60:.1f} min (target {QUICK_MINUTES:g})"))
+    click.echo("\ntargets:")
+    for name, ok, text in checks:
+        click.echo(f"  {'ok    ' if ok else 'MISSED'} {name}: {text}")
+    click.echo(f"\ndemo finished in {seconds / 60:.1f} min: outputs in {out}; recordings:\n  "
+               + "\n  ".join(str(p) for p in sorted(out.rglob("*.rrd"))))
+    return [name for name, ok, _ in checks if not ok]
+
+
+def _sync(out: Path) -> list[tuple[str, bool, str]]:
+    from calib.sync_accuracy import TARGETS, sync_errors
+
+    errors = sync_errors(out / "session_synced.h5", out / "session" / "truth.h5")
+    return [(f"sync {key}", errors[key] <= target, f"{errors[key]:.4f} (target {target})")
+            for key, target in TARGETS.items()]
+
+
+def _fit(out: Path) -> list[tuple[str, bool, str]]:
+    fit = json.loads((out / "msm_params.json").read_text())
+    ratio = fit["mean_distance_m"] / fit["still_distance_m"]
+    text = (f"k_between {fit['k_between']:.4g} N/m, k_fixed {fit['k_fixed']:.4g} N/m: "
+            f"{fit['mean_distance_m'] * 1e3:.3f} mm from the calibration presses; paper's "
+            f"constants {fit['start_distance_m'] * 1e3:.3f} mm, still surface "
+            f"{fit['still_distance_m'] * 1e3:.3f} mm ({ratio:.0%} of it; target "
+            f"{MSM_VS_STILL:.0%})" + "".join(f"; {b}" for b in fit.get("at_bound", [])))
+    return [("fitted MSM", ratio <= MSM_VS_STILL, text)]
+
+
+def variant_of(run: dict) -> str:
+    """'tl', 'notl' or 'msm', from the run folder the demo named."""
+    name = Path(run["run"]).name
+    return "msm" if name == "msm" else name.split("_")[1]
+
+
+def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
+    runs = [r for r in doc["runs"] if variant_of(r) == "msm"]
+    if not runs:
+        return []
+    m, refs = runs[0]["metrics"]["all"], runs[0]["references"]
+    still, linear = refs["nothing moves"]["ld_mean_mm"], refs["force, linear"]["force_abs_n"]
+    return [("MSM model, mean L_d on its test set",
+             m["ld_mean_mm"] <= MSM_VS_STILL * still,
+             f"{m['ld_mean_mm']:.3f} mm, nothing moves {still:.3f} mm"),
+            ("MSM model, force error", m["force_abs_n"] < linear,
+             f"{m['force_abs_n']:.3f} N, linear {linear:.3f} N")]
+
+
+def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
+    checks = []
+    by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
+          for v in ("tl", "notl")}
+    for variant, name in (("tl", "TL"), ("notl", "scratch")):
+        gains = [r["gain"]["ld_gain"] for r in by[variant]]
+        force = [r["metrics"]["all"]["force_abs_n"]
+                 / r["references"]["force, linear"]["force_abs_n"] for r in by[variant]]
+        checks.append((f"{name}: mean L_d below the best reference in every fold",
+                       min(gains, default=0) >= FOLD_GAIN,
+                       "gains " + ", ".join(f"{g:+.0%}" for g in gains)
+                       + f" (target {FOLD_GAIN:.0%} each)"))
+        checks.append((f"{name}: force error against the linear reference",
+                       max(force, default=1) <= FORCE_VS_LINEAR,
+                       "ratios " + ", ".join(f"{f:.2f}" for f in force)
+                       + f" (target <= {FORCE_VS_LINEAR})"))
+    tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
+    scratch = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
+    if tl and len(tl) == len(scratch):
+        n = [r["metrics"]["all"]["n"] for r in by["tl"]]
+        pooled = 1 - sum(a * k for a, k in zip(tl, n, strict=True)) / sum(
+            b * k for b, k in zip(scratch, n, strict=True))
+        better = sum(a < b for a, b in zip(tl, scratch, strict=True))
+        checks.append(("transfer learning, pooled over folds",
+                       pooled >= TL_CUT and better >= len(tl) - 1,
+                       f"mean L_d {pooled:.0%} below scratch (target {TL_CUT:.0%}; paper "
+                       f"23%), better in {better} of {len(tl)} folds"))
+    return checks
+
+
+def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
+    from train.scarcity import curve
+
+    rows = [r for p in sorted((out / "scarcity").glob("fold*.json"))
+            for r in json.loads(p.read_text()).get("scarcity", [])]
+    if not rows:
+        return []
+    groups, tl = curve(rows, "TL", "ld_mean_mm")
+    _, scratch = curve(rows, "no TL", "ld_mean_mm")
+    _, near = curve(rows, "nearest press", "ld_mean_mm")
+    cuts = [1 - a / b for a, b in zip(tl, scratch, strict=True)]
+    text = "; ".join(f"{g} press{'es' if g > 1 else ''}: TL {a:.3f}, scratch {b:.3f}, "
+                     f"nearest press {c:.3f} mm ({d:+.0%})"
+                     for g, a, b, c, d in zip(groups, tl, scratch, near, cuts, strict=True))
+    return [("transfer learning with few presses (scarcity study)",
+             min(cuts) >= SCARCITY_CUT, text + f" (target {SCARCITY_CUT:.0%} each)")]

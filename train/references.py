@@ -1,0 +1,72 @@
+"""Predictors that learn nothing, scored beside every model on the same test examples.
+
+A model's score never stands alone: if it does not beat these, it has learned nothing worth
+shipping, whatever its absolute number (DESIGN.md, "Scoring a model: the references").
+
+- **nothing moves**: the deformed points are the input points; the tip, where it is one of the
+  points (the lab's 26th point, the MSM's loaded mass: a point at the tip's start), goes to the
+  end of C, which the input gives. Its change of force is 0.
+- **nearest press**: the displacement field (target - input, per point index) of the training
+  example whose C = [tip start, tip end] is nearest, added to the test input (the tip as above;
+  a point missing at either end of that example moves by 0). Its change of force is that
+  example's.
+- **force, linear**: least squares of the change of force on [tip end - tip start, 1] over the
+  training examples (4 numbers). It predicts no displacement.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from train.data import Batch, States, make_batch
+from train.loop import Prediction
+
+NAMES = ("nothing moves", "nearest press", "force, linear")
+DISPLACEMENT = ("nothing moves", "nearest press")       # the references that move points
+FORCE = ("nothing moves", "nearest press", "force, linear")
+TIP_MATCH = 1e-7      # m: a point this close to the tip's start is the tip
+
+
+def tip_points(b: Batch) -> torch.Tensor:
+    """(B, N) bool: the points that are the tip (at the tip's start, valid)."""
+    gap = torch.linalg.vector_norm(b.points - b.cond[:, None, :3], dim=-1)
+    return (gap < TIP_MATCH) & b.mask
+
+
+def with_tip(b: Batch, deformed: torch.Tensor) -> torch.Tensor:
+    """``deformed`` with the tip points moved to the end of C."""
+    return torch.where(tip_points(b)[..., None], b.cond[:, None, 3:], deformed)
+
+
+class References:
+    """The three references, fitted on one fold's training examples."""
+
+    def __init__(self, states: States, train_pairs: torch.Tensor) -> None:
+        train = make_batch(states, train_pairs)
+        self.cond = train.cond.double()                                      # (T, 6)
+        self.disp = torch.where(train.mask[..., None], train.target - train.points, 0.0)
+        self.dforce = train.dforce
+        lhs = torch.cat([self.cond[:, 3:] - self.cond[:, :3],
+                         torch.ones(len(self.cond), 1, dtype=torch.float64)], dim=1)
+        self.coef = torch.linalg.lstsq(lhs, train.dforce.double()[:, None]).solution[:, 0]
+
+    def predict(self, name: str, b: Batch) -> Prediction:
+        """One reference's prediction for a batch (points NaN for 'force, linear')."""
+        if name == "nothing moves":
+            return Prediction(with_tip(b, b.points), torch.zeros_like(b.dforce))
+        if name == "nearest press":
+            near = torch.cdist(b.cond.double(), self.cond).argmin(dim=1)     # (B,)
+            return Prediction(with_tip(b, b.points + self.disp[near]), self.dforce[near])
+        if name == "force, linear":
+            step = (b.cond[:, 3:] - b.cond[:, :3]).double()
+            df = step @ self.coef[:3] + self.coef[3]
+            return Prediction(torch.full_like(b.points, float("nan")), df.to(b.dforce.dtype))
+        raise KeyError(name)
+
+
+def best_reference(refs: dict[str, dict], key: str, names: tuple[str, ...]) -> tuple[str, float]:
+    """The name and value of the lowest ``key`` among ``names`` (metrics per reference)."""
+    scored = [(refs[n][key], n) for n in names if n in refs and np.isfinite(refs[n][key])]
+    value, name = min(scored)
+    return name, value
