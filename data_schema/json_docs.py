@@ -143,7 +143,8 @@ def validate_metrics(path: str | Path) -> dict[str, Any]:
     for i, row in enumerate(doc.get("scarcity", [])):
         if not isinstance(row, dict):
             raise BadInput(path, f"scarcity[{i}] is not an object")
-        _check_numbers(path, {k: v for k, v in row.items() if k != "transfer"},
+        _check_numbers(path, {k: v for k, v in row.items()   # a reference may have no L_d
+                              if k not in ("transfer", "predictor") and v is not None},
                        f"scarcity[{i}]")
     return doc
 
