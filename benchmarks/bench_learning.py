@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from pipeline.demo_targets import variant_of  # noqa: E402
+from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
 from train.scarcity import curve  # noqa: E402
 
 REFS = ("nothing moves", "nearest press", "force, linear")
@@ -82,8 +82,7 @@ def report(out: Path, seed: int, seconds: float) -> None:
     print(f"\nTL vs scratch: fold means {1 - np.mean(tl) / np.mean(sc):.0%} lower, better in "
           f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; TL gain over "
           f"the best reference per fold: {', '.join(gains)}")
-    rows = [r for p in sorted((out / "scarcity").glob("fold*.json"))
-            for r in json.loads(p.read_text()).get("scarcity", [])]
+    rows = scarcity_rows(out)
     for name in ("TL", "no TL", "nothing moves", "nearest press"):
         groups, ld = curve(rows, name, "ld_mean_mm")
         print(f"scarcity {name:13}: " + ", ".join(f"{g}: {v:.3f}" for g, v in

@@ -118,11 +118,16 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
     return checks
 
 
+def scarcity_rows(out: Path) -> list[dict]:
+    """The data-scarcity rows of every fold the demo studied (``scarcity/fold<K>.json``)."""
+    files = [p for p in sorted((out / "scarcity").glob("fold*.json")) if p.suffixes == [".json"]]
+    return [r for p in files for r in json.loads(p.read_text())["scarcity"]]
+
+
 def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
     from train.scarcity import curve
 
-    rows = [r for p in sorted((out / "scarcity").glob("fold*.json"))
-            for r in json.loads(p.read_text()).get("scarcity", [])]
+    rows = scarcity_rows(out)
     if not rows:
         return []
     groups, tl = curve(rows, "TL", "ld_mean_mm")

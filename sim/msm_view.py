@@ -37,9 +37,11 @@ SEQUENCE_COLORS = [(214, 39, 40), (31, 119, 180), (255, 127, 14), (148, 103, 189
 
 
 def blueprint(sequences: list[int], largest_mm: float, fmax: float, steps: int,
-              size: float) -> rrb.Blueprint:
-    """One 3D view per logged sequence framing the surface; the displacement curves."""
-    centre = np.array([size / 2, size / 2, -size * 0.05])
+              size: float, middle: np.ndarray | None = None) -> rrb.Blueprint:
+    """One 3D view per logged sequence framing the surface (``size`` wide about ``middle``,
+    default the grid's centre); the displacement curves."""
+    xy = np.array([size / 2, size / 2]) if middle is None else middle
+    centre = np.array([xy[0], xy[1], -size * 0.05])
     views = [phantom_view(f"sequence {s}: displacement 0 .. {largest_mm:.1f} mm (sqrt)",
                           [f"+ /msm/seq_{s:04d}/**"], centre, size) for s in sequences]
     return rrb.Blueprint(
@@ -70,8 +72,11 @@ def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray],
     largest = max((_displacement(arrays, r).max() for r in rows.values()), default=0.0)
     force = np.linalg.norm(arrays["states/force_vector"], axis=1)
     steps = int(arrays["states/step"].max()) if len(force) else 1
-    size = float(np.ptp(arrays["states/points"][0, :, 0])) if len(force) else 0.1
-    bp = blueprint(chosen, largest * 1e3, float(force.max(initial=0.0)), max(steps, 1), size)
+    first = arrays["states/points"][0, :, :2] if len(force) else np.array([[0.0, 0.0], [0.1, 0.1]])
+    size = float(np.ptp(first[:, 0]))
+    middle = (first.min(axis=0) + first.max(axis=0)) / 2
+    bp = blueprint(chosen, largest * 1e3, float(force.max(initial=0.0)), max(steps, 1), size,
+                   middle)
     with recording(APP_ID, path, bp) as rec:
         declare_up(rec)
         for i, s in enumerate(chosen):
@@ -103,7 +108,7 @@ def log_sequence(rec: rr.RecordingStream, s: int, arrays: dict[str, np.ndarray],
     colors = colormap(np.sqrt(_displacement(arrays, rows) / max(largest, 1e-12)))
     root, n, t = f"msm/seq_{s:04d}", points.shape[1], len(rows)
     if triangles is None:             # sampled at a lab's markers: points, not a mesh
-        rec.log(f"{root}/surface", rr.Points3D.from_fields(radii=[0.0012]), static=True)
+        rec.log(f"{root}/surface", rr.Points3D.from_fields(radii=[0.002]), static=True)
         rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Points3D.columns(
             positions=points.reshape(-1, 3), colors=colors.reshape(-1, 3))
             .partition(np.full(t, n)))

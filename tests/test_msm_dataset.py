@@ -221,3 +221,59 @@ def test_recording_shows_surface_load_and_force(small):
     assert "ViewCoordinates" in entities["/"]
     assert rrd_timelines(rrd) == {"force_step"}
     assert rrd_has_blueprint(rrd)
+
+
+# -- the MSM at a lab's layout ------------------------------------------------------------------
+
+LAYOUT = np.array([[x, y, 0.0] for y in (0.03, 0.05, 0.07) for x in (0.031, 0.05, 0.069)])
+
+
+def test_layout_states_are_the_full_grid_seen_at_the_markers(tmp_path):
+    """Sampled at a layout, every state is the full-grid equilibrium's bilinear blend at each
+    marker's rest position, the tip (last) the loaded patch's centre; loads fall inside the
+    markers' footprint; the contact patch shares the load."""
+    from sim.msm_dataset import generate
+    from sim.msm_sampling import contact_masses, sample_at
+    from sim.msm_static import simulate_sequence
+
+    protocol = Protocol(locations=2, directions=2, steps=3, fmax=3.0, seed=4,
+                        contact_radius=0.004)
+    path = tmp_path / "layout.h5"
+    _, lay = generate(path, protocol, MSM().params, layout=LAYOUT)
+    model = MSM()
+    assert lay["states/points"].shape == (2 * 2 * 4, len(LAYOUT) + 1, 3)
+    loaded = model.rest[lay["states/mass"], :2]
+    assert ((loaded >= 0.03 - 1e-9) & (loaded <= 0.07 + 1e-9)).all()
+    rows = np.flatnonzero(lay["states/sequence"] == 1)               # location 0, direction 1
+    node, force = int(lay["states/mass"][rows[0]]), lay["states/force_vector"][rows[-1]]
+    contact = contact_masses(model, model.rest[node, :2], 0.004)
+    assert len(contact) == 5                        # the mass and its four row/column neighbours
+    full = simulate_sequence(model, contact, force, steps=3, fmax=3.0)
+    sampling = sample_at(model, LAYOUT[:, :2])
+    for t, row in enumerate(rows):
+        expected = LAYOUT + sampling.displace(full[t] - model.rest)
+        np.testing.assert_allclose(lay["states/points"][row, :-1], expected, atol=2e-8)
+        np.testing.assert_allclose(lay["states/points"][row, -1], full[t][contact].mean(0),
+                                   atol=2e-8)
+    np.testing.assert_array_equal(lay["states/points"][:, -1], lay["states/tip"])
+    with h5py.File(path) as f:
+        np.testing.assert_allclose(json.loads(f.attrs["layout"]), LAYOUT)
+
+
+def test_a_marker_between_masses_follows_the_bilinear_blend():
+    from sim.msm_sampling import contact_masses, sample_at
+
+    model = MSM()
+    h = model.params.spacing
+    point = np.array([[2.25 * h, 5.5 * h]])                 # a quarter and a half between masses
+    s = sample_at(model, point)
+    assert sorted(s.masses[0].tolist()) == sorted([5 * 32 + 2, 5 * 32 + 3, 6 * 32 + 2,
+                                                   6 * 32 + 3])
+    np.testing.assert_allclose(s.weights[0].sum(), 1.0)
+    disp = np.zeros((model.N, 3))
+    disp[:, 2] = model.rest[:, 0] * 2 + model.rest[:, 1] * 3    # a linear field: exact
+    np.testing.assert_allclose(s.displace(disp)[0, 2], 2 * point[0, 0] + 3 * point[0, 1])
+    assert len(contact_masses(model, model.rest[16 * 32 + 16, :2], 0.0)) == 1
+    assert len(contact_masses(model, model.rest[16 * 32 + 16, :2], 1.01 * h)) == 5
+    missing = sample_at(model, np.array([[np.nan, np.nan]]))
+    assert (missing.weights == 0).all()

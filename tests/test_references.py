@@ -53,12 +53,13 @@ def test_nothing_moves_costs_the_true_displacement(dent):
 
 
 def test_nearest_press_repeats_an_identical_press_exactly(dent):
-    """Every place is pressed twice alike; a test press's single steps are its training
-    twin's, so the nearest press predicts them exactly."""
-    states, train, test = _fold(dent)
-    single = test[(test[:, 1] - test[:, 0]) == 1]
-    b = make_batch(states, single)
-    p = References(states, train).predict("nearest press", b)
+    """Every place is pressed twice alike (sequences s and s + 4): trained on the first
+    presses, the nearest press predicts the second presses' single steps exactly."""
+    states = load_states(dent[0])
+    single = states.pairs["single"]
+    first = single[single[:, 0] < 4 * 6]                  # sequences 0..3 (6 states each)
+    b = make_batch(states, single[single[:, 0] >= 4 * 6])
+    p = References(states, first).predict("nearest press", b)
     assert torch.linalg.vector_norm(p.deformed - b.target, dim=-1).max() < 1e-7
     assert (p.dforce - b.dforce).abs().max() < 1e-6
 

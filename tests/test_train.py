@@ -171,3 +171,48 @@ def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp
     assert {r["predictor"] for r in rows} == {"TL", "no TL", "nothing moves", "nearest press",
                                              "force, linear"} and len(rows) == 5 * n_train
     assert out.with_suffix(".scarcity.png").stat().st_size > 0
+
+
+def test_balanced_loss_puts_each_term_in_its_scale() -> None:
+    from train.data import Batch
+    from train.loop import Prediction, learning_rate, loss_sum
+    from train.normalise import Normaliser
+
+    pts = torch.zeros(1, 2, 3)
+    b = Batch(pts, pts + torch.tensor([0.0, 0.0, 0.002]), torch.ones(1, 2, dtype=torch.bool),
+              torch.zeros(1, 6), torch.tensor([1.0]))
+    p = Prediction(pts, torch.tensor([4.0]))                      # 2 mm and 3 N off
+    norm = Normaliser((0.0, 0.0, 0.0), 0.05, disp_scale=0.001, force_scale=2.0, extent=0.1)
+    assert float(loss_sum(p, b, 88.0)) == pytest.approx(88 * 0.002 + 9.0)
+    assert float(loss_sum(p, b, 88.0, norm)) == pytest.approx(2.0 + 2.25)
+    cosine = TrainOptions(epochs=11, lr=1e-3, schedule="cosine")
+    assert learning_rate(cosine, 0) == pytest.approx(1e-3)
+    assert learning_rate(cosine, 10) == pytest.approx(1e-5)
+    assert learning_rate(cosine, 5) == pytest.approx(1e-3 * (0.01 + 0.99 / 2))
+    assert learning_rate(TrainOptions(epochs=11, lr=1e-3), 7) == 1e-3
+
+
+def test_patience_stops_early_and_a_resumed_run_stops_alike(dent, tmp_path) -> None:
+    """A validation loss that cannot improve (lr ~ 0) stops the run after `patience` epochs;
+    started again with more epochs, it does not train on."""
+    opts = {"epochs": 12, "lr": 1e-12, "patience": 2}
+    _train(dent, tmp_path / "run", **opts)
+    with open(tmp_path / "run" / "log.csv") as f:
+        epochs = [int(r["epoch"]) for r in csv.DictReader(f)]
+    assert epochs == [0, 1, 2]
+    assert load_checkpoint(tmp_path / "run" / "last.pt")["best_epoch"] == 0
+    _train(dent, tmp_path / "run", **{**opts, "epochs": 20})
+    assert load_checkpoint(tmp_path / "run" / "last.pt")["epoch"] == 2
+
+
+def test_tip_offsets_feed_the_first_layer_and_need_the_condition(dent, tmp_path) -> None:
+    from train.model import CGNN
+
+    config = CGNNConfig(tip_offsets=True)
+    assert CGNNConfig.from_dict(config.to_dict()) == config
+    assert CGNN(config).convs[0].mlp[0].in_features == 2 * 9
+    with pytest.raises(ValueError, match="noCond"):
+        CGNNConfig(tip_offsets=True, use_condition=False)
+    res = CliRunner().invoke(cli, ["train", "--data", str(dent[0]), "--splits", str(dent[1]),
+                                   "--out", str(tmp_path / "r"), "--tip-offsets", "--no-cond"])
+    assert res.exit_code == 2 and "not with --no-cond" in res.output

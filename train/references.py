@@ -47,9 +47,12 @@ class References:
         self.cond = train.cond.double()                                      # (T, 6)
         self.disp = torch.where(train.mask[..., None], train.target - train.points, 0.0)
         self.dforce = train.dforce
-        lhs = torch.cat([self.cond[:, 3:] - self.cond[:, :3],
-                         torch.ones(len(self.cond), 1, dtype=torch.float64)], dim=1)
-        self.coef = torch.linalg.lstsq(lhs, train.dforce.double()[:, None]).solution[:, 0]
+        cond = self.cond.cpu().numpy()
+        lhs = np.c_[cond[:, 3:] - cond[:, :3], np.ones(len(cond))]
+        # SVD least squares: the minimum-norm answer where the motions span less than 3-D
+        # (presses straight down), whatever LAPACK driver torch would pick
+        coef = np.linalg.lstsq(lhs, train.dforce.double().cpu().numpy(), rcond=None)[0]
+        self.coef = torch.from_numpy(coef).to(self.cond.device)
 
     def predict(self, name: str, b: Batch) -> Prediction:
         """One reference's prediction for a batch (points NaN for 'force, linear')."""

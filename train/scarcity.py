@@ -81,13 +81,15 @@ def write_csv(path: Path, rows: list[dict]) -> None:
 
 
 def plot(path: Path, rows: list[dict]) -> None:
-    """Three panels like the paper's figure: mean L_d, max L_d, force error over groups."""
+    """Three panels like the paper's figure: mean L_d, max L_d, force error over groups (log
+    scale: a linear fit to one press can be off by newtons), one legend for all."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.0))
     panels = (("ld_mean_mm", "mean $L_d$ [mm]"), ("ld_max_mm", "max $L_d$ [mm]"),
               ("force_abs_n", "force absolute error [N]"))
     for ax, (key, label) in zip(axes, panels, strict=True):
@@ -95,11 +97,14 @@ def plot(path: Path, rows: list[dict]) -> None:
             groups, mean = curve(rows, name, key)
             if groups:
                 ax.plot(groups, mean, style, color=color, label=name)
-        ax.set_xlabel("training groups")
+        ax.set_xlabel("training groups (presses)")
         ax.set_ylabel(label)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.tight_layout()
+    axes[2].set_yscale("log")
+    handles, labels = axes[2].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=len(labels), fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
