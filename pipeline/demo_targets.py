@@ -21,6 +21,8 @@ from pathlib import Path
 
 import click
 
+from data_schema.json_docs import validate_metrics
+
 FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
 TL_CUT = 0.20           # pooled: TL this far below scratch
 SCARCITY_CUT = 0.30     # scarcity study: TL this far below scratch at each size
@@ -35,7 +37,7 @@ def summary(out: Path, seconds: float, quick: bool) -> list[str]:
     checks += _sync(out)
     checks += _fit(out)
     click.echo("\n" + (out / "metrics.md").read_text())
-    doc = json.loads((out / "metrics.json").read_text())
+    doc = validate_metrics(out / "metrics.json")
     checks += _msm_model(doc)
     checks += _fine_tuned(doc)
     checks += _scarcity(out)

@@ -23,6 +23,7 @@ import torch
 from core.atomic import atomic_output
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
+from data_schema.json_docs import validate_metrics
 from train.checkpoint import load_checkpoint, model_from
 from train.data import (
     SETS,
@@ -59,11 +60,18 @@ def run_label(meta: dict, source: str) -> str:
     if meta["init"]:
         init = load_checkpoint(meta["init"])["meta"]
         aug = "aug " if init["options"]["point_fraction"] else ""
-        with h5py.File(init["data"]["file"], "r") as f:
-            first = SOURCE_NAMES.get(attr_text(f.attrs["source"]), "?")
-        return f"{model}/{aug}{first} (TL)"
+        return f"{model}/{aug}{_source_name(Path(init['data']['file']))} (TL)"
     rot = "rot " if opts.get("rotate") else ""
     return f"{model}/{rot}{'aug ' if opts['point_fraction'] else ''}{data}"
+
+
+def _source_name(data: Path) -> str:
+    """'MSM' or 'Exp' for a states file; '?' where it has moved (only the label needs it)."""
+    try:
+        with h5py.File(data, "r") as f:
+            return SOURCE_NAMES.get(attr_text(f.attrs["source"]), "?")
+    except OSError:
+        return "?"
 
 
 @dataclass
@@ -286,6 +294,7 @@ def _fold_table(result: dict) -> str:
 
 
 def write_json(path: Path, doc: dict) -> None:
-    """Write a JSON document atomically."""
+    """Write a metrics document atomically, checked before it takes its name."""
     with atomic_output(path) as tmp:
-        Path(tmp).write_text(json.dumps(doc, indent=1))
+        Path(tmp).write_text(json.dumps(doc, indent=1, allow_nan=False))
+        validate_metrics(tmp)
