@@ -177,7 +177,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         norm = Normaliser.from_dict(state["norm"])   # one phantom frame: keep its statistics
     model.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=opts.lr)
-    start, best = 0, math.inf
+    start, best, best_epoch = 0, math.inf, -1
     last = out / "last.pt"
     if last.is_file():
         state = load_checkpoint(last, device)
@@ -190,7 +190,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         start, best = state["epoch"] + 1, state["best_val"]
         best_epoch = int(state.get("best_epoch", state["epoch"]))
     return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
-               start, best, meta, best_epoch if start else -1)
+               start, best, meta, best_epoch)
 
 
 def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
