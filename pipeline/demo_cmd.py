@@ -58,7 +58,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     from pipeline.demo_targets import summary
 
     settings = SMOKE if smoke else QUICK if quick else PAPER
-    jobs = jobs or (1 if device == "cuda" else _cores())
+    jobs = jobs or (1 if _on_gpu(device) else _cores())
     started = time.perf_counter()
     steps = demo_steps(out, seed, settings, device)
     for batch in _batches(steps):
@@ -66,6 +66,15 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     missed = summary(out, time.perf_counter() - started, quick=quick)
     if missed and strict:
         ctx.exit(1)
+
+
+def _on_gpu(device: str) -> bool:
+    """Whether the runs train on a GPU (``auto`` picks one when torch has it)."""
+    if device == "auto":
+        import torch
+
+        return torch.cuda.is_available()
+    return device == "cuda"
 
 
 def _cores() -> int:

@@ -127,7 +127,8 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto") -> list[
         run = out / "runs" / f"exp_tl_fold{fold}"
         result = out / "scarcity" / f"fold{fold}.json"
         steps.append(Step(("eval", str(run), "--out", str(result), "--scarcity",
-                           "--scarcity-groups", str(s.scarcity_groups), "--no-rrd"),
+                           "--scarcity-groups", str(s.scarcity_groups), "--no-rrd",
+                           "--device", "cuda" if device == "cuda" else "cpu"),
                           (run / "best.pt",), (result,), (result.parent / f"fold{fold}"
                                                           ".scarcity_runs",), parallel=True))
     return steps

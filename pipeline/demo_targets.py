@@ -83,9 +83,9 @@ def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
         return []
     m, refs = runs[0]["metrics"]["all"], runs[0]["references"]
     still, linear = refs["nothing moves"]["ld_mean_mm"], refs["force, linear"]["force_abs_n"]
-    return [("MSM model, mean L_d on its test set",
-             m["ld_mean_mm"] <= MSM_VS_STILL * still,
-             f"{m['ld_mean_mm']:.3f} mm, nothing moves {still:.3f} mm"),
+    ld = m["ld_mean_mm"] if m["ld_mean_mm"] is not None else float("inf")    # not finite
+    return [("MSM model, mean L_d on its test set", ld <= MSM_VS_STILL * still,
+             f"{ld:.3f} mm, nothing moves {still:.3f} mm"),
             ("MSM model, force error", m["force_abs_n"] < linear,
              f"{m['force_abs_n']:.3f} N, linear {linear:.3f} N")]
 
@@ -95,7 +95,8 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
     by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
           for v in ("tl", "notl")}
     for variant, name in (("tl", "TL"), ("notl", "scratch")):
-        gains = [r["gain"]["ld_gain"] for r in by[variant]]
+        gains = [r["gain"]["ld_gain"] if r["gain"]["ld_gain"] is not None else -1.0
+                 for r in by[variant]]                      # -100 %: predictions not finite
         force = [r["metrics"]["all"]["force_abs_n"]
                  / r["references"]["force, linear"]["force_abs_n"] for r in by[variant]]
         checks.append((f"{name}: mean L_d below the best reference in every fold",
@@ -136,6 +137,8 @@ def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
     _, scratch = curve(rows, "no TL", "ld_mean_mm")
     _, near = curve(rows, "nearest press", "ld_mean_mm")
     cuts = [1 - a / b for a, b in zip(tl, scratch, strict=True)]
+    if not cuts:                                  # runs without --init: no TL to compare
+        return []
     text = "; ".join(f"{g} press{'es' if g > 1 else ''}: TL {a:.3f}, scratch {b:.3f}, "
                      f"nearest press {c:.3f} mm ({d:+.0%})"
                      for g, a, b, c, d in zip(groups, tl, scratch, near, cuts, strict=True))

@@ -178,13 +178,16 @@ def pool(errors: list[ExampleErrors]) -> ExampleErrors:
 def gains(model: dict, refs: dict[str, dict]) -> dict:
     """A model's mean L_d and force error against the best reference of each (on the "all"
     metrics): the reference's name and value, and the model's relative gain (positive: the
-    model is better; 0.3 = 30 % lower error)."""
-    ld_name, ld_ref = best_reference(refs, "ld_mean_mm", DISPLACEMENT)
-    f_name, f_ref = best_reference(refs, "force_abs_n", FORCE)
-    return {"ld_reference": ld_name, "ld_reference_mm": ld_ref,
-            "ld_gain": 1 - model["ld_mean_mm"] / ld_ref if ld_ref > 0 else 0.0,
-            "force_reference": f_name, "force_reference_n": f_ref,
-            "force_gain": 1 - model["force_abs_n"] / f_ref if f_ref > 0 else 0.0}
+    model is better; 0.3 = 30 % lower error; None where either value is missing, as for a
+    model whose predictions are not finite)."""
+    out = {}
+    for what, key, names in (("ld", "ld_mean_mm", DISPLACEMENT), ("force", "force_abs_n", FORCE)):
+        name, ref = best_reference(refs, key, names)
+        value = model.get(key)
+        out[f"{what}_reference"], out[f"{what}_reference_{key.rsplit('_', 1)[1]}"] = name, ref
+        out[f"{what}_gain"] = (1 - value / ref if ref else 0.0) \
+            if value is not None and ref is not None else None
+    return out
 
 
 def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
@@ -211,13 +214,18 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
         pooled = metrics(pool([e for e, _, _ in items]))
         ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
         fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
+        fold_ld = [v for v in fold_ld if v is not None] or [0.0]
         overall.append({"label": label, "test_set": test_set, "folds": len(items),
                         "fold_ids": [r["fold"] for _, _, r in items],
                         "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
                         "references": ref_m, "gain": gains(pooled["all"], ref_m),
                         "folds_not_beating_references": [
-                            r["fold"] for _, _, r in items if r["gain"]["ld_gain"] <= 0]})
+                            r["fold"] for _, _, r in items if not _beats(r["gain"]["ld_gain"])]})
     return {"runs": runs, "overall": overall}
+
+
+def _beats(gain: float | None) -> bool:
+    return gain is not None and gain > 0
 
 
 def not_beating(result: dict) -> list[str]:
@@ -228,15 +236,24 @@ def not_beating(result: dict) -> list[str]:
         g = row["gain"]
         for what, gain, ref in (("mean L_d", g["ld_gain"], g["ld_reference"]),
                                 ("force error", g["force_gain"], g["force_reference"])):
-            if gain <= 0:
+            if not _beats(gain):
+                worse = "not finite" if gain is None else f"{-gain:.0%} worse"
                 lines.append(f"{row['label']} on {row['test_set']}: {what} does not beat "
-                             f"'{ref}' ({-gain:.0%} worse)")
+                             f"'{ref}' ({worse})")
     return lines
+
+
+def _pct(gain: float | None) -> str:
+    return "–" if gain is None else f"{gain:+.0%}"
+
+
+def _num(value: float | None) -> str:
+    return "–" if value is None else f"{value:.3f}"
 
 
 def _cell(m: dict, key: str, sd: str) -> str:
     """'mean ± sd' to 2 decimals, or '–' where the predictor has no such value."""
-    return "–" if m[key] is None else f"{m[key]:.2f} ± {m[sd]:.2f}"
+    return "–" if m.get(key) is None else f"{m[key]:.2f} ± {m[sd]:.2f}"
 
 
 def _row(name: str, test_set: str, m: dict, gain: str, folds: str) -> str:
@@ -257,7 +274,7 @@ def table2(result: dict) -> str:
     for row in result["overall"]:
         g = row["gain"]
         lines.append(_row(row["label"], row["test_set"], row["metrics"]["all"],
-                          f"{g['ld_gain']:+.0%} / {g['force_gain']:+.0%}", str(row["folds"])))
+                          f"{_pct(g['ld_gain'])} / {_pct(g['force_gain'])}", str(row["folds"])))
         key = (row["test_set"], tuple(row["fold_ids"]))
         if key in shown:
             continue
@@ -285,8 +302,8 @@ def _fold_table(result: dict) -> str:
         cells = [str(fold)]
         for label in labels:
             run = by_fold[fold].get(label)
-            cells.append("–" if run is None else f"{run['metrics']['all']['ld_mean_mm']:.3f} "
-                                                 f"({run['gain']['ld_gain']:+.0%})")
+            cells.append("–" if run is None else f"{_num(run['metrics']['all']['ld_mean_mm'])} "
+                                                 f"({_pct(run['gain']['ld_gain'])})")
         refs = by_fold[fold]["refs"]
         cells += [f"{refs[n]['ld_mean_mm']:.3f}" for n in DISPLACEMENT]
         lines.append("| " + " | ".join(cells) + " |")

@@ -280,7 +280,7 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
         out.mkdir(parents=True, exist_ok=True)
     first = None
     for epoch in range(run.start_epoch, opts.epochs):
-        if stopped_early(run, opts, epoch):
+        if _agreed(ctx, stopped_early(run, opts, epoch), run.train.device):
             say(f"stopped after epoch {epoch}: no better validation in {opts.patience} epochs "
                 f"(best: epoch {run.best_epoch + 1})")
             break
@@ -301,6 +301,12 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
                 f"{metrics['val_loss']:.5f} (L_d {metrics['val_ld_mm']:.3f} mm, |dF| "
                 f"{metrics['val_force_abs_n']:.3f} N), {row['samples_per_s']:.0f} samples/s")
     return out / "best.pt"
+
+
+def _agreed(ctx: DistContext, stop: bool, device: torch.device) -> bool:
+    """Stop when any process would: every rank takes the same decision, so none waits for
+    another that has left (validation losses may differ in the last bits on a GPU)."""
+    return bool(ctx.total(torch.tensor([float(stop)], device=device)) > 0)
 
 
 def _track_best(run: Run, epoch: int, val_loss: float) -> None:

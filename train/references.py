@@ -68,8 +68,13 @@ class References:
         raise KeyError(name)
 
 
-def best_reference(refs: dict[str, dict], key: str, names: tuple[str, ...]) -> tuple[str, float]:
-    """The name and value of the lowest ``key`` among ``names`` (metrics per reference)."""
-    scored = [(refs[n][key], n) for n in names if n in refs and np.isfinite(refs[n][key])]
+def best_reference(refs: dict[str, dict], key: str, names: tuple[str, ...]
+                   ) -> tuple[str | None, float | None]:
+    """The name and value of the lowest ``key`` among ``names`` (metrics per reference);
+    (None, None) where none has a value."""
+    scored = [(refs[n][key], n) for n in names
+              if n in refs and refs[n].get(key) is not None and np.isfinite(refs[n][key])]
+    if not scored:
+        return None, None
     value, name = min(scored)
     return name, value
