@@ -8,9 +8,9 @@ when a marker sits half-way. Everything is in the phantom frame, which is the gr
 (``[0, size]^2`` at z = 0, +z out of the surface).
 
 An indenter is not a point: its tip touches the surface over a patch. ``contact_masses``
-gives the masses within ``radius`` of the tip (at least the nearest one: the paper's n_n = 1),
-and the load is shared equally among them (paper: F_t / n_n per mass); the tip point follows
-their mean displacement.
+gives the masses within ``radius`` of the tip (at least the nearest one: the paper's n_n = 1);
+``MSM.load`` shares the load equally among them (paper: F_t / n_n per mass), and the tip point
+follows their mean displacement.
 """
 
 from __future__ import annotations
@@ -59,10 +59,3 @@ def contact_masses(model: MSM, tip_xy: np.ndarray, radius: float = 0.0) -> np.nd
     gap = np.linalg.norm(model.rest[:, :2] - tip_xy, axis=1)
     inside = np.flatnonzero(gap <= radius)
     return inside if len(inside) else np.array([int(gap.argmin())])
-
-
-def contact_load(model: MSM, masses: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """External force array (N, 3): ``force`` shared equally among ``masses``."""
-    f_ext = np.zeros((model.N, 3))
-    f_ext[masses] = np.asarray(force, dtype=float) / len(masses)
-    return f_ext
