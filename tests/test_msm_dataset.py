@@ -277,3 +277,11 @@ def test_a_marker_between_masses_follows_the_bilinear_blend():
     assert len(contact_masses(model, model.rest[16 * 32 + 16, :2], 1.01 * h)) == 5
     missing = sample_at(model, np.array([[np.nan, np.nan]]))
     assert (missing.weights == 0).all()
+
+
+def test_a_layout_that_is_not_lab_states_is_one_line_and_no_file(small, tmp_path):
+    out = tmp_path / "layout.h5"
+    res = CliRunner().invoke(cli, ["simulate", "--out", str(out), "--layout", str(small),
+                                   "--locations", "1", "--directions", "1", "--no-rrd"])
+    assert res.exit_code == 2 and len(res.output.splitlines()) == 1, res.output
+    assert "--layout needs extracted lab states" in res.output and not out.exists()

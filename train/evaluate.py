@@ -181,12 +181,13 @@ def gains(model: dict, refs: dict[str, dict]) -> dict:
     model is better; 0.3 = 30 % lower error; None where either value is missing, as for a
     model whose predictions are not finite)."""
     out = {}
-    for what, key, names in (("ld", "ld_mean_mm", DISPLACEMENT), ("force", "force_abs_n", FORCE)):
+    for what, key, unit, names in (("ld", "ld_mean_mm", "mm", DISPLACEMENT),
+                                   ("force", "force_abs_n", "n", FORCE)):
         name, ref = best_reference(refs, key, names)
         value = model.get(key)
-        out[f"{what}_reference"], out[f"{what}_reference_{key.rsplit('_', 1)[1]}"] = name, ref
-        out[f"{what}_gain"] = (1 - value / ref if ref else 0.0) \
-            if value is not None and ref is not None else None
+        gain = None if value is None or ref is None else (1 - value / ref if ref else 0.0)
+        out.update({f"{what}_reference": name, f"{what}_reference_{unit}": ref,
+                    f"{what}_gain": gain})
     return out
 
 
