@@ -7,10 +7,14 @@ applies the first linear per point before gathering and the second after the mea
 function: tests/test_cgnn_model.py checks it against PyG within 1e-5).
 
 Measured in one run, medians over repeats:
-- batch-1 latency at 26 and 1024 points (ours, peer, ratio), and ``forward_force`` alone;
+- batch-1 latency through :class:`train.Predictor` (ONNX Runtime and torch backends) at 26,
+  1024 and 4096 points: ``predict``, ``predict_force``, ``predict`` in region mode (the default
+  radius), and the peer behind the same SI numpy interface; the ratio is peer / ours. The scene
+  is a mesh pressed again (same points, new press), so the predictor's scene cache is warm;
+- where a warm ``predict`` spends its time: the predictor's checks against the network, and
+  the network's heaviest operators;
 - training samples/s at batch 32 x 1024 points (forward, backward, Adam step), and where the
   time of one of our steps goes (torch.profiler, top operators);
-- the ONNX export's latency in onnxruntime beside torch's;
 - with ``--device cuda``: the same on the GPU, plus batch-1 latency replayed as a CUDA graph.
 
     python benchmarks/bench_cgnn.py [--threads 2] [--device cpu|cuda] [--repeats 200]
@@ -20,15 +24,18 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import tempfile
 import time
 from collections.abc import Callable
-from pathlib import Path
+from functools import partial
 
+import numpy as np
 import torch
 from torch import nn
 
 from train.model import CGNN, CGNNConfig, Features
+from train.normalise import Normaliser
+from train.predictor import DEFAULT_REGION, Predictor
+from train.si_model import SIModel
 
 
 def pyg_knn_edges(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -77,17 +84,95 @@ def median_ms(fn: Callable[[], object], repeats: int, sync: Callable[[], None]) 
     return statistics.median(times) * 1e3
 
 
+NORM = Normaliser((0.05, 0.05, 0.0), 0.04, 0.002, 0.5, 0.07)   # a 100 mm surface's statistics
+PRESS = np.array([0.05, 0.05, 0.002, 0.05, 0.05, -0.01], np.float32)  # 12 mm at the centre
+
+
+def surface(n: int, grid: bool) -> np.ndarray:
+    """``n`` points on the 100 mm surface: a regular grid, or random (seeded)."""
+    if grid:
+        side = np.linspace(0.0, 0.1, round(n ** 0.5), dtype=np.float32)
+        x, y = np.meshgrid(side, side)
+        return np.stack([x.ravel(), y.ravel(), np.zeros(x.size, np.float32)], 1)
+    pts = np.random.default_rng(n).uniform(0.0, 0.1, (n, 3)).astype(np.float32)
+    pts[:, 2] = 0.0
+    return pts
+
+
+class PeerPredictor:
+    """The PyG peer behind the same SI interface as ours: numpy in, normalise, run, numpy out."""
+
+    def __init__(self, peer: PygPeer, device: torch.device) -> None:
+        self.peer, self.device = peer, device
+
+    @torch.inference_mode()
+    def predict(self, points: np.ndarray, condition: np.ndarray) -> tuple[np.ndarray, float]:
+        p = torch.from_numpy(points).to(self.device)
+        c = torch.from_numpy(condition).to(self.device)
+        disp, df = self.peer(NORM.points(p)[None], NORM.condition(c)[None])
+        return (p + disp[0] * NORM.disp_scale).cpu().numpy(), float(df[0]) * NORM.force_scale
+
+
 def latency(model: CGNN, peer: PygPeer, device: torch.device, repeats: int,
             sync: Callable[[], None]) -> None:
-    print("batch-1 latency [ms] (median):")
+    """Batch-1 latency through the predictor (a mesh pressed again: the scene is reused)."""
+    si = SIModel(model, NORM)
+    ours = {b: Predictor(si, device, b) for b in (("onnx", "torch") if device.type == "cpu"
+                                                   else ("torch",))}
+    them = PeerPredictor(peer, device)
+    print(f"batch-1 latency through Predictor [ms] (median of {repeats}); ratio = PyG peer / "
+          f"ours ({next(iter(ours))}); region = {DEFAULT_REGION * 1e3:.0f} mm:")
+    for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
+        row = scene_row(ours, them, surface(n, grid), max(5, repeats * 26 // n), sync)
+        first, region = next(iter(row.values())), row[f"{next(iter(ours))} region"]
+        print(f"  N={n:5d} {'grid' if grid else 'random':6s} " + "  ".join(
+            f"{k} {v:7.3f}" for k, v in row.items()) + f"  ratio {row['PyG peer'] / first:5.2f}x"
+            f" (region {row['PyG peer'] / region:5.1f}x)")
+    if device.type == "cpu":
+        where_the_time_goes(ours["onnx"], si, repeats)
+
+
+def scene_row(ours: dict[str, Predictor], them: PeerPredictor, pts: np.ndarray, reps: int,
+              sync: Callable[[], None]) -> dict[str, float]:
+    """Median ms of each backend's predict, predict_force and region predict, and the peer's."""
+    calls = {"predict": lambda p: p.predict(pts, PRESS),
+             "force": lambda p: p.predict_force(pts, PRESS),
+             "region": lambda p: p.predict(pts, PRESS, region=DEFAULT_REGION)}
+    row = {f"{b} {what}": median_ms(lambda p=p, fn=fn: fn(p), reps, sync)
+           for b, p in ours.items() for what, fn in calls.items()}
+    row["PyG peer"] = median_ms(lambda: them.predict(pts, PRESS), reps, sync)
+    return row
+
+
+def checked(pred: Predictor, pts: np.ndarray) -> None:
+    """The predictor's per-call work before the network: the scene lookup, the condition."""
+    pred._scene_of(pts)
+    pred._condition(PRESS)
+
+
+def where_the_time_goes(pred: Predictor, si: SIModel, repeats: int) -> None:
+    """Split one warm ``predict`` into the predictor's checks and the network, and name the
+    network's heaviest operators (torch's profiler on the same graph)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    print("where the time goes (onnx predictor, warm scene) [ms]:")
     for n in (26, 1024):
-        p, c = torch.rand(1, n, 3, device=device), torch.rand(1, 6, device=device)
-        with torch.inference_mode():
-            ours = median_ms(lambda p=p, c=c: model(p, c), repeats, sync)
-            force = median_ms(lambda p=p, c=c: model.forward_force(p, c), repeats, sync)
-            theirs = median_ms(lambda p=p, c=c: peer(p, c), repeats, sync)
-        print(f"  N={n:5d}: ours {ours:7.3f}  force only {force:7.3f}  PyG peer {theirs:7.3f}"
-              f"  ratio {theirs / ours:5.2f}x")
+        pts = surface(n, False)
+        scene = pred._scene_of(pts)
+        checks = median_ms(partial(checked, pred, pts), repeats, lambda: None)
+        net = median_ms(partial(pred.backend.full, scene.points[None], PRESS[None],
+                                scene.neighbours[None]), repeats, lambda: None)
+        args = (torch.from_numpy(pts)[None], torch.from_numpy(PRESS)[None],
+                torch.from_numpy(scene.neighbours)[None])
+        with torch.inference_mode(), profile(activities=[ProfilerActivity.CPU]) as prof:
+            for _ in range(5):
+                si(*args)
+        ops = sorted(prof.key_averages(), key=lambda e: -e.self_cpu_time_total)
+        total = sum(e.self_cpu_time_total for e in ops)
+        top = ", ".join(f"{e.key.removeprefix('aten::')} {100 * e.self_cpu_time_total / total:.0f}%"
+                        for e in ops[:5])
+        print(f"  N={n:5d}: checks and scene {checks:6.3f}  network {net:6.3f}  (torch's "
+              f"operators on the same graph: {top})")
 
 
 def cuda_graph_latency(model: CGNN, repeats: int) -> None:
@@ -148,33 +233,6 @@ def profile_step(model: CGNN, x, c, y, f) -> None:
               f"{100 * e.self_cpu_time_total / total:5.1f}%")
 
 
-def onnx_latency(model: CGNN, repeats: int) -> None:
-    import onnxruntime as ort
-
-    from train.export import SIModel
-    from train.normalise import Normaliser
-
-    norm = Normaliser((0.05, 0.05, 0.0), 0.04, 0.002, 0.5, 0.07)
-    si = SIModel(model, norm).eval()
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "m.onnx"
-        torch.onnx.export(si, (torch.rand(1, 26, 3), torch.rand(1, 6)), str(path),
-                          input_names=["points", "condition"], output_names=["deformed", "dforce"],
-                          opset_version=17, dynamic_axes={"points": {1: "N"}, "deformed": {1: "N"}},
-                          dynamo=False)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = torch.get_num_threads()
-        sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
-        print("ONNX (onnxruntime, CPU) against torch, batch 1 [ms] (median):")
-        for n in (26, 1024):
-            p, c = torch.rand(1, n, 3), torch.rand(1, 6)
-            feed = {"points": p.numpy(), "condition": c.numpy()}
-            t_onnx = median_ms(lambda feed=feed: sess.run(None, feed), repeats, lambda: None)
-            with torch.inference_mode():
-                t_torch = median_ms(lambda p=p, c=c: si(p, c), repeats, lambda: None)
-            print(f"  N={n:5d}: onnxruntime {t_onnx:7.3f}  torch {t_torch:7.3f}")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=2)
@@ -195,8 +253,6 @@ def main() -> None:
     if device.type == "cuda":
         cuda_graph_latency(model, a.repeats)
     training(model.train(), peer.train(), device, a.train_steps, sync)
-    if device.type == "cpu":
-        onnx_latency(model.eval(), a.repeats)
 
 
 if __name__ == "__main__":

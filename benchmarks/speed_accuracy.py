@@ -9,6 +9,9 @@ Every row is measured in one run on one machine, on the same test examples:
 - robustness: the twin test set turned 90 degrees about the surface normal, tilted 10 and 30
   degrees, and with a quarter or half of its markers left out, for the plain model and the one
   trained with rotation augmentation (errors and their ratio to the unmoved test set);
+- region of interest: ``Predictor.predict(..., region=R)`` for R from 5 mm to the whole surface
+  at 1024 and 4096 points, errors against truth and the whole model, latency
+  (``region_study.py``), with each size's Pareto front and the default radius;
 - the MSM fast path's solver tolerance against accuracy and time (``bench_msm.trade_rows``);
 - a Pareto table (latency against error) and the setting to pick for a 1 kHz haptic loop
   (force only, one press at 26 points) and for 60 Hz visuals (displacements of 1024 points).
@@ -16,7 +19,7 @@ Every row is measured in one run on one machine, on the same test examples:
 Writes ``OUT/report.md``, ``OUT/results.json`` and PNG plots; runs and data are kept under OUT
 so a second call only re-measures (delete OUT/runs to retrain).
 
-    python benchmarks/speed_accuracy.py --out out/speed_accuracy --quick   (~4 min, 2 cores)
+    python benchmarks/speed_accuracy.py --out out/speed_accuracy --quick   (~12 min, 2 cores)
     python benchmarks/speed_accuracy.py --out out/speed_accuracy           (paper epochs, GPU)
 """
 
@@ -37,6 +40,7 @@ import numpy as np
 import torch
 from bench_cgnn import median_ms
 from bench_msm import trade_rows
+from region_study import region_rows
 from speed_accuracy_report import write_report
 
 from core.progress import set_quiet
@@ -64,12 +68,13 @@ class Budget:
     msm_directions: int
     lr: float
     repeats: int
+    region_epochs: int
 
 
 QUICK = Budget(twin_epochs=80, msm_epochs=15, msm_grid=16, msm_locations=12,
-               msm_directions=3, lr=1e-3, repeats=50)
+               msm_directions=3, lr=1e-3, repeats=50, region_epochs=15)
 PAPER = Budget(twin_epochs=250, msm_epochs=100, msm_grid=32, msm_locations=100,
-               msm_directions=11, lr=1e-4, repeats=200)
+               msm_directions=11, lr=1e-4, repeats=200, region_epochs=100)
 
 
 def pipeline(*args: str) -> None:
@@ -305,7 +310,7 @@ def main() -> None:
     set_quiet(True)
     b = QUICK if a.quick else PAPER
     if a.epochs:
-        b = replace(b, twin_epochs=a.epochs, msm_epochs=a.epochs)
+        b = replace(b, twin_epochs=a.epochs, msm_epochs=a.epochs, region_epochs=a.epochs)
     a.out.mkdir(parents=True, exist_ok=True)
     twin = twin_data(a.out, a.twin, a.seed)
     msm = msm_data(a.out, b, a.seed)
@@ -325,6 +330,9 @@ def main() -> None:
     msm_run = trained(a.out, f"msm{b.msm_grid}_k5", msm, b.msm_epochs, b, a.device, a.seed)
     print("points, MSM tolerance ...", flush=True)
     res["points"] = point_rows(msm_run, a.device, b.repeats, a.seed)
+    print("region of interest ...", flush=True)
+    res["region"] = region_rows(a.out / "region", b.region_epochs, device=a.device,
+                                seed=a.seed, repeats=b.repeats)
     res["msm_tolerance"] = trade_rows(count=3, reference=not a.quick)
     (a.out / "results.json").write_text(json.dumps(res, indent=1))
     write_report(a.out, res, HAPTIC_MS, VISUAL_MS)

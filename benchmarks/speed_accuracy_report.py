@@ -36,6 +36,27 @@ def pareto(rows: list[dict], cost: str, error: str) -> list[dict]:
     return sorted(front, key=lambda r: r[cost])
 
 
+REGION = [("points", "points", "d"), ("setting", "region", "s"),
+          ("ld_mm", "L_d vs truth [mm]", ".3f"), ("force_n", "force error [N]", ".3f"),
+          ("ld_vs_whole_mm", "L_d vs whole model [mm]", ".3f"),
+          ("force_vs_whole_n", "force vs whole [N]", ".3f"), ("ms", "latency [ms]", ".2f")]
+
+
+def region_text(region: dict) -> str:
+    """The region-of-interest rows, each size's Pareto front (latency against L_d), and the
+    default radius they support."""
+    pick_mm, tol = region["default_mm"], region["tolerance"]
+    parts = [table(region["rows"], REGION)]
+    for n in sorted({r["points"] for r in region["rows"]}):
+        front = pareto([r for r in region["rows"] if r["points"] == n], "ms", "ld_mm")
+        parts.append(f"Pareto front at {n} points (latency against L_d): "
+                     + ", ".join(f"{r['setting']} ({r['ms']:.2f} ms, {r['ld_mm']:.3f} mm)"
+                                 for r in front) + ".\n")
+    parts.append(f"Default radius (mean L_d within {tol:.0%} of the whole model's at every "
+                 f"size): {'none of these' if pick_mm is None else f'{pick_mm:g} mm'}.\n")
+    return "\n".join(parts)
+
+
 def pick(rows: list[dict], cost: str, budget: float, error: str, tie: float = 0.02
          ) -> dict | None:
     """The most accurate row whose ``cost`` fits ``budget``; among rows within ``tie``
@@ -80,6 +101,8 @@ def write_report(out: Path, res: dict, haptic_ms: float, visual_ms: float) -> No
           "\n## Number of points (MSM model)\n",
           table(res["points"], [("points", "points", "d"), ("full_ms", "full [ms]", ".3f"),
                                 ("force_ms", "force only [ms]", ".3f"), *ACC]),
+          "\n## Region of interest (MSM model, `Predictor.predict(..., region=R)`)\n",
+          region_text(res["region"]) if "region" in res else "not measured\n",
           "\n## Rotation augmentation (k = 5, `pipeline train --rotate`)\n",
           table(res.get("augmented", []), [("setting", "setting", "s"), *ACC, *SPEED]),
           "\n## Robustness (twin test set moved or resampled)\n",

@@ -92,3 +92,93 @@ def test_onnx_export_matches_torch(run, tmp_path, n: int) -> None:
                                                       "condition": cond[None]})
     np.testing.assert_allclose(out[0][0], deformed, atol=1e-5)
     assert float(out[1][0]) == pytest.approx(df, abs=1e-4)
+
+
+def _bare(path: Path, points: np.ndarray, cond: np.ndarray) -> tuple[np.ndarray, float]:
+    """The network as training runs it (its own kNN), in SI units: the reference."""
+    model, norm = model_from(load_checkpoint(path / "best.pt"))
+    with torch.no_grad():
+        disp, f = model(norm.points(torch.from_numpy(points))[None],
+                        norm.condition(torch.from_numpy(cond))[None])
+    return points + disp[0].numpy() * norm.disp_scale, float(f[0]) * norm.force_scale
+
+
+def _surface(points: np.ndarray, n: int, seed: int) -> np.ndarray:
+    """``points`` padded with random points on their plane to ``n`` (a denser scene)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = points.min(0), points.max(0)
+    extra = rng.uniform(lo, hi, (max(0, n - len(points)), 3))
+    extra[:, 2] = np.median(points[:, 2])
+    return np.concatenate([points, extra])[:n].astype(np.float32)
+
+
+@pytest.mark.parametrize("backend", ["torch", "onnx"])
+@pytest.mark.parametrize("n", [26, 1024])
+def test_every_backend_gives_the_networks_answer(run, backend: str, n: int) -> None:
+    if backend == "onnx":
+        pytest.importorskip("onnxruntime")
+    path, points, cond = run
+    pts = _surface(points, n, n)
+    p = Predictor.load(path, backend=backend)
+    deformed, df = p.predict(pts, cond)
+    ref, ref_df = _bare(path, pts, cond)
+    np.testing.assert_allclose(deformed, ref, atol=1e-5)
+    assert df == pytest.approx(ref_df, abs=1e-5)
+    assert p.predict_force(pts, cond) == pytest.approx(ref_df, abs=1e-5)
+    cond2 = cond + np.array([0, 0, 0, 1e-3, 0, -1e-3], np.float32)   # same scene, new press
+    np.testing.assert_allclose(p.predict(pts, cond2)[0], _bare(path, pts, cond2)[0], atol=1e-5)
+
+
+def test_points_changed_in_place_are_seen(run) -> None:
+    path, points, cond = run
+    p = Predictor.load(path)
+    pts = points.copy()
+    p.predict(pts, cond)
+    pts[:5] += np.float32(4e-3)               # the caller moves its mesh in place
+    np.testing.assert_allclose(p.predict(pts, cond)[0], _bare(path, pts, cond)[0], atol=1e-5)
+
+
+def test_segment_distance_is_euclidean() -> None:
+    from train.region import segment_distance
+
+    start, end = np.array([0.0, 0, 0]), np.array([0.0, 0, -2])
+    pts = np.array([[3.0, 4, 0], [0, 0, 5], [1, 0, -1], [0, 0, -6]])
+    np.testing.assert_allclose(segment_distance(pts, start, end), [5, 5, 1, 4])
+    np.testing.assert_allclose(segment_distance(pts, start, start), [5, 5, np.sqrt(2), 6])
+
+
+def test_region_covering_the_surface_is_the_whole_model(run) -> None:
+    path, points, cond = run
+    pts = _surface(points, 300, 3)
+    p = Predictor.load(path)
+    whole, df = p.predict(pts, cond)
+    np.testing.assert_allclose(p.predict(pts, cond, region=10.0)[0], whole, atol=1e-5)
+    assert p.predict_force(pts, cond, region=10.0) == pytest.approx(df, abs=1e-5)
+
+
+def test_region_runs_the_network_on_the_press_and_its_rings(run) -> None:
+    path, points, cond = run
+    pts = _surface(points, 300, 4)
+    radius, k = 0.015, 5
+    deformed, df = Predictor.load(path).predict(pts, cond, region=radius)
+    # the same region by brute force: distances to the tip's path, hops on a cdist kNN
+    a, b = cond[:3].astype(np.float64), cond[3:].astype(np.float64)
+    t = np.clip((pts - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    core = np.linalg.norm(pts - a - t[:, None] * (b - a), axis=1) <= radius
+    assert 10 < core.sum() < len(pts) - 50
+    knn = np.argsort(((pts[:, None] - pts[None]) ** 2).sum(-1), axis=1)[:, :k]
+    used = core.copy()
+    for _ in range(3):
+        used[knn[used].ravel()] = True
+    assert used.sum() > core.sum()
+    np.testing.assert_array_equal(deformed[~core], pts[~core])          # left at rest
+    order = np.r_[np.flatnonzero(core), np.flatnonzero(used & ~core)]
+    ref, ref_df = _bare(path, pts[order], cond)
+    np.testing.assert_allclose(deformed[core], ref[: core.sum()], atol=1e-5)
+    assert df == pytest.approx(ref_df, abs=1e-5)
+
+
+def test_region_must_be_a_positive_radius(run) -> None:
+    path, points, cond = run
+    with pytest.raises(ValueError, match="positive radius"):
+        Predictor.load(path).predict(points, cond, region=0.0)

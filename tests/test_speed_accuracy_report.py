@@ -29,3 +29,16 @@ def test_pick_fits_the_budget_and_breaks_near_ties_by_cost() -> None:
 def test_a_missing_value_is_a_dash() -> None:
     text = table(ROWS[-2:], [("setting", "s", "s"), ("ms", "ms", ".1f")])
     assert text.splitlines()[-1] == "| unsupported | - |"
+
+
+def test_the_default_region_is_the_smallest_within_tolerance_at_every_size() -> None:
+    from region_study import RADII_MM, pick_default
+
+    def rows(n: int, whole: float, by_radius: dict[float, float]) -> list[dict]:
+        return [{"points": n, "setting": "whole model", "ld_mm": whole}] + [
+            {"points": n, "radius_mm": r, "ld_mm": by_radius.get(r, whole)} for r in RADII_MM]
+
+    small, middle = RADII_MM[0], RADII_MM[2]
+    assert pick_default(rows(1024, 1.0, {small: 1.2, RADII_MM[1]: 1.04})
+                        + rows(4096, 2.0, {small: 2.5, RADII_MM[1]: 2.12})) == middle
+    assert pick_default(rows(1024, 1.0, {r: 1.3 for r in RADII_MM})) is None

@@ -11,6 +11,10 @@ are never neighbours and never pooled. ``tip_offsets`` (ours, not the paper's) a
 first layer each point's offset from the tip's start and end, [p, p - c_start, p - c_end]
 (B, N, 9): how a point moves depends mostly on where it is relative to the tip, which the
 paper's network has to learn from absolute positions (the follow-up cEGCL feeds the same).
+
+The first layer's graph is the kNN of the points themselves (with tip offsets the distance of
+two inputs is sqrt(3) times that of their points: the same neighbours). A caller that already
+has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
 """
 
 from __future__ import annotations
@@ -92,14 +96,16 @@ class CGNN(nn.Module):
         self.force_head = mlp([2 * local + cond, *config.force_widths, 1])
 
     def features(self, points: torch.Tensor, cond: torch.Tensor,
-                 mask: torch.Tensor | None = None) -> Features:
-        """The three edge convolutions' outputs, concatenated."""
+                 mask: torch.Tensor | None = None,
+                 neighbours: torch.Tensor | None = None) -> Features:
+        """The three edge convolutions' outputs, concatenated (``neighbours``: the points'
+        kNN (B, N, k), if known)."""
         x, outs = points, []
         if self.config.tip_offsets:
             tips = cond.reshape(-1, 1, 2, 3)
             x = torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
-        for conv in self.convs:
-            x = torch.relu(conv(x, mask))                                   # (B, N, O)
+        for i, conv in enumerate(self.convs):
+            x = torch.relu(conv(x, mask, neighbours if i == 0 else None))  # (B, N, O)
             outs.append(x)
         return Features(torch.cat(outs, dim=-1),
                          cond if self.config.use_condition else None, mask)
@@ -125,12 +131,14 @@ class CGNN(nn.Module):
         return self.force_head(g).squeeze(-1)
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor,
-                mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+                mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor]:
         """(displacement (B, N, 3), change of force (B,)), normalised."""
-        f = self.features(points, cond, mask)
+        f = self.features(points, cond, mask, neighbours)
         return self.displacement(f), self.force(f)
 
     def forward_force(self, points: torch.Tensor, cond: torch.Tensor,
-                      mask: torch.Tensor | None = None) -> torch.Tensor:
+                      mask: torch.Tensor | None = None,
+                      neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """Only the change of force (B,): the displacement head is skipped."""
-        return self.force(self.features(points, cond, mask))
+        return self.force(self.features(points, cond, mask, neighbours))

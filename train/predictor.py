@@ -5,6 +5,14 @@ MSM masses, a mesh's vertices); the condition is C = [tip start, tip end] (6,), 
 ``predict`` gives the deformed points and the change of force; ``predict_force`` (a haptic
 loop at 1 kHz) runs the graph layers and the force head only.
 
+What is done once, not per call: the network runs in ONNX Runtime where it is installed (CPU;
+``backend="torch"`` keeps torch, the only choice on a GPU), and a scene's points are checked and
+their 3-D neighbour graph (the first layer's) built once, then reused while the caller passes
+the same points again (a mesh pressed at 1 kHz). ``region=R`` (metres) runs the network only on
+the points within R of the tip's path and the graph's rings around them, and leaves the rest
+where they are (:mod:`train.region`): how a 4096-point mesh runs at haptic rates.
+``DEFAULT_REGION`` is the radius the speed-accuracy report found to change mean L_d by under 5 %.
+
 Refused with ValueError: fewer than k + 1 points, a non-finite value, or coordinates in another
 unit (farther from the training data's centre than 20 times its extent: millimetres fed where
 metres belong). Flagged, not refused: a condition or points beyond 1.5 times the training extent
@@ -15,74 +23,119 @@ Duplicate points are allowed (they are each other's nearest neighbours).
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from train.backends import make_backend
 from train.checkpoint import load_checkpoint, model_from
+from train.region import neighbour_table, region
+from train.si_model import SIModel
 
 UNIT_FACTOR = 20.0
 EXTRAPOLATION_FACTOR = 1.5
+DEFAULT_REGION = 0.03     # m: see the README's "Latency" section
+
+
+@dataclass
+class Scene:
+    """A set of points, checked, with its neighbour graph: kept while the caller reuses it."""
+
+    points: np.ndarray         # (N, 3) float32, a private copy
+    neighbours: np.ndarray     # (N, k) int64
+    reach: float               # the farthest point's distance from the training centre, m
 
 
 class Predictor:
-    """A trained model on one device, ready for single predictions."""
+    """A trained model, ready for single predictions."""
 
-    def __init__(self, model: torch.nn.Module, norm, device: torch.device) -> None:
-        self.model, self.norm, self.device = model, norm, device
-        self.k = model.config.k
+    def __init__(self, si: SIModel, device: torch.device, backend: str = "auto") -> None:
+        self.norm, self.k = si.norm, si.model.config.k
+        self.hops = len(si.model.convs)
+        self.backend = make_backend(si, device, backend)
         self.extrapolating = False
+        self._scene: Scene | None = None
 
     @classmethod
-    def load(cls, path: str | Path, device: str = "cpu") -> Predictor:
-        """From a checkpoint file or a run folder (its ``best.pt``)."""
+    def load(cls, path: str | Path, device: str = "cpu", backend: str = "auto") -> Predictor:
+        """From a checkpoint file or a run folder (its ``best.pt``); ``backend`` is ``auto``
+        (ONNX Runtime on a CPU where installed), ``onnx`` or ``torch``."""
         path = Path(path)
         if path.is_dir():
             path = path / "best.pt"
         dev = torch.device(device)
-        model, norm = model_from(load_checkpoint(path, dev), dev)
-        return cls(model, norm, dev)
+        return cls(SIModel(*model_from(load_checkpoint(path, dev), dev)), dev, backend)
 
-    def _inputs(self, points: np.ndarray, condition: np.ndarray
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None
+                ) -> tuple[np.ndarray, float]:
+        """Deformed points (N, 3) float32 in metres, and the change of force in newtons."""
+        scene, c = self._scene_of(points), self._condition(condition)
+        if region is None:
+            deformed, df = self.backend.full(scene.points[None], c, scene.neighbours[None])
+            return deformed, df
+        core, used = self._region(scene, c, region)
+        sub = scene.points[used]
+        moved, df = self.backend.full(sub[None], c, neighbour_table(sub, self.k)[None])
+        deformed = scene.points.copy()
+        deformed[core] = moved[: len(core)]
+        return deformed, df
+
+    def predict_force(self, points: np.ndarray, condition: np.ndarray,
+                      region: float | None = None) -> float:
+        """The change of force (N) alone: the displacement head is not run."""
+        scene, c = self._scene_of(points), self._condition(condition)
+        if region is None:
+            return self.backend.force(scene.points[None], c, scene.neighbours[None])
+        sub = scene.points[self._region(scene, c, region)[1]]
+        return self.backend.force(sub[None], c, neighbour_table(sub, self.k)[None])
+
+    def _region(self, scene: Scene, c: np.ndarray, radius: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+        if not (np.isfinite(radius) and radius > 0):
+            raise ValueError(f"region must be a positive radius in metres, got {radius}")
+        return region(scene.points, scene.neighbours, c[0, :3], c[0, 3:], radius, self.hops)
+
+    def _scene_of(self, points: np.ndarray) -> Scene:
+        """The cached scene when ``points`` are the last call's, else a new one, checked."""
         p = np.asarray(points, dtype=np.float32)
-        c = np.asarray(condition, dtype=np.float32).reshape(-1)
+        old = self._scene
+        if old is not None and old.points.shape == p.shape and np.array_equal(old.points, p):
+            return old
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points must be (N, 3), got {p.shape}")
         if len(p) < self.k + 1:
             raise ValueError(f"{len(p)} points: the graph needs at least k + 1 = {self.k + 1}")
+        if not np.isfinite(p).all():
+            raise ValueError("points and condition must be finite (no NaN or inf)")
+        p = p.copy()
+        self._scene = Scene(p, neighbour_table(p, self.k), self._reach(p))
+        return self._scene
+
+    def _condition(self, condition: np.ndarray) -> np.ndarray:
+        """C as (1, 6) float32, checked; sets ``extrapolating`` for this call."""
+        c = np.asarray(condition, dtype=np.float32).reshape(-1)
         if c.shape != (6,):
             raise ValueError(f"condition must be 6 values (tip start, tip end), got {c.shape}")
-        if not (np.isfinite(p).all() and np.isfinite(c).all()):
+        if not np.isfinite(c).all():
             raise ValueError("points and condition must be finite (no NaN or inf)")
-        self._check_range(np.concatenate([p, c.reshape(2, 3)]))
-        pt = self.norm.points(torch.from_numpy(p).to(self.device)).unsqueeze(0)
-        ct = self.norm.condition(torch.from_numpy(c).to(self.device)).unsqueeze(0)
-        return torch.from_numpy(p).to(self.device), pt, ct
-
-    def _check_range(self, xyz: np.ndarray) -> None:
-        far = float(np.linalg.norm(xyz - np.asarray(self.norm.centre), axis=1).max())
-        extent = max(self.norm.extent, 1e-9)
-        if far > UNIT_FACTOR * extent:
-            raise ValueError(f"a point lies {far:.3g} from the training data's centre, "
-                             f"{far / extent:.0f} times its extent: are these millimetres? "
-                             "Points and condition are metres in the phantom frame")
-        self.extrapolating = far > EXTRAPOLATION_FACTOR * extent
+        far = max(self._reach(c.reshape(2, 3)), self._scene.reach)
+        self.extrapolating = far > EXTRAPOLATION_FACTOR * self._extent
         if self.extrapolating:
-            warnings.warn(f"input reaches {far / extent:.1f} times the training extent: the "
-                          "model extrapolates", stacklevel=3)
+            warnings.warn(f"input reaches {far / self._extent:.1f} times the training extent: "
+                          "the model extrapolates", stacklevel=3)
+        return c[None]
 
-    @torch.inference_mode()
-    def predict(self, points: np.ndarray, condition: np.ndarray) -> tuple[np.ndarray, float]:
-        """Deformed points (N, 3) float32 in metres, and the change of force in newtons."""
-        raw, p, c = self._inputs(points, condition)
-        disp, df = self.model(p, c)
-        deformed = raw + disp[0] * self.norm.disp_scale
-        return deformed.cpu().numpy(), float(df[0]) * self.norm.force_scale
+    @property
+    def _extent(self) -> float:
+        return max(self.norm.extent, 1e-9)
 
-    @torch.inference_mode()
-    def predict_force(self, points: np.ndarray, condition: np.ndarray) -> float:
-        """The change of force (N) alone: the displacement head is not run."""
-        _, p, c = self._inputs(points, condition)
-        return float(self.model.forward_force(p, c)[0]) * self.norm.force_scale
+    def _reach(self, xyz: np.ndarray) -> float:
+        """The farthest of ``xyz`` from the training centre; refused if in another unit."""
+        far = float(np.sqrt(((xyz - np.asarray(self.norm.centre)) ** 2).sum(1).max()))
+        if far > UNIT_FACTOR * self._extent:
+            raise ValueError(f"a point lies {far:.3g} from the training data's centre, "
+                             f"{far / self._extent:.0f} times its extent: are these millimetres?"
+                             " Points and condition are metres in the phantom frame")
+        return far

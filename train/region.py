@@ -1,0 +1,47 @@
+"""Region of interest: the points a press can move, so the network runs on those alone.
+
+A press moves the surface near the tip's path and leaves the far surface where it is. The
+region is every point within ``radius`` of the segment from the tip's start to its end (the
+core, whose predictions are used) plus the rings the graph layers read around it (``hops``
+steps along each point's k nearest neighbours, so the core's points keep the neighbours they
+would have in the whole surface). Points outside the core stay at rest; the force head pools
+over the region only. The report (``benchmarks/speed_accuracy.py``) measures what that costs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def neighbour_table(points: np.ndarray, k: int) -> np.ndarray:
+    """Each point's k nearest points (N, k) int64, itself included (a 3-D tree, no N x N)."""
+    _, idx = cKDTree(points).query(points, k=k)
+    return idx.reshape(len(points), k).astype(np.int64)
+
+
+def segment_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Distance (N,) of each point from the segment start-end (a point when they coincide)."""
+    axis = end - start
+    length2 = float(axis @ axis)
+    t = np.zeros(len(points)) if length2 == 0 else np.clip((points - start) @ axis / length2,
+                                                          0.0, 1.0)
+    return np.linalg.norm(points - start - t[:, None] * axis, axis=1)
+
+
+def region(points: np.ndarray, table: np.ndarray, start: np.ndarray, end: np.ndarray,
+           radius: float, hops: int) -> tuple[np.ndarray, np.ndarray]:
+    """(core, used): indices of the points within ``radius`` of the tip's path (at least
+    k + 1, the nearest, so the graph exists), and of those plus ``hops`` rings of neighbours
+    (``table``), the core first."""
+    dist = segment_distance(points, start, end)
+    core = np.flatnonzero(dist <= radius)
+    least = table.shape[1] + 1
+    if len(core) < least:
+        core = np.sort(np.argpartition(dist, least - 1)[:least])
+    inside = np.zeros(len(points), dtype=bool)
+    inside[core] = True
+    ring = inside.copy()
+    for _ in range(hops):
+        ring[table[ring].ravel()] = True
+    return core, np.concatenate([core, np.flatnonzero(ring & ~inside)])
