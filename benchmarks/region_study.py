@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from bench_cgnn import median_ms
-from speed_accuracy_report import region_text
+from speed_accuracy_report import NOTHING, region_text
 
 from sim.msm import MSMParams
 from sim.msm_dataset import Protocol, draw_plan, generate, simulate
@@ -97,7 +97,7 @@ def scores(pred: Predictor, cases: list, radius: float | None, whole: list | Non
 
 def nothing_moves(cases: list) -> dict:
     """The reference that learns nothing: every point stays at rest, the force is zero."""
-    return {"setting": "nothing moves (reference)", "points": len(cases[0][0]),
+    return {"setting": NOTHING, "points": len(cases[0][0]),
             "ld_mm": 1e3 * float(np.mean([np.linalg.norm(y - p, axis=1).mean()
                                           for p, y, _, _ in cases])),
             "force_n": float(np.mean([f for _, _, _, f in cases]))}

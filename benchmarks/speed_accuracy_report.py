@@ -42,6 +42,9 @@ REGION = [("points", "points", "d"), ("setting", "region", "s"),
           ("force_vs_whole_n", "force vs whole [N]", ".3f"), ("ms", "latency [ms]", ".2f")]
 
 
+NOTHING = "nothing moves (reference)"
+
+
 def region_text(region: dict) -> str:
     """The region-of-interest rows, each size's Pareto front (latency against L_d), and the
     default radius they support."""
@@ -54,6 +57,13 @@ def region_text(region: dict) -> str:
                                  for r in front) + ".\n")
     parts.append(f"Default radius (mean L_d within {tol:.0%} of the whole model's at every "
                  f"size): {'none of these' if pick_mm is None else f'{pick_mm:g} mm'}.\n")
+    ld = {(r["points"], r["setting"]): r["ld_mm"] for r in region["rows"]}
+    idle = [n for n, s in ld if s == "whole model"
+            and ld[(n, s)] > (1 - tol) * ld.get((n, NOTHING), float("inf"))]
+    if idle:
+        parts.append(f"**Not evidence:** at {idle} points the whole model's mean L_d is within "
+                     f"{tol:.0%} of '{NOTHING}': it learned no displacement to lose, so no "
+                     "radius can change its L_d. Judge the radius by the force columns.\n")
     return "\n".join(parts)
 
 

@@ -11,7 +11,8 @@ their 3-D neighbour graph (the first layer's) built once, then reused while the 
 the same points again (a mesh pressed at 1 kHz). ``region=R`` (metres) runs the network only on
 the points within R of the tip's path and the graph's rings around them, and leaves the rest
 where they are (:mod:`train.region`): how a 4096-point mesh runs at haptic rates.
-``DEFAULT_REGION`` is the radius the speed-accuracy report found to change mean L_d by under 5 %.
+``DEFAULT_REGION`` is the radius the benchmarks time; what a radius costs in error is measured
+by ``benchmarks/region_study.py`` (the speed-accuracy report's region rows), not assumed.
 
 Refused with ValueError: fewer than k + 1 points, a non-finite value, or coordinates in another
 unit (farther from the training data's centre than 20 times its extent: millimetres fed where
@@ -36,7 +37,7 @@ from train.si_model import SIModel
 
 UNIT_FACTOR = 20.0
 EXTRAPOLATION_FACTOR = 1.5
-DEFAULT_REGION = 0.03     # m: see the README's "Latency" section
+DEFAULT_REGION = 0.03     # m: the radius benchmarks/bench_cgnn.py times
 
 
 @dataclass
