@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 from click.testing import CliRunner
 
-from calib.phantom_frame import apply_transform
+from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
 
 STEP_N = 0.5

@@ -29,15 +29,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from calib.clock import ClockFit
-from calib.force import apply_calibration, rest_baseline
-from calib.sync_accuracy import TARGETS, sync_errors
-from calib.sync_params import SyncParams
 from core.progress import set_quiet
 from ingest.mcap_io import read_raw_mcap
 from ingest.session_to_mcap import ingest_session
-from pipeline.sync_stage import run_sync
 from sim.twin_folder import synthesize_session
+from sync.clock import ClockFit
+from sync.force import apply_calibration, rest_baseline
+from sync.sync_accuracy import TARGETS, sync_errors
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 
 def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
@@ -178,7 +178,7 @@ def _report(rows: dict[str, list[dict[str, float]]], naive: list[float],
 def trigger_matching_time(repeats: int) -> None:
     """match_trigger on a half-hour session (1,200 pulses, every 97th edge missed): the
     vectorised count of 1.4 million (edge, event) proposals, median of ``repeats``."""
-    from calib.clock import match_trigger
+    from sync.clock import match_trigger
 
     rng = np.random.default_rng(5)
     events = np.cumsum(rng.uniform(0.7, 2.3, 1200))

@@ -11,12 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.rigid import fit_rigid
 from sim.indenter import Hand, IndenterGeometry
 from sim.mocap_errors import gap_mask, gap_rates, residual_noise
 from sim.phantom import LoadPath, Phantom
 from sim.twin_force_log import contact_wrench
 from sim.twin_scene import Lab, TwinParams
+from sync.rigid import fit_rigid
 
 
 @dataclass

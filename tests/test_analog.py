@@ -18,7 +18,6 @@ from c3d_bytes import c3d_parameter, float_frames, rename_parameter, set_paramet
 from click.testing import CliRunner
 from test_extract import check_states_against_truth
 
-from calib.sync_accuracy import TARGETS, sync_errors
 from core.errors import BadInput
 from ingest.analog import analog_force, channel_names, resolve_channels
 from ingest.c3d import read_c3d, read_c3d_analog
@@ -26,6 +25,7 @@ from ingest.detect import detect_format, read_analog
 from ingest.qtm_tsv import read_qtm_analog
 from pipeline.cli import cli
 from pipeline.inspect import inspect_file
+from sync.sync_accuracy import TARGETS, sync_errors
 
 REAL = Path("c3d") / "qualisys_55markers_200hz.c3d"
 POINTS, CHANNELS, PER_FRAME, FRAMES = 55, 69, 10, 340     # what the real export holds

@@ -17,11 +17,11 @@ import torch
 from cgnn_data import write_dent_states
 from click.testing import CliRunner
 
-from calib.force_conditioning import over_range
 from core.errors import BadInput
 from core.series import frame_times_ns, time_to_ns
 from data_schema.states import validate_states
 from pipeline.cli import cli
+from sync.force_conditioning import over_range
 from train.checkpoint import load_checkpoint
 from train.data import load_manifest, role_examples
 from train.evaluate import example_errors, load_run

@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from calib.gaps import FILLED, MISSING
-from calib.sync_accuracy import TARGETS, match_presses, sync_errors
-from calib.sync_params import SyncParams
 from core.recording import rrd_entities, rrd_timelines
 from ingest.session_to_mcap import ingest_session
 from pipeline.cli import cli
-from pipeline.sync_stage import run_sync
 from sim.twin_folder import synthesize_session
+from sync.gaps import FILLED, MISSING
+from sync.sync_accuracy import TARGETS, match_presses, sync_errors
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 SEEDS = (0, 1, 2, 3, 4)
 

@@ -1,6 +1,6 @@
-"""``pipeline sync``'s orchestration: ingest's MCAP in, the synced file and its recording out.
+"""The sync stage runner: ingest's MCAP in, the synced file and its recording out.
 
-The math is :func:`calib.sync.sync_session`; this reads the input, records the provenance and
+The math is :func:`sync.sync.sync_session`; this reads the input, records the provenance and
 writes both outputs atomically (nothing is written unless everything succeeds).
 """
 
@@ -9,15 +9,15 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
-from calib.sync import SyncResult, sync_session
-from calib.sync_params import SyncParams, check_params
-from calib.sync_view import write_sync_recording
-from calib.synced_file import write_synced
 from core.atomic import atomic_outputs
 from core.errors import BadInput
 from core.provenance import make_provenance
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
+from sync.sync import SyncResult, sync_session
+from sync.sync_params import SyncParams, check_params
+from sync.sync_view import write_sync_recording
+from sync.synced_file import write_synced
 
 
 def run_sync(mcap: str | Path, out: str | Path, rrd: str | Path | None = None,

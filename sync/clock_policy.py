@@ -4,7 +4,7 @@ Force that came through the mocap system's analog board (a C3D or QTM analog exp
 ``force.meta["clock"] == "mocap"``) shares the mocap's clock: with ``--clock auto`` there is no
 offset or drift to estimate (method ``shared``). Otherwise trigger pulses when the session
 recorded them (and the user did not ask for the data), else the tip's motion against the
-force (:mod:`calib.clock` holds both estimators). :func:`clock_reason` says which policy
+force (:mod:`sync.clock` holds both estimators). :func:`clock_reason` says which policy
 applied and why, for the calibration record. With
 ``--clock auto`` a dead or unplugged trigger line falls back to the data and says why; a
 trigger train that fits several offsets equally well is disambiguated by the data clock.
@@ -16,7 +16,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from calib.clock import (
+from core.errors import BadInput
+from core.series import SHARED_CLOCK, RawSession
+from sync.clock import (
     ClockFit,
     clock_from_data,
     contact_lag,
@@ -24,10 +26,8 @@ from calib.clock import (
     rising_edges,
     stamp_resolution_s,
 )
-from calib.presses import segment_presses
-from calib.sync_params import SyncParams
-from core.errors import BadInput
-from core.series import SHARED_CLOCK, RawSession
+from sync.presses import segment_presses
+from sync.sync_params import SyncParams
 
 MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
 SHARED = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "shared")   # one clock: exact, nothing estimated

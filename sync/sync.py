@@ -1,25 +1,26 @@
 """The sync stage's math: raw streams (ingest's MCAP) to one synchronised record per press.
 
-Steps, each in its own module of :mod:`calib`:
+Steps, each in its own module of :mod:`sync`:
 
 1. the indenter cluster's shape and the tip offset from the pivot recording, the cluster's pose
-   in every trial frame and the tip it carries, the 26th point (:mod:`calib.tip_track`);
-2. short marker gaps filled, longer ones kept missing and flagged (:mod:`calib.gaps`); the tip
-   track low-passed (zero phase) against the lever arm's noise (:mod:`calib.smooth`); the tip
-   depth below the phantom's rest plane (:mod:`calib.surface`);
+   in every trial frame and the tip it carries, the 26th point (:mod:`sync.tip_track`);
+2. short marker gaps filled, longer ones kept missing and flagged (:mod:`sync.gaps`); the tip
+   track low-passed (zero phase) against the lever arm's noise (:mod:`sync.smooth`); the tip
+   depth below the phantom's rest plane (:mod:`sync.surface`);
 3. the force tared from the unloaded start of the log, calibrated with the 6x6 matrix, and
-   re-tared from the rest level next to every press (:mod:`calib.force_conditioning`);
+   re-tared from the rest level next to every press (:mod:`sync.force_conditioning`);
 4. the clock: one shared clock when the force came through the mocap's analog board,
    else trigger pulses when recorded, otherwise the tip depth against the force
-   (:mod:`calib.clock_policy`; the calibration record says which policy applied and why);
+   (:mod:`sync.clock_policy`; the calibration record says which policy applied and why);
 5. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock
-   (:mod:`calib.resample`);
+   (:mod:`sync.resample`);
 6. presses from contact onset to release, each with its location id and repeat number, cut
    out with a margin of unloaded frames on both sides; presses cut off by the end of either
-   recording are left out (and counted) (:mod:`calib.presses`).
+   recording are left out (and counted) (:mod:`sync.presses`).
 
-:func:`sync_session` returns everything in memory; :mod:`calib.synced_file` writes it and
-:mod:`calib.sync_view` shows it. Every bad input is one :class:`BadInput` line.
+:func:`sync_session` returns everything in memory; :mod:`sync.sync_stage` reads its input and
+writes it (:mod:`sync.synced_file`) and its view (:mod:`sync.sync_view`). Every bad input is
+one :class:`BadInput` line.
 """
 
 from __future__ import annotations
@@ -29,21 +30,21 @@ from typing import Any
 
 import numpy as np
 
-from calib.clock import IDENTITY, ClockFit
-from calib.clock_policy import check_overlap, clock_reason, estimate_clock
-from calib.force import Tare
-from calib.force_conditioning import ConditionedForce, condition_force, over_range
-from calib.gaps import fill_gaps
-from calib.pivot import PivotResult
-from calib.presses import PressRecord, assign_locations, cut_presses, segment_presses
-from calib.resample import antialiased_interpolant
-from calib.smooth import lowpass_track
-from calib.surface import contact_points, rest_surface, tip_depth
-from calib.sync_params import SyncParams, check_params
-from calib.tip_track import check_cluster, track_tip
 from core.errors import BadInput
 from core.series import RawSession
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
+from sync.clock import IDENTITY, ClockFit
+from sync.clock_policy import check_overlap, clock_reason, estimate_clock
+from sync.force import Tare
+from sync.force_conditioning import ConditionedForce, condition_force, over_range
+from sync.gaps import fill_gaps
+from sync.pivot import PivotResult
+from sync.presses import PressRecord, assign_locations, cut_presses, segment_presses
+from sync.resample import antialiased_interpolant
+from sync.smooth import lowpass_track
+from sync.surface import contact_points, rest_surface, tip_depth
+from sync.sync_params import SyncParams, check_params
+from sync.tip_track import check_cluster, track_tip
 
 POOR_FIT = np.uint8(QUALITY_BITS["poor_fit"])
 TIP = "tip"

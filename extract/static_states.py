@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from core.protocol import STEP_N
+
 MIN_SAMPLES = 3
 
 
@@ -27,7 +29,7 @@ MIN_SAMPLES = 3
 class ExtractParams:
     """How states are read off a press."""
 
-    step_n: float = 0.5            # force level spacing, N
+    step_n: float = STEP_N         # force level spacing, N
     half_window_s: float = 0.02    # frames within this of the crossing are fitted
     rest_window_s: float = 0.1     # k = 0: the frames this long before onset
     max_speed: float | None = None  # m/s: states faster than this are dropped

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.gaps import nan_runs
+from sync.gaps import nan_runs
 
 
 @dataclass

@@ -6,7 +6,7 @@ millimetre at the tip). A hand moves the indenter at a few hertz, so a zero-phas
 well above that (sync uses 15 Hz) removes most of this noise without delaying or flattening the
 motion. Each run of finite samples is filtered on its own; runs shorter than the filter's half
 length are left as they are (there is too little to filter), and gaps stay gaps. The ends of a
-run are smoothed too (see :func:`calib.resample.lowpass_zero_phase`).
+run are smoothed too (see :func:`sync.resample.lowpass_zero_phase`).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import firwin, kaiserord
 
-from calib.gaps import nan_runs
-from calib.resample import lowpass_zero_phase
+from sync.gaps import nan_runs
+from sync.resample import lowpass_zero_phase
 
 
 def smoothing_taps(rate_hz: float, cutoff_hz: float, atten_db: float = 60.0) -> np.ndarray:

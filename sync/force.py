@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.gaps import nan_runs
 from core.errors import BadInput
+from sync.gaps import nan_runs
 
 
 @dataclass

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.force import RestBaseline, Tare, apply_calibration, rest_baseline, unloaded_start
-from calib.sync_params import SyncParams
 from core.errors import BadInput
 from core.series import RawSession
+from sync.force import RestBaseline, Tare, apply_calibration, rest_baseline, unloaded_start
+from sync.sync_params import SyncParams
 
 
 @dataclass

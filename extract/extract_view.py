@@ -17,8 +17,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from calib.static_states import Press, PressStates
 from core.recording import declare_up, phantom_view, recording, time_column
+from extract.static_states import Press, PressStates
 
 APP_ID = "phantom-extract"
 TIMELINE = "session_time"

@@ -31,8 +31,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.spatial import Delaunay
 
-from calib.gaps import FILLED, MISSING
-from calib.sync import SyncResult
 from core.recording import (
     colormap,
     declare_up,
@@ -42,6 +40,8 @@ from core.recording import (
     send_series,
     time_column,
 )
+from sync.gaps import FILLED, MISSING
+from sync.sync import SyncResult
 
 APP_ID = "phantom-sync"
 TIMELINE = "mocap_time"

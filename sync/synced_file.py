@@ -1,4 +1,4 @@
-"""The synced file (:data:`data_schema.synced.SYNCED`): a :class:`calib.sync.SyncResult` on disk.
+"""The synced file (:data:`data_schema.synced.SYNCED`): a :class:`sync.sync.SyncResult` on disk.
 
 Names, dtypes and units are the schema's; this module only says which array goes where.
 """
@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from calib.gaps import MISSING
-from calib.presses import PressRecord
-from calib.sync import SyncResult
 from data_schema.hdf5 import write_h5
 from data_schema.synced import FORCE_BITS, QUALITY_BITS, SYNCED
+from sync.gaps import MISSING
+from sync.presses import PressRecord
+from sync.sync import SyncResult
 
 GZIP = {"presses/*/points": 4, "presses/*/quality": 4}
 
