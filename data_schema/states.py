@@ -112,6 +112,13 @@ def validate_states(path: str | Path) -> None:
             _check_pairs(path, name, f[f"{name}/start"][()], f[f"{name}/end"][()], seq, step, gap)
 
 
+def example_groups(states: str | Path, group_by: str) -> dict[str, np.ndarray]:
+    """The group of every single- and multi-step example (that of its start state)."""
+    with h5_reading(states), h5py.File(states, "r") as f:
+        group = f[f"states/{group_by}"][()]
+        return {name: group[f[f"{name}/start"][()]] for name in ("single", "multi")}
+
+
 def _check_attrs(path: str | Path, f: h5py.File) -> None:
     step_n = f.attrs["step_n"]
     if not (np.ndim(step_n) == 0 and np.issubdtype(np.asarray(step_n).dtype, np.number)

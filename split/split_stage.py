@@ -1,7 +1,8 @@
-"""``pipeline split``: a states file -> its ``phantom.folds`` 2.0 manifest (and what it shows).
+"""The split stage runner: a states file in, its ``phantom.folds`` 2.0 manifest and recording out.
 
 Defaults follow the paper and the data: lab states group by press (``sequence``), 12:3:5;
-MSM states by location, 7:2:1; five folds.
+MSM states by location, 7:2:1; five folds. The folds themselves are :mod:`split.split`'s; the
+view is :mod:`split.split_view`.
 """
 
 from __future__ import annotations
@@ -13,13 +14,27 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from core.atomic import atomic_output
+from core.atomic import atomic_output, atomic_outputs
 from core.errors import BadInput
 from core.provenance import make_provenance, sha256_file
 from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
-from data_schema.states import validate_states
-from train.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
+from data_schema.states import example_groups, validate_states
+from split.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
+from split.split_view import write_split_recording
+
+
+def run_split(states: str | Path, out: str | Path, rrd: str | Path | None = None,
+              group_by: str | None = None, ratio: tuple[int, int, int] | None = None,
+              folds: int = 5, seed: int = 0) -> dict:
+    """Split ``states`` (the data's defaults where ``group_by`` or ``ratio`` is None); write
+    the manifest ``out`` and the recording ``rrd`` atomically; returns the manifest."""
+    doc = build_manifest(states, default_plan(states, group_by, ratio, folds, seed))
+    with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
+        write_manifest(tmp_out, doc)
+        if tmp_rrd is not None:
+            write_split_recording(tmp_rrd, states, doc)
+    return doc
 
 
 def source_of(states: str | Path) -> str:
@@ -34,13 +49,6 @@ def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int
     """The plan for ``states``: what the user gave, the data's defaults for the rest."""
     d_group, d_ratio = DEFAULTS.get(source_of(states), DEFAULTS["lab"])
     return SplitPlan(group_by or d_group, ratio or d_ratio, folds, seed)
-
-
-def example_groups(states: str | Path, group_by: str) -> dict[str, np.ndarray]:
-    """The group of every single- and multi-step example (that of its start state)."""
-    with h5_reading(states), h5py.File(states, "r") as f:
-        group = f[f"states/{group_by}"][()]
-        return {name: group[f[f"{name}/start"][()]] for name in ("single", "multi")}
 
 
 def build_manifest(states: str | Path, plan: SplitPlan) -> dict:
