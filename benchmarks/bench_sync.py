@@ -32,7 +32,7 @@ import numpy as np
 from core.progress import set_quiet
 from ingest.mcap_io import read_raw_mcap
 from ingest.session_to_mcap import ingest_session
-from sim.twin_folder import synthesize_session
+from sim.twin.synth_stage import run_synth
 from sync.clock import ClockFit
 from sync.force import apply_calibration, rest_baseline
 from sync.sync_accuracy import TARGETS, sync_errors
@@ -70,7 +70,7 @@ def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
 
 def long_session_force(workdir: Path) -> dict[str, tuple[float, float]]:
     """Loaded-force RMS (all presses, last press) of a 7-minute session, re-tared or not."""
-    folder = synthesize_session(workdir / "long", seed=0, press_seconds=20.0)
+    folder = run_synth(workdir / "long", seed=0, press_seconds=20.0)
     mcap = workdir / "long.mcap"
     ingest_session(folder, mcap)
     out = {}
@@ -93,7 +93,7 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
                                                "analog": []}
     naive, times_seeds, times, times_rrd = [], [], [], []
     for seed in range(seeds):
-        folder = synthesize_session(workdir / f"s{seed}", seed=seed)
+        folder = run_synth(workdir / f"s{seed}", seed=seed)
         mcap = workdir / f"s{seed}.mcap"
         ingest_session(folder, mcap)
         truth = folder / "truth.h5"
@@ -108,7 +108,7 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
         plain = workdir / f"s{seed}_plain.h5"
         run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
         rows["plain_tip"].append(sync_errors(plain, truth))
-        analog = synthesize_session(workdir / f"a{seed}", seed=seed, force_via="analog")
+        analog = run_synth(workdir / f"a{seed}", seed=seed, force_via="analog")
         ingest_session(analog, workdir / f"a{seed}.mcap")
         run_sync(workdir / f"a{seed}.mcap", workdir / f"a{seed}.h5")
         rows["analog"].append(sync_errors(workdir / f"a{seed}.h5", analog / "truth.h5"))

@@ -10,7 +10,7 @@ Times, as medians over repeats:
   factorisation is made once per session and shared by its presses: it is timed on its own
   and the ratio is given with it amortised over a default session's presses and with it
   charged in full to the one press;
-* a default session (5 locations x 4 repeats, ``synthesize_session`` without a recording),
+* a default session (5 locations x 4 repeats, ``run_synth`` without a recording),
   split into simulation and writing, against the peer that reads it back, ``pipeline ingest``.
 
     python benchmarks/bench_twin.py [--repeats 3]
@@ -29,10 +29,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ingest.session_to_mcap import ingest_session
-from sim.phantom import Phantom
-from sim.twin import simulate
-from sim.twin_folder import write_twin
-from sim.twin_scene import TwinParams
+from sim.twin.phantom import Phantom
+from sim.twin.synth_stage import write_twin
+from sim.twin.twin import simulate
+from sim.twin.twin_scene import TwinParams
 
 LEVELS = np.concatenate([[0.25], np.arange(0.5, 7.01, 0.5), [7.2, 7.3]])
 TILT = np.radians(20.0)

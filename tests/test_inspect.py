@@ -264,9 +264,9 @@ def test_inspect_session_toml(tmp_path):
     from click.testing import CliRunner
 
     from pipeline.cli import cli
-    from sim.twin_folder import synthesize_session
+    from sim.twin.synth_stage import run_synth
 
-    folder = synthesize_session(tmp_path / "s", seed=3, locations=1, repeats=1,
+    folder = run_synth(tmp_path / "s", seed=3, locations=1, repeats=1,
                                 press_seconds=3.0, pivot_seconds=3.0)
     res = CliRunner().invoke(cli, ["inspect", str(folder / "session.toml"), "--json"])
     assert res.exit_code == 0, res.output

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from core.recording import rrd_entities, rrd_timelines
 from ingest.session_to_mcap import ingest_session
 from pipeline.cli import cli
-from sim.twin_folder import synthesize_session
+from sim.twin.synth_stage import run_synth
 from sync.gaps import FILLED, MISSING
 from sync.sync_accuracy import TARGETS, match_presses, sync_errors
 from sync.sync_params import SyncParams
@@ -33,7 +33,7 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, 
     root = tmp_path_factory.mktemp("twin")
     out = {}
     for seed in SEEDS:
-        folder = synthesize_session(root / f"s{seed}", seed=seed, locations=2, repeats=1,
+        folder = run_synth(root / f"s{seed}", seed=seed, locations=2, repeats=1,
                                     press_seconds=60.0, pivot_seconds=10.0)
         mcap = root / f"s{seed}.mcap"
         ingest_session(folder, mcap)

@@ -14,8 +14,8 @@ import numpy as np
 from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.truth import CLOCK_DOC, TRUTH
-from sim.twin import Twin
-from sim.twin_scene import PHANTOM_MARKERS, TwinParams
+from sim.twin.twin import Twin
+from sim.twin.twin_scene import PHANTOM_MARKERS, TwinParams
 
 GZIP = dict.fromkeys((d.path for d in TRUTH.datasets), 1)   # the large series, fast and small
 

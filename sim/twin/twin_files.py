@@ -1,9 +1,4 @@
-"""The phantom twin's session folder: what the lab would hand over, plus the truth.
-
-``synthesize_session`` plays a session (:func:`sim.twin.simulate`) and writes it in the lab's
-formats (:mod:`sim.lab_writers`, :mod:`ingest.ati_cal`) with ``truth.h5``
-(:mod:`sim.twin_truth`) and, when asked, a rerun recording (:mod:`sim.twin_view`). The same
-seed gives the same bytes of every data file.
+"""The twin's session folder, file by file: names, what each file holds, its session.toml.
 
 Session folder::
 
@@ -22,9 +17,6 @@ Session folder::
     truth.h5              the truth (data_schema.truth)
     recording.rrd         the rerun recording of one press (when asked for)
 
-Writing over an earlier session removes its files that the new one does not write (another
-sensor's ``FT<serial>.cal``, a recording) and leaves every other file alone.
-
 Clock convention: an event at mocap time ``t_m`` (0 at the first frame) is stamped by the
 logger at ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``; the log starts before the mocap
 (with the indenter still and unloaded, so it can be tared) and ends after it. Through the
@@ -33,18 +25,15 @@ analog board offset and drift are 0: the first sample is at the first frame.
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 
-from core.atomic import atomic_outputs
-from core.errors import BadInput
 from data_schema.session import SCHEMA as SESSION_SCHEMA
 from data_schema.session import VERSION as SESSION_VERSION
 from ingest.ati_cal import write_ati_cal
-from sim.indenter import BODY_NAME
-from sim.lab_writers import (
+from sim.twin.indenter import BODY_NAME
+from sim.twin.lab_writers import (
     write_c3d,
     write_force_csv,
     write_force_mat,
@@ -53,10 +42,8 @@ from sim.lab_writers import (
     write_qtm_analog,
     write_session_toml,
 )
-from sim.twin import Twin, simulate
-from sim.twin_scene import PHANTOM_MARKERS, TRIGGER_EVENT, TwinParams
-from sim.twin_truth import write_truth
-from sim.twin_view import write_twin_recording
+from sim.twin.twin import Twin
+from sim.twin.twin_scene import PHANTOM_MARKERS, TRIGGER_EVENT
 
 FILES = {"trial": "indentation.tsv", "bodies": "indentation_6D.tsv", "pivot": "pivot.tsv",
          "csv": "force.csv", "mat": "force.mat", "c3d": "indentation.c3d",
@@ -71,33 +58,33 @@ ANALOG_SCALE = 10.0 / 32768        # V per count of a +-10 V 16-bit board (C3D A
 RECORDING = "recording.rrd"         # the recording's default name in the folder
 
 
-def synthesize_session(out_dir: str | Path, seed: int = 0, locations: int = 5,
-                       repeats: int = 4, rrd: str | Path | None = None, view_press: int = 0,
-                       **params: object) -> Path:
-    """Simulate a session and write its folder (see the module docstring); returns the folder.
-
-    ``params`` are further :class:`TwinParams` fields; ``rrd`` also writes a rerun recording of
-    press ``view_press``.
-    """
-    p = TwinParams(seed=seed, locations=locations, repeats=repeats, **params)
-    folder = _output_folder(out_dir)
-    if rrd is not None and not 0 <= view_press < locations * repeats:
-        raise BadInput("--view-press",
-                       f"press {view_press} does not exist (0..{locations * repeats - 1})")
-    twin = simulate(p)
-    write_twin(twin, folder, rrd, view_press)
-    return folder
+def file_keys(twin: Twin) -> tuple[str, ...]:
+    """The :data:`FILES` keys a session writes (the force route's own), truth last."""
+    force = ("c3d", "analog") if twin.params.force_via == "analog" else ("csv", "mat")
+    return ("trial", "bodies", "pivot", *force, "session", "truth")
 
 
-def _output_folder(out_dir: str | Path) -> Path:
-    """The session folder: new, empty, or an earlier twin session (then overwritten)."""
-    folder = Path(out_dir)
-    if folder.exists() and not folder.is_dir():
-        raise BadInput(folder, "exists and is not a folder")
-    if folder.is_dir() and any(folder.iterdir()) and not (folder / FILES["truth"]).is_file():
-        raise BadInput(folder, "folder is not empty and holds no earlier synthetic session; "
-                               "choose a new or empty folder")
-    return folder
+def calibration_name(twin: Twin) -> str:
+    """The ATI calibration's file name: ``FT<serial>.cal``."""
+    return f"{twin.sensor.serial}.cal"
+
+
+def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
+    """Every lab file of the session (all but the truth) to the paths ``out`` names by
+    :data:`FILES` key, and the calibration to ``out["cal"]``."""
+    p, m = twin.params, twin.mocap
+    stamp, mat_date = _stamp(p.seed)
+    write_qtm_3d(out["trial"], _marker_names(twin), m.measured, p.rate_hz, stamp, m.events)
+    write_qtm_6d(out["bodies"], BODY_NAME, m.body_origin, m.body_rotation, m.body_residual,
+                 p.rate_hz, stamp, m.events)
+    write_qtm_3d(out["pivot"], list(twin.indenter.names), twin.pivot.measured, p.rate_hz,
+                 _stamp(p.seed, minutes_before=4)[0])
+    if p.force_via == "analog":
+        _write_analog(twin, out["c3d"], out["analog"], stamp)
+    else:
+        _write_logger(twin, out["csv"], out["mat"], mat_date)
+    write_ati_cal(out["cal"], twin.sensor.calibration)
+    write_session_toml(out["session"], *_session_tables(twin, calibration_name(twin)))
 
 
 def _stamp(seed: int, minutes_before: int = 0) -> tuple[str, str]:
@@ -109,45 +96,6 @@ def _stamp(seed: int, minutes_before: int = 0) -> tuple[str, str]:
     date = str(day)
     ticks = 3600.0 + (seed * 104729) % 500000 + secs + ms / 1000
     return f"{date}, {hh:02d}:{mm:02d}:{ss:02d}.{ms:03d}\t{ticks:.8f}", f"{date} {hh:02d}:{mm:02d}"
-
-
-def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
-               view_press: int = 0) -> None:
-    """Write every file of the session folder (atomically: all or nothing).
-
-    Over an earlier session (the folder holds a ``truth.h5``), the files that session wrote
-    and this one does not (another sensor's ``FT<serial>.cal``, a ``recording.rrd`` this run
-    skips, the other force route's files) are removed once the new files are in place; no
-    other file is touched.
-    """
-    p, folder = twin.params, Path(folder)
-    earlier = (folder / FILES["truth"]).is_file()
-    cal_name = f"{twin.sensor.serial}.cal"
-    force_keys = ("c3d", "analog") if p.force_via == "analog" else ("csv", "mat")
-    keys = ("trial", "bodies", "pivot", *force_keys, "session", "truth")
-    finals = [folder / FILES[k] for k in keys] + [folder / cal_name]
-    if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
-        raise BadInput(rrd, "--rrd names one of the session files synth writes")
-    stamp, mat_date = _stamp(p.seed)
-    m = twin.mocap
-    with atomic_outputs(*finals, rrd) as tmps:
-        out = dict(zip([*keys, "cal", "rrd"], tmps, strict=True))
-        write_qtm_3d(out["trial"], _marker_names(twin), m.measured, p.rate_hz, stamp, m.events)
-        write_qtm_6d(out["bodies"], BODY_NAME, m.body_origin, m.body_rotation, m.body_residual,
-                     p.rate_hz, stamp, m.events)
-        write_qtm_3d(out["pivot"], list(twin.indenter.names), twin.pivot.measured, p.rate_hz,
-                     _stamp(p.seed, minutes_before=4)[0])
-        if p.force_via == "analog":
-            _write_analog(twin, out["c3d"], out["analog"], stamp)
-        else:
-            _write_logger(twin, out["csv"], out["mat"], mat_date)
-        write_ati_cal(out["cal"], twin.sensor.calibration)
-        write_session_toml(out["session"], *_session_tables(twin, cal_name))
-        write_truth(out["truth"], twin)
-        if out["rrd"] is not None:
-            write_twin_recording(twin, out["rrd"], view_press)
-    if earlier:
-        _remove_stale(folder, [*finals, rrd])
 
 
 def _marker_names(twin: Twin) -> list[str]:
@@ -178,20 +126,6 @@ def _write_analog(twin: Twin, c3d: Path, tsv: Path, stamp: str) -> None:
     write_c3d(c3d, _marker_names(twin), twin.mocap.measured, p.rate_hz, channels, p.logger_hz,
               labels, ["V"] * len(channels), ANALOG_SCALE)
     write_qtm_analog(tsv, channels, p.logger_hz, stamp)
-
-
-def _remove_stale(folder: Path, written: list[Path | str | None]) -> None:
-    """Remove the files of an earlier session in ``folder`` that this one did not write."""
-    keep = {Path(f).resolve() for f in written if f is not None}
-    for f in folder.iterdir():
-        if f.is_file() and _twin_file(f.name) and f.resolve() not in keep:
-            f.unlink()
-
-
-def _twin_file(name: str) -> bool:
-    """Whether a session folder's file named ``name`` is one the twin writes."""
-    return (name in FILES.values() or name == RECORDING
-            or re.fullmatch(r"FT\d{5}\.cal", name) is not None)
 
 
 def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:

@@ -2,8 +2,9 @@
 
 What a person checks after simulate: does the surface dent where the force is applied, along
 the force, by a plausible amount, and smoothly from step to step. One timeline, ``force_step``
-(t = 0 rest .. steps; the applied force is t x fmax / steps, the same in every sequence, so it
-is written in the plot's name rather than drawn four times). Per logged sequence ``s``:
+(t = 0 rest .. steps; the applied force is t x the file's ``step_n``, the same in every
+sequence, so it is written in the plot's name rather than drawn four times). Per logged
+sequence ``s``:
 
 - ``msm/seq_<s>/surface``: Mesh3D of the surface (the spring triangles), vertices coloured by
   displacement from rest, viridis on a square-root scale from 0 (purple) to the largest
@@ -36,8 +37,8 @@ SEQUENCE_COLORS = [(214, 39, 40), (31, 119, 180), (255, 127, 14), (148, 103, 189
                    (44, 160, 44), (140, 86, 75), (227, 119, 194), (23, 190, 207)]
 
 
-def blueprint(sequences: list[int], largest_mm: float, fmax: float, steps: int,
-              size: float, middle: np.ndarray | None = None) -> rrb.Blueprint:
+def blueprint(sequences: list[int], largest_mm: float, step_n: float, size: float,
+              middle: np.ndarray | None = None) -> rrb.Blueprint:
     """One 3D view per logged sequence framing the surface (``size`` wide about ``middle``,
     default the grid's centre); the displacement curves."""
     xy = np.array([size / 2, size / 2]) if middle is None else middle
@@ -47,7 +48,7 @@ def blueprint(sequences: list[int], largest_mm: float, fmax: float, steps: int,
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Grid(*views),
-            plot(f"loaded mass displacement [mm] (force {fmax / steps:g} N per step)",
+            plot(f"loaded mass displacement [mm] (force {step_n:g} N per step)",
                  "/plots"),
             column_shares=[3, 2],
         ),
@@ -61,22 +62,21 @@ def pick_sequences(n_sequences: int, count: int) -> list[int]:
     return sorted({int(round(v)) for v in np.linspace(0, n_sequences - 1, count)}) if count else []
 
 
-def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray],
+def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], step_n: float,
                              triangles: np.ndarray | None, count: int = 4) -> list[int]:
-    """Save the recording of ``count`` sequences of a states file's arrays; returns them.
-    ``triangles`` None: the states are points sampled at a lab's layout, drawn as points."""
+    """Save the recording of ``count`` sequences of a states file's arrays (its force step
+    ``step_n``, N); returns them. ``triangles`` None: the states are points sampled at a lab's
+    layout, drawn as points."""
     seq_of_state = arrays["states/sequence"]
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
     rows = {s: _rows(arrays, s) for s in chosen}
     largest = max((_displacement(arrays, r).max() for r in rows.values()), default=0.0)
-    force = np.linalg.norm(arrays["states/force_vector"], axis=1)
-    steps = int(arrays["states/step"].max()) if len(force) else 1
-    first = arrays["states/points"][0, :, :2] if len(force) else np.array([[0.0, 0.0], [0.1, 0.1]])
+    empty = len(arrays["states/step"]) == 0
+    first = np.array([[0.0, 0.0], [0.1, 0.1]]) if empty else arrays["states/points"][0, :, :2]
     size = float(np.ptp(first[:, 0]))
     middle = (first.min(axis=0) + first.max(axis=0)) / 2
-    bp = blueprint(chosen, largest * 1e3, float(force.max(initial=0.0)), max(steps, 1), size,
-                   middle)
+    bp = blueprint(chosen, largest * 1e3, step_n, size, middle)
     with recording(APP_ID, path, bp) as rec:
         declare_up(rec)
         for i, s in enumerate(chosen):

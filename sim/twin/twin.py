@@ -1,12 +1,13 @@
 """The phantom twin: a whole lab session simulated in memory (:func:`simulate`).
 
-A volumetric silicone block (:mod:`sim.phantom`) on the table, 5 x 5 markers on its top, an
-indenter cluster held by a hand (:mod:`sim.indenter`) pressing each location several times
-(:mod:`sim.twin_scene`), seen by Qualisys with noise and occlusions (:mod:`sim.twin_mocap`),
-a Nano17 logged by a Speedgoat on its own clock (:mod:`sim.twin_force_log`), a pivot
-calibration (:mod:`sim.twin_pivot`) and the true static states (:mod:`sim.twin_states`).
-:mod:`sim.twin_folder` writes it as the lab would, with ``truth.h5`` (:mod:`sim.twin_truth`).
-The same seed gives the same session.
+A volumetric silicone block (:mod:`sim.twin.phantom`) on the table, 5 x 5 markers on its top,
+an indenter cluster held by a hand (:mod:`sim.twin.indenter`) pressing each location several
+times (:mod:`sim.twin.twin_scene`), seen by Qualisys with noise and occlusions
+(:mod:`sim.twin.twin_mocap`, QTM's 6D body: :mod:`sim.twin.body_fit`), a Nano17 logged by a
+Speedgoat on its own clock (:mod:`sim.twin.twin_force_log`), a pivot calibration
+(:mod:`sim.twin.twin_pivot`) and the true static states (:mod:`sim.twin.twin_states`).
+:mod:`sim.twin.synth_stage` writes it as the lab would, with ``truth.h5``
+(:mod:`sim.twin.twin_truth`). The same seed gives the same session.
 """
 
 from __future__ import annotations
@@ -16,13 +17,13 @@ from functools import partial
 
 import numpy as np
 
-from sim.indenter import Hand, HandStyle, IndenterGeometry, make_indenter, plan_hand
-from sim.nano17 import Nano17, make_nano17
-from sim.phantom import LoadPath, Phantom
-from sim.twin_force_log import ForceLog, play_force_log
-from sim.twin_mocap import Mocap, play_mocap
-from sim.twin_pivot import Pivot, play_pivot
-from sim.twin_scene import (
+from sim.twin.indenter import Hand, HandStyle, IndenterGeometry, make_indenter, plan_hand
+from sim.twin.nano17 import Nano17, make_nano17
+from sim.twin.phantom import LoadPath, Phantom
+from sim.twin.twin_force_log import ForceLog, play_force_log
+from sim.twin.twin_mocap import Mocap, play_mocap
+from sim.twin.twin_pivot import Pivot, play_pivot
+from sim.twin.twin_scene import (
     TRIGGER_EVENT,
     TwinParams,
     check_params,
@@ -31,7 +32,7 @@ from sim.twin_scene import (
     solve_presses,
     to_lab_frame,
 )
-from sim.twin_states import States, true_states
+from sim.twin.twin_states import States, true_states
 
 ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (analog route)
 

@@ -1,7 +1,7 @@
 """The fast path: the MSM's static equilibrium solved directly instead of integrated in time.
 
 The equilibrium of the springs and the load is the minimum of the potential energy
-(:meth:`sim.msm.MSM.energy_forces`). We minimise it with L-BFGS whose initial inverse Hessian
+(:meth:`sim.msm.msm.MSM.energy_forces`). We minimise it with L-BFGS whose initial inverse Hessian
 is a banded Cholesky factor of the tangent stiffness: with masses in row-major order the
 half-bandwidth is 3 (n + 1) + 2 = 101 unknowns, so LAPACK factors the 3072 x 3072 matrix in
 ~3 ms and applies it in ~0.1 ms (single precision: it only guides iterations whose forces are
@@ -11,7 +11,7 @@ convergence slows or a step had to be cut (the first load on the flat, tension-f
 needs that most); each force step starts from the linear extrapolation of the two previous
 equilibria. On the paper's protocol that is ~0.6 factorizations and ~6.5 iterations per state.
 Every solve ends with the largest per-mass force below ``tol`` (1e-6 N by default) or raises
-:class:`sim.msm.MSMError`; it never returns a non-finite state.
+:class:`sim.msm.msm.MSMError`; it never returns a non-finite state.
 """
 
 from __future__ import annotations
@@ -23,10 +23,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import lapack
 
-from sim.blas_threads import blas_threads
-from sim.msm import MSM, MSMError, max_norm, unit
+from sim.msm import paper
+from sim.msm.blas_threads import blas_threads
+from sim.msm.msm import MSM, MSMError, max_norm, unit
 
-DEFAULT_TOL = 1e-6        # N: largest force on any mass at an accepted equilibrium
+DEFAULT_TOL = paper.STATIC_TOL_N   # N: largest force on any mass at an accepted equilibrium
 MEMORY = 8                # L-BFGS pairs kept
 REFACTOR_AFTER = 6        # refresh the factor at the next step when a step took more iterations
 REFACTOR_EVERY = 12       # ... and within a step after this many iterations on one factor

@@ -1,8 +1,9 @@
 """The trial as Qualisys saw it: the truth on the mocap clock and what the cameras delivered.
 
 Phantom markers and tip follow the solved phantom along each press; the indenter cluster rides
-the hand's pose. Noise and occlusion gaps (:mod:`sim.mocap_errors`) give the measured markers,
-and QTM's 6D body is a rigid fit of the measured cluster, as QTM would compute it.
+the hand's pose. Noise and occlusion gaps (:mod:`sim.twin.mocap_errors`) give the measured markers,
+and QTM's 6D body is the body fitted to the measured cluster, as QTM computes it
+(:mod:`sim.twin.body_fit`).
 """
 
 from __future__ import annotations
@@ -11,12 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.indenter import Hand, IndenterGeometry
-from sim.mocap_errors import gap_mask, gap_rates, residual_noise
-from sim.phantom import LoadPath, Phantom
-from sim.twin_force_log import contact_wrench
-from sim.twin_scene import Lab, TwinParams
-from sync.rigid import fit_rigid
+from sim.twin.body_fit import qtm_body
+from sim.twin.indenter import Hand, IndenterGeometry
+from sim.twin.mocap_errors import gap_mask, gap_rates, residual_noise
+from sim.twin.phantom import LoadPath, Phantom
+from sim.twin.twin_force_log import contact_wrench
+from sim.twin.twin_scene import Lab, TwinParams
 
 
 @dataclass
@@ -66,10 +67,10 @@ def play_mocap(p: TwinParams, phantom: Phantom, lab: Lab, hand: Hand, paths: lis
     visible = gap_mask(g_gap, rates, p.rate_hz, p.errors)
     measured = truth + residual_noise(g_cam, truth.shape[:2], p.errors)
     measured[~visible] = np.nan
-    fit = fit_rigid(indenter.markers, measured[:, 25:], max_rms=1.0, drop_outlier=False)
+    body_origin, body_rotation, body_residual = qtm_body(indenter.markers, measured[:, 25:])
     return Mocap(
         time_s=time_s, points=np.concatenate([markers, tip[:, None]], axis=1), cluster=cluster,
         origin=origin, rotation=st.rotation, press=st.press, force=st.force,
         force_lab=force_lab, force_sensor=force_sensor, torque_sensor=torque,
-        visible=visible, measured=measured, body_origin=fit.translation,
-        body_rotation=fit.rotation, body_residual=fit.rms, events=[])
+        visible=visible, measured=measured, body_origin=body_origin,
+        body_rotation=body_rotation, body_residual=body_residual, events=[])

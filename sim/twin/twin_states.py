@@ -7,10 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.indenter import Hand
-from sim.phantom import LoadPath
-from sim.twin_mocap import Mocap
-from sim.twin_scene import STEP_N, Lab
+from core.protocol import STEP_N
+from sim.twin.indenter import Hand
+from sim.twin.phantom import LoadPath
+from sim.twin.twin_mocap import Mocap
+from sim.twin.twin_scene import Lab
 
 
 @dataclass

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.indenter import GRAVITY, Hand, IndenterGeometry
-from sim.nano17 import Nano17
-from sim.twin_scene import TwinParams
+from sim.twin.indenter import GRAVITY, Hand, IndenterGeometry
+from sim.twin.nano17 import Nano17
+from sim.twin.twin_scene import TwinParams
 
 
 @dataclass

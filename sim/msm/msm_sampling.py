@@ -1,8 +1,8 @@
 """The MSM seen where a lab sees its phantom: at marker positions, loaded over a contact patch.
 
-Both the fit (:mod:`sim.msm_fit`) and the lab-layout data set (:mod:`sim.msm_dataset`) compare
-or sample the MSM at points that are not its masses (25 markers at 20 mm pitch do not sit on a
-3.2 mm grid). A point at rest position (x, y) on the grid follows the bilinear blend of the
+Both the fit (:mod:`sim.msm.msm_fit`) and the lab-layout data set (:mod:`sim.msm.msm_dataset`)
+compare or sample the MSM at points that are not its masses (25 markers at 20 mm pitch do not
+sit on a 3.2 mm grid). A point at rest position (x, y) on the grid follows the bilinear blend of the
 displacements of the four masses around it: no tie between two "nearest" masses, no jump
 when a marker sits half-way. Everything is in the phantom frame, which is the grid's frame
 (``[0, size]^2`` at z = 0, +z out of the surface).
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.msm import MSM
+from sim.msm.msm import MSM
 
 
 @dataclass(frozen=True)

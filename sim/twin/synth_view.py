@@ -23,6 +23,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from core.protocol import STEP_N
 from core.recording import (
     colormap,
     declare_up,
@@ -32,7 +33,7 @@ from core.recording import (
     send_series,
     time_column,
 )
-from sim.twin import Twin
+from sim.twin.twin import Twin
 
 APP_ID = "phantom-synth"
 VIEW_HZ = 50.0
@@ -56,7 +57,8 @@ def blueprint(twin: Twin, k: int, depth_mm: float) -> rrb.Blueprint:
                          "cubes, measured orange", ["+ /phantom/**", "+ /truth/**",
                                                     "+ /measured/**"],
                          centre, max(size[:2]), up),
-            plot("force magnitude [N]: truth green, logger orange, 0.5 N states", "/force"),
+            plot(f"force magnitude [N]: truth green, logger orange, {STEP_N:g} N states",
+                 "/force"),
             column_shares=[3, 2],
         ),
         collapse_panels=False,
@@ -168,8 +170,9 @@ def _log_force(rec: rr.RecordingStream, twin: Twin, frames: np.ndarray,
     send_series(rec, "force/measured", TIMELINE, _ns(log.mocap_time_s[rows]), measured,
                 "logged force", COLORS["measured"], width=1.0)
     st = twin.states
-    rec.log("force/states", rr.SeriesPoints(names=["0.5 N states"], colors=[COLORS["states"]],
-                                            markers=["circle"], marker_sizes=[4.0]),
+    rec.log("force/states", rr.SeriesPoints(names=[f"{STEP_N:g} N states"],
+                                            colors=[COLORS["states"]], markers=["circle"],
+                                            marker_sizes=[4.0]),
             static=True)
     rec.send_columns("force/states", indexes=[time_column(TIMELINE, _ns(st.time_s[mine]))],
                      columns=rr.Scalars.columns(scalars=st.force[mine]))

@@ -10,7 +10,7 @@ surface normal is +z and an indenting force points into the surface (negative z)
 The reference solver integrates ``m a = f(x) + f_ext - c v`` explicitly (semi-implicit Euler,
 time step ``dt``) until the paper's stability criterion holds on every mass: ``|v| < v_static``
 and ``|f| < f_static`` (``f`` is the force of the springs and the load, without damping). It is
-what the paper did; :mod:`sim.msm_static` is the fast path that solves the same equilibrium.
+what the paper did; :mod:`sim.msm.msm_static` is the fast path that solves the same equilibrium.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from core.errors import BadInput
+from sim.msm import paper
 
 # Edge families as (row offset, column offset): rows, columns, the one diagonal.
 FAMILIES: tuple[tuple[int, int], ...] = ((0, 1), (1, 0), (1, 1))
@@ -43,15 +44,15 @@ class MSMError(BadInput):
 class MSMParams:
     """The paper's MSM parameters (SI units)."""
 
-    n: int = 32                 # masses per side
-    size: float = 0.1           # m, side length of the surface
-    mass: float = 0.00016       # kg per mass
-    damping: float = 0.1        # N s/m: damping force -c v on each mass
-    k_between: float = 100.0    # N/m, springs between masses
-    k_fixed: float = 21.0       # N/m, zero-length springs to the rest positions
-    dt: float = 1e-4            # s, explicit time step of the reference solver
-    v_static: float = 0.02      # m/s, stability criterion on every mass
-    f_static: float = 0.02      # N, stability criterion on every mass
+    n: int = paper.GRID_N               # masses per side
+    size: float = paper.SIZE_M          # m, side length of the surface
+    mass: float = paper.MASS_KG         # kg per mass
+    damping: float = paper.DAMPING      # N s/m: damping force -c v on each mass
+    k_between: float = paper.K_BETWEEN  # N/m, springs between masses
+    k_fixed: float = paper.K_FIXED      # N/m, zero-length springs to the rest positions
+    dt: float = paper.DT_S              # s, explicit time step of the reference solver
+    v_static: float = paper.V_STATIC    # m/s, stability criterion on every mass
+    f_static: float = paper.F_STATIC    # N, stability criterion on every mass
 
     def __post_init__(self) -> None:
         if not isinstance(self.n, int | np.integer) or self.n < 2:

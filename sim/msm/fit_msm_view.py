@@ -22,8 +22,9 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from core.recording import colormap, declare_up, phantom_view, recording
-from sim.msm import MSM, MSMParams
-from sim.msm_fit import FitResult, MeasuredSequence, at_points, grid_states
+from sim.msm.msm import MSM, MSMParams
+from sim.msm.msm_fit import FitResult, at_points, grid_states
+from sim.msm.msm_measured import MeasuredSequence
 
 APP_ID = "phantom-fit-msm"
 MEASURED, MODEL, ERROR = (255, 127, 14), (31, 119, 180), (214, 39, 40)

@@ -17,13 +17,13 @@ import numpy as np
 
 from core.errors import BadInput
 from core.progress import progress
-from sim.indenter import Hand
-from sim.mocap_errors import MocapErrors
-from sim.phantom import LoadPath, Phantom, PhantomSpec
+from core.protocol import STEP_N
+from sim.twin.indenter import Hand
+from sim.twin.mocap_errors import MocapErrors
+from sim.twin.phantom import LoadPath, Phantom, PhantomSpec
 
 PHANTOM_MARKERS = tuple(f"P{k:02d}" for k in range(25))
 TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
-STEP_N = 0.5                        # static states every 0.5 N
 FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
 
 Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab

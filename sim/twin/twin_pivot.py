@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.indenter import IndenterGeometry, pivot_motion
-from sim.mocap_errors import gap_mask, residual_noise
-from sim.twin_scene import Lab, TwinParams
+from sim.twin.indenter import IndenterGeometry, pivot_motion
+from sim.twin.mocap_errors import gap_mask, residual_noise
+from sim.twin.twin_scene import Lab, TwinParams
 
 
 @dataclass
