@@ -30,8 +30,8 @@ import h5py
 import numpy as np
 
 from core.progress import set_quiet
+from ingest.ingest_stage import run_ingest
 from ingest.mcap_io import read_raw_mcap
-from ingest.session_to_mcap import ingest_session
 from sim.twin.synth_stage import run_synth
 from sync.clock import ClockFit
 from sync.force import apply_calibration, rest_baseline
@@ -72,7 +72,7 @@ def long_session_force(workdir: Path) -> dict[str, tuple[float, float]]:
     """Loaded-force RMS (all presses, last press) of a 7-minute session, re-tared or not."""
     folder = run_synth(workdir / "long", seed=0, press_seconds=20.0)
     mcap = workdir / "long.mcap"
-    ingest_session(folder, mcap)
+    run_ingest(folder, mcap)
     out = {}
     for key, retare in (("on", True), ("off", False)):
         synced = workdir / f"long_{key}.h5"
@@ -95,7 +95,7 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
     for seed in range(seeds):
         folder = run_synth(workdir / f"s{seed}", seed=seed)
         mcap = workdir / f"s{seed}.mcap"
-        ingest_session(folder, mcap)
+        run_ingest(folder, mcap)
         truth = folder / "truth.h5"
         for method in ("trigger", "data"):
             out = workdir / f"s{seed}_{method}.h5"
@@ -109,7 +109,7 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
         run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
         rows["plain_tip"].append(sync_errors(plain, truth))
         analog = run_synth(workdir / f"a{seed}", seed=seed, force_via="analog")
-        ingest_session(analog, workdir / f"a{seed}.mcap")
+        run_ingest(analog, workdir / f"a{seed}.mcap")
         run_sync(workdir / f"a{seed}.mcap", workdir / f"a{seed}.h5")
         rows["analog"].append(sync_errors(workdir / f"a{seed}.h5", analog / "truth.h5"))
         print(f"seed {seed}: done", flush=True)

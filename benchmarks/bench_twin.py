@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ingest.session_to_mcap import ingest_session
+from ingest.ingest_stage import run_ingest
 from sim.twin.phantom import Phantom
 from sim.twin.synth_stage import write_twin
 from sim.twin.twin import simulate
@@ -96,7 +96,7 @@ def main() -> None:
         folder = Path(tmp) / "session"
         sim_s, twin = median_time(lambda: simulate(TwinParams(seed=0)), args.repeats)
         write_s, _ = median_time(lambda: write_twin(twin, folder), args.repeats)
-        read_s, _ = median_time(lambda: ingest_session(folder, Path(tmp) / "s.mcap"),
+        read_s, _ = median_time(lambda: run_ingest(folder, Path(tmp) / "s.mcap"),
                                 args.repeats)
         frames = len(twin.mocap.time_s)
         print(f"default session ({len(twin.hand.presses)} presses, {frames} frames, "

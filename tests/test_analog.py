@@ -22,9 +22,9 @@ from core.errors import BadInput
 from ingest.analog import analog_force, channel_names, resolve_channels
 from ingest.c3d import read_c3d, read_c3d_analog
 from ingest.detect import detect_format, read_analog
+from ingest.inspect_stage import run_inspect
 from ingest.qtm_tsv import read_qtm_analog
 from pipeline.cli import cli
-from pipeline.inspect import inspect_file
 from sync.sync_accuracy import TARGETS, sync_errors
 
 REAL = Path("c3d") / "qualisys_55markers_200hz.c3d"
@@ -105,7 +105,7 @@ def test_real_force_plate_as_a_wrench(real_samples):
 
 
 def test_real_file_inspect_lists_analog_channels(real_samples):
-    s = inspect_file(real_samples / REAL)
+    s = run_inspect(real_samples / REAL)
     a = s["analog"]
     assert (a["rate_hz"], a["samples_per_frame"], len(a["channels"])) == (2000, 10, 69)
     emg = a["channels"][40]

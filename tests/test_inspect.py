@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from ingest.inspect_stage import KEYS, run_inspect
 from pipeline.cli import cli
-from pipeline.inspect import KEYS, inspect_file
 
 pytestmark = pytest.mark.usefixtures("real_samples")
 
@@ -51,7 +51,7 @@ def test_marker_exports(path, fmt, frames, rate, names, missing, first):
 
 
 def test_qtm2010_names_with_spaces_and_dashes():
-    s = inspect_file(QTM2010)
+    s = run_inspect(QTM2010)
     assert "Knee Hinge" in s["markers"] and "Lower Leg IMU - 3" in s["markers"]
 
 

@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from core.recording import rrd_entities, rrd_timelines
-from ingest.session_to_mcap import ingest_session
+from ingest.ingest_stage import run_ingest
 from pipeline.cli import cli
 from sim.twin.synth_stage import run_synth
 from sync.gaps import FILLED, MISSING
@@ -36,7 +36,7 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, 
         folder = run_synth(root / f"s{seed}", seed=seed, locations=2, repeats=1,
                                     press_seconds=60.0, pivot_seconds=10.0)
         mcap = root / f"s{seed}.mcap"
-        ingest_session(folder, mcap)
+        run_ingest(folder, mcap)
         synced = root / f"s{seed}.h5"
         if seed == 0:
             res = CliRunner().invoke(cli, ["-q", "sync", str(mcap), "--out", str(synced)])

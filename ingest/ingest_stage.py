@@ -1,4 +1,4 @@
-"""A raw session folder (lab files + session.toml) into one MCAP file (``pipeline ingest``).
+"""The ingest stage runner: a raw session folder (lab files + session.toml) into one MCAP file.
 
 Reads every file the session names with the lab readers, which check each file on its own
 (unique names, numbers, increasing time, a finite 6x6 calibration); checks that the files agree
@@ -36,7 +36,7 @@ from ingest.mcap_io import write_raw_mcap
 from ingest.qtm_tsv import read_qtm_6d
 
 
-def ingest_session(folder: str | Path, out: str | Path, rrd: str | Path | None = None,
+def run_ingest(folder: str | Path, out: str | Path, rrd: str | Path | None = None,
                    compression: str = "none") -> RawSession:
     """Read, check and store the session in ``folder``; ``rrd`` also writes the recording.
 

@@ -1,4 +1,4 @@
-"""``pipeline inspect``: one summary for any lab file and any file the pipeline writes.
+"""The inspect stage runner: one summary for any lab file and any file the pipeline writes.
 
 The summary is a dict with the same keys for every format (``None`` where a key does not apply),
 so scripts can rely on them (``pipeline inspect FILE --json``):
@@ -23,11 +23,31 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 
 from core.errors import BadInput
+from core.recording import rrd_entities, rrd_has_blueprint
 from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
 from core.text import attr_text
+from data_schema.hdf5 import h5_reading
+from data_schema.json_docs import (
+    JSON_SCHEMAS,
+    METRIC_ROWS,
+    validate_folds,
+    validate_json_doc,
+    validate_metrics,
+)
+from data_schema.raw_mcap import open_reader, read_index, reading
+from data_schema.registry import validator_for
+from data_schema.session import SCHEMA, VERSION, read_session
+from ingest.ati_cal import read_ati_cal
+from ingest.c3d import read_c3d, read_c3d_analog
+from ingest.detect import detect_format
+from ingest.force_log import force_log_columns, read_force_log
+from ingest.mcap_io import read_raw_mcap
+from ingest.qtm_mat import read_qtm_mat
+from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d, read_qtm_analog
 
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
         "missing_samples", "units", "events", "analog", "schema", "schema_version",
@@ -38,7 +58,7 @@ TRIGGER_NAMES = ("trigger", "sync")
 WRENCH_NAMES = ("fx", "fy", "fz", "tx", "ty", "tz", "mx", "my", "mz")
 
 
-def inspect_file(path: str | Path) -> dict[str, Any]:
+def run_inspect(path: str | Path) -> dict[str, Any]:
     """The summary of ``path`` (see the module doc for its keys); unknown formats are bad input."""
     path = Path(path)
     if not path.is_file():
@@ -105,8 +125,6 @@ def _analog_lines(a: dict[str, Any]) -> list[str]:
 
 
 def _detect(path: Path) -> str:
-    from ingest.detect import detect_format
-
     fmt = detect_format(path)
     if fmt not in _INSPECT:
         raise BadInput(path, f"no summary for format {fmt!r}")
@@ -147,15 +165,11 @@ def _markers(m: MarkerSeries, default_units: str) -> dict[str, Any]:
 
 
 def _inspect_qtm_3d(path: Path) -> dict[str, Any]:
-    from ingest.qtm_tsv import read_qtm_3d
-
     m = read_qtm_3d(path)
     return {**_markers(m, "mm"), "details": _plain(m.meta)}
 
 
 def _inspect_qtm_6d(path: Path) -> dict[str, Any]:
-    from ingest.qtm_tsv import read_qtm_6d
-
     b = read_qtm_6d(path)
     return {**_series(b), "bodies": list(b.bodies), "missing_samples": b.missing_samples(),
             "units": {"position": _file_units(b.meta, "mm"), "rotation": "1",
@@ -164,16 +178,12 @@ def _inspect_qtm_6d(path: Path) -> dict[str, Any]:
 
 
 def _inspect_c3d(path: Path) -> dict[str, Any]:
-    from ingest.c3d import read_c3d, read_c3d_analog
-
     m = read_c3d(path)
     analog = read_c3d_analog(path).summary() if m.meta.get("analog_rate") else None
     return {**_markers(m, "mm"), "analog": analog, "details": _plain(m.meta)}
 
 
 def _inspect_qtm_analog(path: Path) -> dict[str, Any]:
-    from ingest.qtm_tsv import read_qtm_analog
-
     a = read_qtm_analog(path)
     return {"frames": a.samples, "rate_hz": a.rate_hz, "duration_s": _duration(a.time_ns()),
             "channels": a.names, "units": dict(zip(a.names, a.units, strict=True)),
@@ -181,8 +191,6 @@ def _inspect_qtm_analog(path: Path) -> dict[str, Any]:
 
 
 def _inspect_qtm_mat(path: Path) -> dict[str, Any]:
-    from ingest.qtm_mat import read_qtm_mat
-
     m = read_qtm_mat(path)
     return {**_markers(m, "mm"), "details": _plain(m.meta)}
 
@@ -190,8 +198,6 @@ def _inspect_qtm_mat(path: Path) -> dict[str, Any]:
 def _inspect_force(path: Path) -> dict[str, Any]:
     """A force log without its session.toml: time is the column named like time (in s), a
     column named trigger or sync is the trigger, every other column a channel."""
-    from ingest.force_log import force_log_columns, read_force_log
-
     columns = [str(c) for c in force_log_columns(path)]
     time_col = next((c for c in columns if c.lower() in TIME_NAMES), columns[0])
     trigger = next((c for c in columns if c.lower() in TRIGGER_NAMES and c != time_col), None)
@@ -209,8 +215,6 @@ def _inspect_force(path: Path) -> dict[str, Any]:
 
 
 def _inspect_cal(path: Path) -> dict[str, Any]:
-    from ingest.ati_cal import read_ati_cal
-
     return _calibration(read_ati_cal(path))
 
 
@@ -224,9 +228,6 @@ def _calibration(c: AtiCalibration) -> dict[str, Any]:
 
 
 def _inspect_mcap(path: Path) -> dict[str, Any]:
-    from data_schema.raw_mcap import open_reader, read_index, reading
-    from ingest.mcap_io import read_raw_mcap
-
     s: RawSession = read_raw_mcap(path)            # every block checked on the way
     with reading(path), open(path, "rb") as f:
         index = read_index(open_reader(f, path), path)
@@ -252,10 +253,6 @@ def _inspect_mcap(path: Path) -> dict[str, Any]:
 
 def _inspect_hdf5(path: Path) -> dict[str, Any]:
     """Root attributes and every dataset, read generically (any schema, ours or not)."""
-    import h5py
-
-    from data_schema.hdf5 import h5_reading
-
     with h5_reading(path), h5py.File(path, "r") as f:
         attrs = {k: _attr(v) for k, v in f.attrs.items()}
         datasets: dict[str, dict[str, Any]] = {}
@@ -303,8 +300,6 @@ def _nan_points(ds: Any, rows: int = 1 << 16) -> int:
 
 
 def _validity(path: Path, schema: str | None) -> str | None:
-    from data_schema.registry import validator_for
-
     check = validator_for(schema) if schema else None
     if check is None:
         return None
@@ -312,14 +307,6 @@ def _validity(path: Path, schema: str | None) -> str | None:
 
 
 def _inspect_json(path: Path) -> dict[str, Any]:
-    from data_schema.json_docs import (
-        JSON_SCHEMAS,
-        METRIC_ROWS,
-        validate_folds,
-        validate_json_doc,
-        validate_metrics,
-    )
-
     try:
         doc = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
@@ -352,8 +339,6 @@ def _valid(check: Callable[[], object]) -> str:
 
 def _inspect_session(path: Path) -> dict[str, Any]:
     """A session.toml: which files it names and which markers belong to what."""
-    from data_schema.session import SCHEMA, VERSION, read_session
-
     if path.name != "session.toml":
         raise BadInput(path, "a session file must be named session.toml inside its folder")
     cfg = read_session(path.parent)
@@ -373,8 +358,6 @@ def _inspect_session(path: Path) -> dict[str, Any]:
 
 
 def _inspect_rrd(path: Path) -> dict[str, Any]:
-    from core.recording import rrd_entities, rrd_has_blueprint
-
     try:
         entities = rrd_entities(path)
         blueprint = rrd_has_blueprint(path)
