@@ -20,7 +20,8 @@ def inspect(file: Path, as_json: bool) -> None:
     Writes nothing; prints text, or with --json one JSON object whose keys are the same for
     every format (null where a key does not apply).
     """
-    from ingest.inspect_stage import format_summary, run_inspect
+    from ingest.inspect_stage import run_inspect
+    from ingest.inspect_view import format_summary
 
     summary = run_inspect(file)
     if as_json:
