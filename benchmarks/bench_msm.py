@@ -8,7 +8,7 @@ of accuracy against time as the fast path's tolerance and the reference's stoppi
 move, errors against an equilibrium solved to 1e-10 N; (4) what HDF5 compression would cost.
 
 The fast path is timed as the dataset runs it: one solver per location keeps the Cholesky
-factor of the rest stiffness for all 11 directions (``sim.msm.msm_dataset._simulate_location``),
+factor of the rest stiffness for all 11 directions (``sim.msm.msm_simulate._simulate_location``),
 so here one solver per tolerance serves every sequence and the rest factorisation is timed on
 its own and added, shared by a location's 11 x 15 examples. The paper's 2.93 s per example is
 a figure from other code on another CPU: its ratio is printed apart from the in-run ratios.
