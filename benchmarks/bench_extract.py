@@ -3,13 +3,14 @@
 For each seed: synth a default session (20 presses), ingest, sync, extract; then, against
 truth.h5:
 
-* levels: presses whose extracted levels are exactly 0 .. floor(max true force / 0.5 N) (the
+* levels: presses whose extracted levels are exactly 0 .. floor(max true force / step_n) (the
   levels the true contact force reached; truth's own ``states`` stop at the planned peak
   ``presses/fmax``, which hand tremor can overshoot or fall short of: counted and printed);
 * points: each state's mean point distance from the true state (truth moved into the phantom
   frame with the file's ``sessions/transform``), median and max over states, beside the raw
   synced markers' own distance from truth at the frame nearest the true crossing;
-* force: |force - level| (max and median, N);
+* force: |force - level| (max and median, N), a state's level being ``step * step_n`` (the
+  states file's own level spacing);
 * the paper's counts beside ours: 244 states from 20 presses (12.2 per press), and its Table 1
   depth features of the experimental sets, computed the same way for our examples: per
   example the largest point displacement |end - start| (max over examples; mean +- sd over
@@ -31,10 +32,9 @@ import h5py
 import numpy as np
 from click.testing import CliRunner
 
-from calib.phantom_frame import apply_transform
+from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
 
-STEP_N = 0.5
 PAPER = {"states": 244, "presses": 20,
          "single": {"dF": "0.5", "max": 12.91, "mean": 2.38, "sd": 2.97},
          "multi": {"dF": "1-7.5", "max": 30.27, "mean": 8.91, "sd": 7.96}}
@@ -58,10 +58,10 @@ def make_session(seed: int, d: Path) -> float:
     return time.perf_counter() - t0
 
 
-def reached_levels(truth: h5py.File) -> dict[int, int]:
-    """Per true press, the top level its true contact force reached."""
+def reached_levels(truth: h5py.File, step_n: float) -> dict[int, int]:
+    """Per true press, the top level (every ``step_n`` N) its true contact force reached."""
     force, press = truth["force/magnitude"][()], truth["mocap/press"][()]
-    return {int(p): int(np.floor(force[press == p].max() / STEP_N + 1e-9))
+    return {int(p): int(np.floor(force[press == p].max() / step_n + 1e-9))
             for p in np.unique(press[press >= 0])}
 
 
@@ -80,12 +80,12 @@ def measure(d: Path) -> dict:
     """Every figure of one session against its truth."""
     with h5py.File(d / "states.h5") as s, h5py.File(d / "s" / "truth.h5") as t, \
             h5py.File(d / "synced.h5") as y:
-        seq, step = s["states/sequence"][()], s["states/step"][()]
+        seq, step, step_n = s["states/sequence"][()], s["states/step"][()], s.attrs["step_n"]
         pts, valid, force = s["states/points"][()], s["states/valid"][()], s["states/force"][()]
         to_phantom = s["sessions/transform"][0]
         t_pts, t_step, t_press, t_time = (t["states/points"][()], t["states/step"][()],
                                           t["states/press"][()], t["states/time_s"][()])
-        top = reached_levels(t)
+        top = reached_levels(t, step_n)
         truth_top = {p: int(t_step[t_press == p].max()) for p in top}
         raw = [(g["time_ns"][()] * 1e-9, g["points"][()])
                for g in (y["presses"][k] for k in sorted(y["presses"].keys()))]
@@ -113,7 +113,7 @@ def measure(d: Path) -> dict:
             "extra": extra, "flagged": excluded.get("tip_missing", 0) + excluded.get("too_fast", 0),
             "truth_off": sum(truth_top[p] != top[p] for p in top),
             "ours_mm": np.array(ours) * 1e3, "raw_mm": np.array(theirs) * 1e3,
-            "force_err": np.abs(force - STEP_N * step), "examples": ex}
+            "force_err": np.abs(force - step_n * step), "examples": ex}
 
 
 def _pm(x: np.ndarray) -> str:

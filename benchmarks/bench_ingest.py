@@ -5,7 +5,7 @@ minutes (300,000 frames, real TSV header keys, a Frame/Time column line, occlusi
 1 kHz six-gauge force CSV of the same length, an ATI .cal and session.toml. Then times, as the
 median over repeats:
 
-* ``ingest_session`` without a recording, and with one;
+* ``run_ingest`` without a recording, and with one;
 * the peer: a bare ``pandas.read_csv`` of the same TSV data block into a float64 array;
 
 and prints the ratio (target: ingest within 1.5x of the bare parse). Peak memory of each, in a
@@ -130,10 +130,10 @@ def bare_parse(tsv: Path) -> np.ndarray:
 
 def ingest(folder: Path, out: Path, rrd: Path | None) -> None:
     from core.progress import set_quiet
-    from ingest.session_to_mcap import ingest_session
+    from ingest.ingest_stage import run_ingest
 
     set_quiet(True)
-    ingest_session(folder, out, rrd)
+    run_ingest(folder, out, rrd)
 
 
 def timed(fn, fresh: tuple[Path, ...] = ()) -> float:  # noqa: ANN001 - any callable
@@ -150,7 +150,7 @@ import sys
 sys.path.insert(0, {root!r})
 import numpy, pandas, rerun, mcap, h5py, zstandard
 import benchmarks.bench_ingest as b
-import ingest.session_to_mcap, ingest.ingest_view, ingest.detect, ingest.force_log
+import ingest.ingest_stage, ingest.ingest_view, ingest.detect, ingest.force_log
 def hwm():
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM:"):
@@ -199,10 +199,10 @@ def main() -> None:
         t_bare, t_ingest, t_rrd = (statistics.median(r[i] for r in rounds) for i in range(3))
         print(f"bare pandas.read_csv of the TSV data block: {t_bare:7.2f} s (median of "
               f"{args.repeats}; rounds {', '.join(f'{r[0]:.2f}' for r in rounds)})")
-        print(f"ingest_session, no recording:               {t_ingest:7.2f} s   "
+        print(f"run_ingest, no recording:                   {t_ingest:7.2f} s   "
               f"ratio {t_ingest / t_bare:.2f}x (target <= 1.5x); per round "
               f"{', '.join(f'{r[1] / r[0]:.2f}' for r in rounds)}")
-        print(f"ingest_session, with recording:             {t_rrd:7.2f} s   "
+        print(f"run_ingest, with recording:                 {t_rrd:7.2f} s   "
               f"ratio {t_rrd / t_bare:.2f}x; per round "
               f"{', '.join(f'{r[2] / r[0]:.2f}' for r in rounds)}; recording "
               f"{rrd.stat().st_size / 1e6:.0f} MB")
@@ -224,7 +224,7 @@ def main() -> None:
                      for _ in range(args.repeats)]
             t_load, t_mat = (statistics.median(p[i] for p in pairs) for i in range(2))
             print(f"QTM MAT v7 ({mat.stat().st_size / 1e6:.0f} MB): bare scipy.io.loadmat "
-                  f"{t_load:.2f} s, ingest_session {t_mat:.2f} s, ratio {t_mat / t_load:.2f}x; "
+                  f"{t_load:.2f} s, run_ingest {t_mat:.2f} s, ratio {t_mat / t_load:.2f}x; "
                   f"per round {', '.join(f'{b / a:.2f}' for a, b in pairs)}")
         if args.profile:
             prof = cProfile.Profile()

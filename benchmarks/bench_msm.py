@@ -8,7 +8,7 @@ of accuracy against time as the fast path's tolerance and the reference's stoppi
 move, errors against an equilibrium solved to 1e-10 N; (4) what HDF5 compression would cost.
 
 The fast path is timed as the dataset runs it: one solver per location keeps the Cholesky
-factor of the rest stiffness for all 11 directions (``sim.msm_dataset._simulate_location``),
+factor of the rest stiffness for all 11 directions (``sim.msm.msm_simulate._simulate_location``),
 so here one solver per tolerance serves every sequence and the rest factorisation is timed on
 its own and added, shared by a location's 11 x 15 examples. The paper's 2.93 s per example is
 a figure from other code on another CPU: its ratio is printed apart from the in-run ratios.
@@ -29,10 +29,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from sim.blas_threads import blas_threads
-from sim.msm import MSM, MSMParams, simulate_reference
-from sim.msm_dataset import Protocol, draw_plan, generate
-from sim.msm_static import DEFAULT_TOL, BandedTangent, StaticSolver, simulate_sequence
+from sim.msm.blas_threads import blas_threads
+from sim.msm.msm import MSM, MSMParams, simulate_reference
+from sim.msm.msm_dataset import generate
+from sim.msm.msm_protocol import Protocol, draw_plan
+from sim.msm.msm_static import DEFAULT_TOL, BandedTangent, StaticSolver, simulate_sequence
 
 PAPER_S_PER_EXAMPLE = 2.93                          # the paper's machine and code
 EXAMPLES_PER_LOCATION = 11 * 15                     # share one rest factorisation

@@ -29,15 +29,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from calib.clock import ClockFit
-from calib.force import apply_calibration, rest_baseline
-from calib.sync_accuracy import TARGETS, sync_errors
-from calib.sync_params import SyncParams
 from core.progress import set_quiet
+from ingest.ingest_stage import run_ingest
 from ingest.mcap_io import read_raw_mcap
-from ingest.session_to_mcap import ingest_session
-from pipeline.sync_stage import run_sync
-from sim.twin_folder import synthesize_session
+from sim.twin.synth_stage import run_synth
+from sync.clock import ClockFit
+from sync.force import apply_calibration, rest_baseline
+from sync.sync_accuracy import TARGETS, sync_errors
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 
 def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
@@ -70,9 +70,9 @@ def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
 
 def long_session_force(workdir: Path) -> dict[str, tuple[float, float]]:
     """Loaded-force RMS (all presses, last press) of a 7-minute session, re-tared or not."""
-    folder = synthesize_session(workdir / "long", seed=0, press_seconds=20.0)
+    folder = run_synth(workdir / "long", seed=0, press_seconds=20.0)
     mcap = workdir / "long.mcap"
-    ingest_session(folder, mcap)
+    run_ingest(folder, mcap)
     out = {}
     for key, retare in (("on", True), ("off", False)):
         synced = workdir / f"long_{key}.h5"
@@ -93,9 +93,9 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
                                                "analog": []}
     naive, times_seeds, times, times_rrd = [], [], [], []
     for seed in range(seeds):
-        folder = synthesize_session(workdir / f"s{seed}", seed=seed)
+        folder = run_synth(workdir / f"s{seed}", seed=seed)
         mcap = workdir / f"s{seed}.mcap"
-        ingest_session(folder, mcap)
+        run_ingest(folder, mcap)
         truth = folder / "truth.h5"
         for method in ("trigger", "data"):
             out = workdir / f"s{seed}_{method}.h5"
@@ -108,8 +108,8 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
         plain = workdir / f"s{seed}_plain.h5"
         run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
         rows["plain_tip"].append(sync_errors(plain, truth))
-        analog = synthesize_session(workdir / f"a{seed}", seed=seed, force_via="analog")
-        ingest_session(analog, workdir / f"a{seed}.mcap")
+        analog = run_synth(workdir / f"a{seed}", seed=seed, force_via="analog")
+        run_ingest(analog, workdir / f"a{seed}.mcap")
         run_sync(workdir / f"a{seed}.mcap", workdir / f"a{seed}.h5")
         rows["analog"].append(sync_errors(workdir / f"a{seed}.h5", analog / "truth.h5"))
         print(f"seed {seed}: done", flush=True)
@@ -178,7 +178,7 @@ def _report(rows: dict[str, list[dict[str, float]]], naive: list[float],
 def trigger_matching_time(repeats: int) -> None:
     """match_trigger on a half-hour session (1,200 pulses, every 97th edge missed): the
     vectorised count of 1.4 million (edge, event) proposals, median of ``repeats``."""
-    from calib.clock import match_trigger
+    from sync.clock import match_trigger
 
     rng = np.random.default_rng(5)
     events = np.cumsum(rng.uniform(0.7, 2.3, 1200))

@@ -10,7 +10,7 @@ Times, as medians over repeats:
   factorisation is made once per session and shared by its presses: it is timed on its own
   and the ratio is given with it amortised over a default session's presses and with it
   charged in full to the one press;
-* a default session (5 locations x 4 repeats, ``synthesize_session`` without a recording),
+* a default session (5 locations x 4 repeats, ``run_synth`` without a recording),
   split into simulation and writing, against the peer that reads it back, ``pipeline ingest``.
 
     python benchmarks/bench_twin.py [--repeats 3]
@@ -28,11 +28,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ingest.session_to_mcap import ingest_session
-from sim.phantom import Phantom
-from sim.twin import simulate
-from sim.twin_folder import write_twin
-from sim.twin_scene import TwinParams
+from ingest.ingest_stage import run_ingest
+from sim.twin.phantom import Phantom
+from sim.twin.synth_stage import write_twin
+from sim.twin.twin import simulate
+from sim.twin.twin_scene import TwinParams
 
 LEVELS = np.concatenate([[0.25], np.arange(0.5, 7.01, 0.5), [7.2, 7.3]])
 TILT = np.radians(20.0)
@@ -96,7 +96,7 @@ def main() -> None:
         folder = Path(tmp) / "session"
         sim_s, twin = median_time(lambda: simulate(TwinParams(seed=0)), args.repeats)
         write_s, _ = median_time(lambda: write_twin(twin, folder), args.repeats)
-        read_s, _ = median_time(lambda: ingest_session(folder, Path(tmp) / "s.mcap"),
+        read_s, _ = median_time(lambda: run_ingest(folder, Path(tmp) / "s.mcap"),
                                 args.repeats)
         frames = len(twin.mocap.time_s)
         print(f"default session ({len(twin.hand.presses)} presses, {frames} frames, "

@@ -25,8 +25,10 @@ import torch
 from bench_cgnn import median_ms
 from speed_accuracy_report import NOTHING, region_text
 
-from sim.msm import MSMParams
-from sim.msm_dataset import Protocol, draw_plan, generate, simulate
+from sim.msm.msm import MSMParams
+from sim.msm.msm_dataset import generate
+from sim.msm.msm_protocol import Protocol, draw_plan
+from sim.msm.msm_simulate import simulate
 from train.evaluate import load_run
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig

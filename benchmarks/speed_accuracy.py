@@ -44,8 +44,9 @@ from region_study import region_rows
 from speed_accuracy_report import write_report
 
 from core.progress import set_quiet
-from sim.msm import MSMParams
-from sim.msm_dataset import Protocol, generate
+from sim.msm.msm import MSMParams
+from sim.msm.msm_dataset import generate
+from sim.msm.msm_protocol import Protocol
 from train.augment import about_normal, move_batch, tilt
 from train.data import Batch
 from train.evaluate import LoadedRun, example_errors, load_run, metrics

@@ -1,7 +1,8 @@
 """Rerun recordings of each stage: opened beside the output, written atomically, read back.
 
-Each stage logs what a person checks at that stage (see DESIGN.md); this module only handles
-where the recording goes and how tests and `pipeline inspect` read it back.
+Each stage's view logs what a person checks at that stage (README, "Rerun recordings"); this
+module only handles where the recording goes and how tests and `pipeline inspect` read it
+back.
 """
 
 from __future__ import annotations

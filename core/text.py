@@ -1,8 +1,8 @@
 """Values as text in the files we write: HDF5 attributes and JSON.
 
 h5py hands back a text attribute as ``bytes`` or ``str`` depending on how it was stored, and
-``json`` refuses numpy values and paths; these two helpers are the one place that says how
-such values become text.
+``json`` refuses numpy values and paths; these helpers are the one place that says how such
+values become text, and how any value becomes one line of it (:func:`one_line`).
 """
 
 from __future__ import annotations
@@ -29,3 +29,15 @@ def jsonable(value: Any) -> Any:
 def to_json(value: Any, **kwargs: Any) -> str:
     """``json.dumps`` that also takes numpy values and paths (see :func:`jsonable`)."""
     return json.dumps(value, default=jsonable, **kwargs)
+
+
+def one_line(value: Any, limit: int = 200) -> str:
+    """A value as one line of text: dicts as ``key value; ...``, lists space-separated, cut
+    at ``limit`` characters."""
+    if isinstance(value, dict):
+        text = "; ".join(f"{k} {one_line(v, limit)}" for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        text = " ".join(one_line(v, limit) for v in value)
+    else:
+        text = value if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= limit else text[:limit - 3] + "..."

@@ -9,7 +9,9 @@ the same place in MSM and lab data.
   session.toml order, then the indenter tip; MSM: the 32 x 32 masses). ``states/valid`` (S, N)
   is False where a lab marker was missing at that instant (its row of ``points`` is NaN).
 - ``states/step`` is the level index t: the state's force level is ``t * step_n`` (root
-  attribute, N); ``states/force`` is the force magnitude measured (lab) or applied (MSM).
+  attribute, N: the spacing the file was made with, 0.5 N by default; a reader computes a
+  level from it, never from a constant); ``states/force`` is the force magnitude measured
+  (lab) or applied (MSM).
 - ``states/sequence`` is unique in the file: lab, one press (numbered in time order, so within
   a session the n-th sequence is the synced file's n-th press); MSM, location x direction.
   ``states/location`` is a global place id (two sessions share one only when the user says
@@ -110,6 +112,13 @@ def validate_states(path: str | Path) -> None:
         seq, step = f["states/sequence"][()], f["states/step"][()]
         for name, gap in (("single", 1), ("multi", 2)):
             _check_pairs(path, name, f[f"{name}/start"][()], f[f"{name}/end"][()], seq, step, gap)
+
+
+def example_groups(states: str | Path, group_by: str) -> dict[str, np.ndarray]:
+    """The group of every single- and multi-step example (that of its start state)."""
+    with h5_reading(states), h5py.File(states, "r") as f:
+        group = f[f"states/{group_by}"][()]
+        return {name: group[f[f"{name}/start"][()]] for name in ("single", "multi")}
 
 
 def _check_attrs(path: str | Path, f: h5py.File) -> None:

@@ -3,7 +3,7 @@
 Everything is SI (m, N, N*m, s, V) in the mocap lab frame unless a name says otherwise; time
 is on the mocap clock (0 at the first frame) unless it is ``logger/time_s``.
 
-Clock convention (the one ``calib.clock`` uses): a true event at mocap time ``t_m`` (s) is
+Clock convention (the one ``sync.clock`` uses): a true event at mocap time ``t_m`` (s) is
 stamped by the force logger at ``t_f = clock/offset_s + (1 + clock/drift_ppm * 1e-6) * t_m``,
 ``t_f`` being the force file's time column (s).
 

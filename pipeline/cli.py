@@ -23,7 +23,7 @@ COMMANDS: dict[str, str] = {
     "extract": "pipeline.extract_cmd:extract",
     "split": "pipeline.split_cmd:split",
     "simulate": "pipeline.simulate_cmd:simulate",
-    "fit-msm": "pipeline.simulate_cmd:fit_msm",
+    "fit-msm": "pipeline.fit_msm_cmd:fit_msm",
     "train": "pipeline.train_cmd:train",
     "eval": "pipeline.eval_cmd:eval_",
     "export": "pipeline.export_cmd:export",

@@ -24,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from sim.msm import paper
+
 
 @dataclass(frozen=True)
 class Step:
@@ -57,9 +59,9 @@ class Settings:
 RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate")
 QUICK = Settings(msm_locations=60, msm_directions=4, pretrain_epochs=12, finetune_epochs=60,
                  lr=2e-3)
-PAPER = Settings(msm_locations=100, msm_directions=11, pretrain_epochs=250,
-                 finetune_epochs=250, lr=1e-4, scarcity_folds=5, scarcity_groups=12,
-                 fit_sequences=10)
+PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
+                 pretrain_epochs=250, finetune_epochs=250, lr=1e-4, scarcity_folds=5,
+                 scarcity_groups=12, fit_sequences=10)
 # Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
                  lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2)

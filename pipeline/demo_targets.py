@@ -3,7 +3,7 @@
 Targets (issues 16 and 21; the references are the predictors that learn nothing, scored on
 the same test examples, :mod:`train.references`):
 
-- sync against the twin's truth (:data:`calib.sync_accuracy.TARGETS`);
+- sync against the twin's truth (:data:`sync.sync_accuracy.TARGETS`);
 - the fitted MSM at most half as far from the calibration presses as a still surface;
 - the MSM-trained model on its own test set: mean L_d at most half of "nothing moves", force
   error below the linear reference;
@@ -53,7 +53,7 @@ def summary(out: Path, seconds: float, quick: bool) -> list[str]:
 
 
 def _sync(out: Path) -> list[tuple[str, bool, str]]:
-    from calib.sync_accuracy import TARGETS, sync_errors
+    from sync.sync_accuracy import TARGETS, sync_errors
 
     errors = sync_errors(out / "session_synced.h5", out / "session" / "truth.h5")
     return [(f"sync {key}", errors[key] <= target, f"{errors[key]:.4f} (target {target})")

@@ -1,4 +1,4 @@
-"""``pipeline eval``: the click layer over :mod:`train.evaluate` and :mod:`train.scarcity`."""
+"""``pipeline eval``: the click layer over :func:`train.eval_stage.run_eval`."""
 
 from __future__ import annotations
 
@@ -41,20 +41,12 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     nothing (nothing moves; the nearest training press's displacement; force linear in the
     tip's motion), on the same test examples, with its gain over the best of them.
     """
-    from core.atomic import atomic_output
-    from train.eval_view import write_eval_recording
-    from train.evaluate import evaluate_runs, not_beating, table2, test_errors, write_json
+    from train.eval_stage import run_eval
+    from train.evaluate import not_beating
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    result = evaluate_runs(list(runs), device)
-    if scarcity:
-        result["scarcity"] = _scarcity(runs, out, scarcity_epochs, scarcity_groups, device)
-    write_json(out, result)
-    table = table2(result)
-    with atomic_output(out.with_suffix(".md")) as tmp:
-        tmp.write_text(table)
-    if rrd_path:
-        write_eval_recording(rrd_path, test_errors(runs[0], device)[2])
+    result, table = run_eval(runs, out, rrd_path, device, scarcity, scarcity_epochs,
+                             scarcity_groups)
     click.echo(table + f"\nwrote {out}, {out.with_suffix('.md')}"
                + (f", {rrd_path}" if rrd_path else ""))
     worse = not_beating(result)
@@ -62,16 +54,3 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
         click.echo(f"NOT BEATING THE REFERENCES: {line}", err=True)
     if worse and strict:
         ctx.exit(1)
-
-
-def _scarcity(runs: tuple[Path, ...], out: Path, epochs: int | None, most: int | None,
-              device: str) -> list:
-    from train.scarcity import plot, scarcity_rows, write_csv
-
-    rows = []
-    for run in runs:
-        rows += scarcity_rows(run, out.parent / f"{out.stem}.scarcity_runs", epochs, device,
-                              most)
-    write_csv(out.with_suffix(".scarcity.csv"), rows)
-    plot(out.with_suffix(".scarcity.png"), rows)
-    return rows

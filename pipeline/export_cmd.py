@@ -1,4 +1,4 @@
-"""``pipeline export``: the click layer over :func:`train.export.export_onnx`."""
+"""``pipeline export``: the click layer over :func:`train.export_stage.run_export`."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def export(run: Path, onnx_path: Path) -> None:
     --onnx: inputs `points` (1, N, 3) m in the phantom frame (N free) and `condition` (1, 6) m;
     outputs `deformed` (1, N, 3) m and `dforce` (1,) N; normalisation is inside the graph.
     """
-    from train.export import export_onnx
+    from train.export_stage import run_export
 
-    export_onnx(run, onnx_path)
+    run_export(run, onnx_path)
     click.echo(f"{onnx_path}: ONNX model of {run}")

@@ -1,4 +1,4 @@
-"""``pipeline extract``: the click layer over :mod:`calib.extract`."""
+"""``pipeline extract``: the click layer over :func:`extract.extract_stage.run_extract`."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from core.protocol import FOOTPRINT_M, STEP_N
 from pipeline.options import resolve_rrd, rrd_option, seed_option
 
 
@@ -25,13 +26,14 @@ def _size(text: str) -> tuple[float, float]:
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="States file to write (schema phantom.states 2.0).")
-@click.option("--step", type=click.FloatRange(min=0, min_open=True), default=0.5,
+@click.option("--step", type=click.FloatRange(min=0, min_open=True), default=STEP_N,
               show_default=True, help="Force level spacing, N.")
 @click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
 @click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True), default=20.0,
               show_default=True, help="Frames within this of a level's instant are fitted.")
-@click.option("--phantom-size", default="100x100", show_default=True,
+@click.option("--phantom-size", default="x".join(f"{v * 1e3:g}" for v in FOOTPRINT_M),
+              show_default=True,
               help="Phantom footprint WIDTHxLENGTH in mm (the marker grid is centred on it).")
 @click.option("--shared-locations", is_flag=True,
               help="The synced files' location ids name the same places in every session.")
@@ -51,18 +53,13 @@ def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float |
     recording of the levels on each force curve and the states in 3D (--rrd, default beside
     --out). Excluded presses and dropped states are counted in the file and printed.
     """
-    from calib.extract import extract as run
-    from calib.extract import write_states
-    from calib.extract_view import write_extract_recording
-    from calib.static_states import ExtractParams
+    from extract.extract_stage import run_extract
+    from extract.static_states import ExtractParams
 
     size = _size(phantom_size)
     params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    ex = run(synced, params, seed, size, shared_locations)
-    write_states(out, ex, params, seed, synced)
-    if rrd_path:
-        write_extract_recording(rrd_path, ex.sessions, size)
+    ex = run_extract(synced, out, rrd_path, params, seed, size, shared_locations)
     a = ex.arrays
     presses = len(set(a["states/sequence"].tolist()))
     left = ", ".join(f"{k} {v}" for k, v in ex.excluded.items() if v) or "nothing"

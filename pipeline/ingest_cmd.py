@@ -1,4 +1,4 @@
-"""``pipeline ingest``: the click layer over :func:`ingest.session_to_mcap.ingest_session`."""
+"""``pipeline ingest``: the click layer over :func:`ingest.ingest_stage.run_ingest`."""
 
 from __future__ import annotations
 
@@ -27,10 +27,10 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
     provenance metadata) and a rerun recording of the raw trajectories and force (--rrd,
     default beside --out). Inputs are never modified; nothing is written on bad input.
     """
-    from ingest.session_to_mcap import ingest_session
+    from ingest.ingest_stage import run_ingest
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    s = ingest_session(session_dir, out, rrd_path, "zstd" if zstd else "none")
+    s = run_ingest(session_dir, out, rrd_path, "zstd" if zstd else "none")
     m, f = s.markers, s.force
     click.echo(f"{out}: {m.frames} mocap frames ({len(m.labels)} markers, {m.rate_hz:g} Hz, "
                f"{m.missing_samples()} missing samples), {f.frames} force samples "

@@ -1,4 +1,4 @@
-"""``pipeline inspect``: the click layer over :func:`pipeline.inspect.inspect_file`."""
+"""``pipeline inspect``: the click layer over :func:`ingest.inspect_stage.run_inspect`."""
 
 from __future__ import annotations
 
@@ -20,9 +20,10 @@ def inspect(file: Path, as_json: bool) -> None:
     Writes nothing; prints text, or with --json one JSON object whose keys are the same for
     every format (null where a key does not apply).
     """
-    from pipeline.inspect import format_summary, inspect_file
+    from ingest.inspect_stage import run_inspect
+    from ingest.inspect_view import format_summary
 
-    summary = inspect_file(file)
+    summary = run_inspect(file)
     if as_json:
         click.echo(json.dumps(summary, indent=2, default=str))
     else:

@@ -1,4 +1,4 @@
-"""``pipeline split``: the click layer over :mod:`train.split_file`."""
+"""``pipeline split``: the click layer over :func:`split.split_stage.run_split`."""
 
 from __future__ import annotations
 
@@ -31,19 +31,15 @@ def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str 
     (trainers refuse a manifest whose data changed), and a rerun recording of the fold roles on
     the phantom footprint (--rrd, default beside --out).
     """
-    from train.split import parse_ratio
-    from train.split_file import build_manifest, default_plan, write_manifest
-    from train.split_view import write_split_recording
+    from split.split import parse_ratio
+    from split.split_stage import run_split
 
-    plan = default_plan(states, group_by, parse_ratio(ratio) if ratio else None, folds, seed)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    doc = build_manifest(states, plan)
-    write_manifest(out, doc)
-    if rrd_path:
-        write_split_recording(rrd_path, states, doc)
+    doc = run_split(states, out, rrd_path, group_by, parse_ratio(ratio) if ratio else None,
+                    folds, seed)
     f0 = doc["folds"][0]
-    click.echo(f"{out}: {len(doc['folds'])} folds over {doc['groups']} {plan.group_by} groups "
-               f"({':'.join(map(str, plan.ratio))}: fold 0 trains on "
+    click.echo(f"{out}: {len(doc['folds'])} folds over {doc['groups']} {doc['group_by']} groups "
+               f"({':'.join(map(str, doc['ratio']))}: fold 0 trains on "
                f"{len(f0['train']['groups'])}, validates on {len(f0['val']['groups'])}, tests "
                f"on {len(f0['test']['groups'])}); {doc['note']}"
                + (f"; recording {rrd_path}" if rrd_path else ""))

@@ -1,5 +1,5 @@
-"""``pipeline sync``: the click layer over :func:`pipeline.sync_stage.run_sync`
-(the math: :mod:`calib.sync`)."""
+"""``pipeline sync``: the click layer over :func:`sync.sync_stage.run_sync`
+(the math: :mod:`sync.sync`)."""
 
 from __future__ import annotations
 
@@ -43,8 +43,8 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     recording of the alignment and the tip (--rrd, default beside --out). Nothing is written
     on bad input.
     """
-    from calib.sync_params import SyncParams
-    from pipeline.sync_stage import run_sync
+    from sync.sync_params import SyncParams
+    from sync.sync_stage import run_sync
 
     params = SyncParams(clock=clock, max_gap_s=max_gap_ms * 1e-3, margin_s=margin_s,
                         location_radius_m=location_radius_mm * 1e-3)

@@ -1,4 +1,4 @@
-"""``pipeline synth``: the click layer over :func:`sim.twin_folder.synthesize_session`."""
+"""``pipeline synth``: the click layer over :func:`sim.twin.synth_stage.run_synth`."""
 
 from __future__ import annotations
 
@@ -61,11 +61,11 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
     removed, and files the twin does not write are left alone. The same seed gives the same
     bytes of data. `pipeline ingest OUT_DIR` reads the folder as it is.
     """
-    from sim.twin_folder import synthesize_session
+    from sim.twin.synth_stage import run_synth
 
     rrd_path = resolve_rrd(out_dir, rrd, no_rrd)
     start = time.perf_counter()
-    folder = synthesize_session(
+    folder = run_synth(
         out_dir, seed=seed, locations=locations, repeats=repeats, rrd=rrd_path,
         view_press=view_press, press_seconds=press_seconds,
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,

@@ -1,4 +1,4 @@
-"""``pipeline train``: the click layer over :func:`train.loop.train_run`."""
+"""``pipeline train``: the click layer over :func:`train.train_stage.run_train`."""
 
 from __future__ import annotations
 
@@ -68,9 +68,9 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
     with the epoch and batch named. Under torchrun it trains data-parallel (gloo on CPU, nccl
     on GPU).
     """
-    from train.loop import TrainOptions, train_run
+    from train.loop import TrainOptions
     from train.model import CGNNConfig
-    from train.train_view import write_train_recording
+    from train.train_stage import run_train
 
     if tip_offsets and no_cond:
         raise click.UsageError("--tip-offsets are the condition C: not with --no-cond")
@@ -78,8 +78,6 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
                         point_fraction=point_fraction, train_groups=train_groups, seed=seed,
                         rotate=rotate, loss=loss, schedule=schedule, patience=patience)
     config = CGNNConfig(k=k, use_condition=not no_cond, tip_offsets=tip_offsets)
-    best = train_run(data, splits, out, opts, config, init, device)
-    if rrd and (out / "log.csv").is_file():
-        write_train_recording(out / "train.rrd", out / "log.csv")
+    best = run_train(data, splits, out, opts, config, init, device, rrd)
     click.echo(f"{out}: trained fold {fold} for {epochs} epochs; best checkpoint {best}"
                + (f"; recording {out / 'train.rrd'}" if rrd else ""))

@@ -1,1 +1,3 @@
-"""Simulators: the surface mass-spring model (MSM) and the phantom twin that writes lab sessions."""
+"""The two simulators, apart: the phantom twin (:mod:`sim.twin`, ``pipeline synth``), a lab
+session with its truth, and the paper's surface mass-spring model (:mod:`sim.msm`, ``pipeline
+simulate`` and ``fit-msm``). They share one helper, :mod:`sim.cone` (force directions)."""

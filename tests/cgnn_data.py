@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.static_states import example_pairs
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES
+from extract.static_states import example_pairs
 
 SIGMA = 0.015
 GRID = 7

@@ -18,14 +18,14 @@ from c3d_bytes import c3d_parameter, float_frames, rename_parameter, set_paramet
 from click.testing import CliRunner
 from test_extract import check_states_against_truth
 
-from calib.sync_accuracy import TARGETS, sync_errors
 from core.errors import BadInput
 from ingest.analog import analog_force, channel_names, resolve_channels
 from ingest.c3d import read_c3d, read_c3d_analog
 from ingest.detect import detect_format, read_analog
+from ingest.inspect_stage import run_inspect
 from ingest.qtm_tsv import read_qtm_analog
 from pipeline.cli import cli
-from pipeline.inspect import inspect_file
+from sync.sync_accuracy import TARGETS, sync_errors
 
 REAL = Path("c3d") / "qualisys_55markers_200hz.c3d"
 POINTS, CHANNELS, PER_FRAME, FRAMES = 55, 69, 10, 340     # what the real export holds
@@ -105,7 +105,7 @@ def test_real_force_plate_as_a_wrench(real_samples):
 
 
 def test_real_file_inspect_lists_analog_channels(real_samples):
-    s = inspect_file(real_samples / REAL)
+    s = run_inspect(real_samples / REAL)
     a = s["analog"]
     assert (a["rate_hz"], a["samples_per_frame"], len(a["channels"])) == (2000, 10, 69)
     emg = a["channels"][40]

@@ -9,11 +9,11 @@ import pytest
 import torch
 from cgnn_data import dent, write_dent_states
 
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train.augment import about_normal, move_batch, tilt
 from train.data import load_states, make_batch
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
-from train.split_file import build_manifest, default_plan, write_manifest
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
 CENTRE = torch.tensor([0.05, 0.05, 0.0])

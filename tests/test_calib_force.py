@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.force import apply_calibration, noise_sigma, rest_baseline, unloaded_start
 from core.errors import BadInput
+from sync.force import apply_calibration, noise_sigma, rest_baseline, unloaded_start
 
 RATE = 1000.0
 

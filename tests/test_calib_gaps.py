@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.gaps import FILLED, MISSING, fill_gaps, nan_runs
+from sync.gaps import FILLED, MISSING, fill_gaps, nan_runs
 
 RATE = 500.0
 

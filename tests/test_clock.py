@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.clock import (
+from core.errors import BadInput
+from sync.clock import (
     ClockFit,
     clock_from_data,
     contact_lag,
@@ -13,8 +14,7 @@ from calib.clock import (
     match_trigger,
     rising_edges,
 )
-from calib.resample import antialiased_interpolant
-from core.errors import BadInput
+from sync.resample import antialiased_interpolant
 
 OFFSET, DRIFT = 1.23456, 37.0          # s, ppm: t_f = OFFSET + (1 + DRIFT e-6) t_m
 

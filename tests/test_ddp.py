@@ -13,10 +13,10 @@ import torch.distributed as dist
 import torch.multiprocessing as mp
 from cgnn_data import write_dent_states
 
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train.checkpoint import load_checkpoint
 from train.loop import TrainOptions, train_run
 from train.model import CGNN, CGNNConfig
-from train.split_file import build_manifest, default_plan, write_manifest
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
 OPTS = TrainOptions(epochs=1, batch=6, lr=3e-3)

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from calib.phantom_frame import apply_transform
 from core.recording import rrd_entities
 from data_schema.states import validate_states
+from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
 
 

@@ -409,8 +409,8 @@ def test_a_qtm_mat_that_agrees_with_itself_reads(tmp_path, version):
 @pytest.fixture(scope="module")
 def twin_session(tmp_path_factory) -> Path:
     """A small phantom-twin session folder (QTM 3D and 6D exports, force log, session.toml)."""
-    twin = pytest.importorskip("sim.twin_folder")
-    return twin.synthesize_session(tmp_path_factory.mktemp("twin") / "session", seed=2,
+    twin = pytest.importorskip("sim.twin.synth_stage")
+    return twin.run_synth(tmp_path_factory.mktemp("twin") / "session", seed=2,
                                    locations=1, repeats=1)
 
 

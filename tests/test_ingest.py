@@ -417,11 +417,11 @@ def test_output_over_an_input_is_refused(session):
 
 def test_phantom_twin_session(tmp_path):
     """A whole synthetic session (6D bodies, pivot, trigger) survives ingest bit for bit."""
-    twin = pytest.importorskip("sim.twin_folder")
+    twin = pytest.importorskip("sim.twin.synth_stage")
     from ingest.detect import read_mocap
     from ingest.qtm_tsv import read_qtm_6d
 
-    folder = twin.synthesize_session(tmp_path / "twin", seed=1, locations=1, repeats=1)
+    folder = twin.run_synth(tmp_path / "twin", seed=1, locations=1, repeats=1)
     out = tmp_path / "twin.mcap"
     res = run(["ingest", str(folder), "--out", str(out), "--no-rrd"])
     assert res.exit_code == 0, res.stderr

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from ingest.inspect_stage import KEYS, run_inspect
 from pipeline.cli import cli
-from pipeline.inspect import KEYS, inspect_file
 
 pytestmark = pytest.mark.usefixtures("real_samples")
 
@@ -51,7 +51,7 @@ def test_marker_exports(path, fmt, frames, rate, names, missing, first):
 
 
 def test_qtm2010_names_with_spaces_and_dashes():
-    s = inspect_file(QTM2010)
+    s = run_inspect(QTM2010)
     assert "Knee Hinge" in s["markers"] and "Lower Leg IMU - 3" in s["markers"]
 
 
@@ -264,9 +264,9 @@ def test_inspect_session_toml(tmp_path):
     from click.testing import CliRunner
 
     from pipeline.cli import cli
-    from sim.twin_folder import synthesize_session
+    from sim.twin.synth_stage import run_synth
 
-    folder = synthesize_session(tmp_path / "s", seed=3, locations=1, repeats=1,
+    folder = run_synth(tmp_path / "s", seed=3, locations=1, repeats=1,
                                 press_seconds=3.0, pivot_seconds=3.0)
     res = CliRunner().invoke(cli, ["inspect", str(folder / "session.toml"), "--json"])
     assert res.exit_code == 0, res.output

@@ -1,32 +1,49 @@
-"""The layering rule a newcomer reads off the tree, checked on every module's imports.
+"""The layering and the folder-per-stage rule a newcomer reads off the tree and off
+docs/ARCHITECTURE.md, checked on every module's imports.
 
-pipeline -> (ingest, calib, sim, train) -> data_schema -> core: a package imports only
-packages below it (and itself); train/ stands on core/ and data_schema/ alone; the domain
-packages may use each other only without a cycle; and no two modules import each other,
-directly or round a longer loop, not even through an import hidden inside a function.
-Outside pipeline/ our modules are imported at the module top, where a reader sees them.
+pipeline -> (the stage packages) -> data_schema -> core: a package imports only packages below
+it (and itself); train/ stands on core/ and data_schema/ alone, and the phantom twin uses none
+of the stages it is there to check; the stage packages may use each other only without a
+cycle; and no two modules import each other, directly or round a longer loop, not even
+through an import hidden inside a function. Outside pipeline/ our modules are imported at the
+module top, where a reader sees them.
+
+Each command has one row in ARCHITECTURE.md's stage table: its math, its runner
+(``<command>_stage.py:run_<command>``), its view (``<command>_view.py`` beside the runner) and
+what it writes. Every path there exists, every runner and view in the tree is there, each
+command module calls its runner, and no command module writes, records provenance or logs to
+rerun itself.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
+from pipeline.cli import COMMANDS
+
 ROOT = Path(__file__).resolve().parents[1]
-LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "calib": 2, "sim": 2, "train": 2,
-         "pipeline": 3}
-ONLY = {"train": {"core", "data_schema", "train"}}     # narrower than its layer allows
+ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
+LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "sync": 2, "extract": 2, "split": 2,
+         "sim": 2, "sim.twin": 2, "sim.msm": 2, "train": 2, "pipeline": 3}
+# narrower than their layer allows: train/ is used without the lab stages; the twin checks
+# sync and extract against its truth, so it must not share their code
+ONLY = {"train": {"core", "data_schema", "train"},
+        "sim.twin": {"core", "data_schema", "ingest", "sim", "sim.twin"}}
 # Imports inside functions, allowed only here: the commands load their stage when run (so
 # `pipeline --help` stays fast), and `from train import Predictor` loads torch on demand.
 LAZY = ("pipeline", "train")
+ORCHESTRATION = {"demo"}            # commands that run other commands: no stage of their own
+WRITERS = {"core.atomic", "core.provenance"}
 
 
 def _modules() -> dict[str, Path]:
     out = {}
-    for package in LAYER:
-        for path in sorted((ROOT / package).rglob("*.py")):
+    for top in sorted({p.split(".")[0] for p in LAYER}):
+        for path in sorted((ROOT / top).rglob("*.py")):
             parts = path.relative_to(ROOT).with_suffix("").parts
             name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
             out[name] = path
@@ -69,7 +86,8 @@ GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
 
 
 def _package(module: str) -> str:
-    return module.split(".")[0]
+    """The package of ``module`` in :data:`LAYER`: the longest one it lies in."""
+    return max((p for p in LAYER if module == p or module.startswith(p + ".")), key=len)
 
 
 def test_every_layer_has_modules():
@@ -133,8 +151,94 @@ def _find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
+# -- the folder-per-stage rule, against ARCHITECTURE.md ---------------------------------------
+
+def _stage_table(text: str) -> dict[str, dict[str, list[str]]]:
+    """The stage table's rows: command -> {math, runner, view, writes} -> backticked items."""
+    section = text.split("\n## Stages\n", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for line in section.splitlines():
+        if not line.startswith("| `"):
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        command, math, runner, view, writes = (re.findall(r"`([^`]+)`", c) for c in cells)
+        rows[command[0]] = {"math": math, "runner": runner, "view": view, "writes": writes}
+    return rows
+
+
+TABLE = _stage_table(ARCHITECTURE.read_text())
+STAGES = sorted(set(COMMANDS) - ORCHESTRATION)
+
+
+def _module_of(path: str) -> str:
+    return path.removesuffix(".py").replace("/", ".")
+
+
+def _defines(path: Path, function: str) -> bool:
+    return any(isinstance(n, ast.FunctionDef) and n.name == function
+               for n in ast.parse(path.read_text()).body)
+
+
+def test_every_command_has_one_stage_row():
+    assert sorted(TABLE) == STAGES
+
+
+@pytest.mark.parametrize("command", STAGES)
+def test_stage_row_names_modules_that_exist(command):
+    row = TABLE[command]
+    for path in row["math"] + row["view"]:
+        assert (ROOT / path).is_file(), f"{command}: {path} does not exist"
+    assert len(row["runner"]) == 1 and len(row["view"]) <= 1, row
+
+
+@pytest.mark.parametrize("command", STAGES)
+def test_runner_and_view_are_named_for_the_command(command):
+    stem = command.replace("-", "_")
+    path, _, function = TABLE[command]["runner"][0].partition(":")
+    assert Path(path).name == f"{stem}_stage.py" and function == f"run_{stem}", path
+    assert _defines(ROOT / path, function), f"{path} defines no {function}()"
+    assert _package(_module_of(path)) not in ("core", "data_schema", "pipeline"), path
+    for view in TABLE[command]["view"]:
+        assert Path(view) == Path(path).with_name(f"{stem}_view.py"), view
+
+
+def test_every_runner_and_view_is_in_the_table():
+    listed = {p.partition(":")[0] for row in TABLE.values() for p in row["runner"] + row["view"]}
+    found = {str(path.relative_to(ROOT)) for name, path in MODULES.items()
+             if _package(name) != "pipeline" and path.stem.endswith(("_stage", "_view"))}
+    assert found == listed
+
+
+@pytest.mark.parametrize("command", STAGES)
+def test_command_calls_its_runner(command):
+    module = COMMANDS[command].partition(":")[0]
+    path, _, function = TABLE[command]["runner"][0].partition(":")
+    tree = ast.parse(MODULES[module].read_text())
+    assert any(isinstance(n, ast.ImportFrom) and n.module == _module_of(path)
+               and function in {a.name for a in n.names} for n in ast.walk(tree)), \
+        f"{module} does not call {function} of {path}"
+
+
+@pytest.mark.parametrize("module", sorted({c.partition(":")[0] for c in COMMANDS.values()}))
+def test_commands_leave_writing_to_their_runner(module):
+    recording = {m for m in MODULES if m.endswith("_view") and "core.recording" in GRAPH[m]}
+    done_here = GRAPH[module] & (WRITERS | recording)
+    assert not done_here, f"{module} writes itself through {sorted(done_here)}"
+
+
+def test_every_package_is_in_the_architecture():
+    text = ARCHITECTURE.read_text()
+    for package in LAYER:
+        assert f"{package.replace('.', '/')}/" in text, package
+
+
 def test_the_checks_can_fail():
-    """The cycle finder finds a planted loop, and the import parser sees hidden imports."""
+    """The cycle finder finds a planted loop, the import parser sees hidden imports, and the
+    table parser reads a row."""
     assert _find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _find_cycle({"a": {"b"}, "b": set()}) is None
-    assert "ingest.mcap_io" in GRAPH["pipeline.sync_stage"]
+    assert "ingest.mcap_io" in GRAPH["sync.sync_stage"]
+    assert _package("sim.twin.twin") == "sim.twin" and _package("sim.cone") == "sim"
+    row = _stage_table("\n## Stages\n| `x` | `a.py`, `b.py` | `p/x_stage.py:run_x` | — | f |\n")
+    assert row == {"x": {"math": ["a.py", "b.py"], "runner": ["p/x_stage.py:run_x"],
+                         "view": [], "writes": []}}

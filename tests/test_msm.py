@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.linalg import eig_banded
 
-from sim.msm import (
+from sim.msm.msm import (
     MSM,
     MSMError,
     MSMParams,
@@ -19,7 +19,7 @@ from sim.msm import (
     stability_limit,
     unit,
 )
-from sim.msm_static import StaticSolver, residual, simulate_sequence
+from sim.msm.msm_static import StaticSolver, residual, simulate_sequence
 
 MODEL = MSM()
 CENTRE = MODEL.node(16, 16)

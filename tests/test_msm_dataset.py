@@ -15,9 +15,10 @@ from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
 from data_schema.hdf5 import validate_h5
 from data_schema.states import STATES
 from pipeline.cli import cli
-from sim.msm import MSM, MSMError, unit
-from sim.msm_dataset import Protocol, draw_plan, write_states
-from sim.msm_static import residual
+from sim.msm.msm import MSM, MSMError, unit
+from sim.msm.msm_dataset import write_states
+from sim.msm.msm_protocol import Protocol, draw_plan
+from sim.msm.msm_static import residual
 
 SMALL = ["--locations", "3", "--directions", "2", "--steps", "4", "--seed", "7"]
 
@@ -232,9 +233,9 @@ def test_layout_states_are_the_full_grid_seen_at_the_markers(tmp_path):
     """Sampled at a layout, every state is the full-grid equilibrium's bilinear blend at each
     marker's rest position, the tip (last) the loaded patch's centre; loads fall inside the
     markers' footprint; the contact patch shares the load."""
-    from sim.msm_dataset import generate
-    from sim.msm_sampling import contact_masses, sample_at
-    from sim.msm_static import simulate_sequence
+    from sim.msm.msm_dataset import generate
+    from sim.msm.msm_sampling import contact_masses, sample_at
+    from sim.msm.msm_static import simulate_sequence
 
     protocol = Protocol(locations=2, directions=2, steps=3, fmax=3.0, seed=4,
                         contact_radius=0.004)
@@ -261,7 +262,7 @@ def test_layout_states_are_the_full_grid_seen_at_the_markers(tmp_path):
 
 
 def test_a_marker_between_masses_follows_the_bilinear_blend():
-    from sim.msm_sampling import contact_masses, sample_at
+    from sim.msm.msm_sampling import contact_masses, sample_at
 
     model = MSM()
     h = model.params.spacing

@@ -14,10 +14,12 @@ from click.testing import CliRunner
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
-from sim import msm_fit
-from sim.msm import MSMError, MSMParams
-from sim.msm_dataset import Plan, Protocol, draw_plan, file_attrs, generate, write_states
-from sim.msm_fit import fit_msm, mean_distance, read_measured, still
+from sim.msm import msm_fit
+from sim.msm.msm import MSMError, MSMParams
+from sim.msm.msm_dataset import file_attrs, generate, write_states
+from sim.msm.msm_fit import fit_msm, mean_distance, still
+from sim.msm.msm_measured import read_measured
+from sim.msm.msm_protocol import Plan, Protocol, draw_plan
 
 TRUE = MSMParams(k_between=80.0, k_fixed=30.0)
 PROTOCOL = Protocol(locations=2, directions=1, steps=4, fmax=6.0, seed=5)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.phantom import Phantom, PhantomSpec
+from sim.twin.phantom import Phantom, PhantomSpec
 
 LEVELS = np.array([0.25, 0.5, 1.0, 2.0, 4.0, 6.2, 7.5])
 

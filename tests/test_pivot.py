@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calib.pivot import pivot_calibrate, rotation_spread_deg
-from calib.rigid import cluster_reference, fit_rigid
 from core.errors import BadInput
+from sync.pivot import pivot_calibrate, rotation_spread_deg
+from sync.rigid import cluster_reference, fit_rigid
 
 CLUSTER = np.array([[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.0, 0.030, 0.0], [0.012, 0.015, 0.038]])
 TIP = np.array([0.004, -0.006, -0.110])      # body frame, metres

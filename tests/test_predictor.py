@@ -13,11 +13,11 @@ from cgnn_data import write_dent_states
 from click.testing import CliRunner
 
 from pipeline.cli import cli
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train import Predictor
 from train.checkpoint import load_checkpoint, model_from
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
-from train.split_file import build_manifest, default_plan, write_manifest
 
 
 @pytest.fixture(scope="module")

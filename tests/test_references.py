@@ -12,11 +12,11 @@ from cgnn_data import SIGMA, write_dent_states
 from click.testing import CliRunner
 
 from pipeline.cli import cli
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train.data import Batch, example_pairs, load_states, make_batch, role_examples
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
 from train.references import References, with_tip
-from train.split_file import build_manifest, default_plan, write_manifest
 
 SMALL = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(8,), force_widths=(8, 8, 8))
 

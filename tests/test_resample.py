@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import freqz, resample_poly
 
-from calib.resample import antialias_taps, lowpass_zero_phase, resample_at
+from sync.resample import antialias_taps, lowpass_zero_phase, resample_at
 
 FS_IN, FS_OUT = 1000.0, 500.0
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calib.rigid import cluster_reference, fit_rigid
 from core.errors import BadInput
+from sync.rigid import cluster_reference, fit_rigid
 
 # An asymmetric 4-marker cluster (metres), like an indenter's marker tree.
 CLUSTER = np.array([[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.0, 0.030, 0.0], [0.012, 0.015, 0.038]])

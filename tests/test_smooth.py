@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.smooth import lowpass_track, smoothing_taps
+from sync.smooth import lowpass_track, smoothing_taps
 
 RATE, CUTOFF = 500.0, 15.0
 HALF = len(smoothing_taps(RATE, CUTOFF)) // 2

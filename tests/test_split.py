@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
-from train.split import SplitPlan, make_folds
+from split.split import SplitPlan, make_folds
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

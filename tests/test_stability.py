@@ -17,17 +17,17 @@ import torch
 from cgnn_data import write_dent_states
 from click.testing import CliRunner
 
-from calib.force_conditioning import over_range
 from core.errors import BadInput
 from core.series import frame_times_ns, time_to_ns
 from data_schema.states import validate_states
 from pipeline.cli import cli
+from split.split_stage import build_manifest, default_plan, write_manifest
+from sync.force_conditioning import over_range
 from train.checkpoint import load_checkpoint
 from train.data import load_manifest, role_examples
 from train.evaluate import example_errors, load_run
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
-from train.split_file import build_manifest, default_plan, write_manifest
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
 NANO17_MAX = np.array([25.0, 25.0, 35.0, 0.25, 0.25, 0.25])      # SI-25-0.25, N and N m

@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from calib.gaps import FILLED, MISSING
-from calib.sync_accuracy import TARGETS, match_presses, sync_errors
-from calib.sync_params import SyncParams
 from core.recording import rrd_entities, rrd_timelines
-from ingest.session_to_mcap import ingest_session
+from ingest.ingest_stage import run_ingest
 from pipeline.cli import cli
-from pipeline.sync_stage import run_sync
-from sim.twin_folder import synthesize_session
+from sim.twin.synth_stage import run_synth
+from sync.gaps import FILLED, MISSING
+from sync.sync_accuracy import TARGETS, match_presses, sync_errors
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 SEEDS = (0, 1, 2, 3, 4)
 
@@ -33,10 +33,10 @@ def sessions(tmp_path_factory: pytest.TempPathFactory) -> dict[int, tuple[Path, 
     root = tmp_path_factory.mktemp("twin")
     out = {}
     for seed in SEEDS:
-        folder = synthesize_session(root / f"s{seed}", seed=seed, locations=2, repeats=1,
+        folder = run_synth(root / f"s{seed}", seed=seed, locations=2, repeats=1,
                                     press_seconds=60.0, pivot_seconds=10.0)
         mcap = root / f"s{seed}.mcap"
-        ingest_session(folder, mcap)
+        run_ingest(folder, mcap)
         synced = root / f"s{seed}.h5"
         if seed == 0:
             res = CliRunner().invoke(cli, ["-q", "sync", str(mcap), "--out", str(synced)])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.presses import assign_locations, segment_presses
+from sync.presses import assign_locations, segment_presses
 
 RATE = 500.0
 

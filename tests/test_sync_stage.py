@@ -12,10 +12,6 @@ import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from calib.gaps import MISSING
-from calib.sync import sync_session
-from calib.sync_params import SyncParams
-from calib.synced_file import write_synced
 from core.errors import BadInput
 from core.provenance import make_provenance
 from core.recording import rrd_entities, rrd_has_blueprint
@@ -24,6 +20,10 @@ from data_schema.hdf5 import validate_h5
 from data_schema.synced import SYNCED
 from ingest.mcap_io import write_raw_mcap
 from pipeline.cli import cli
+from sync.gaps import MISSING
+from sync.sync import sync_session
+from sync.sync_params import SyncParams
+from sync.synced_file import write_synced
 
 RATE, LOG_RATE = 500.0, 1000.0
 OFFSET, DRIFT = 0.8, 20.0                       # logger clock: OFFSET + (1 + DRIFT ppm) t_m

@@ -16,11 +16,11 @@ from click.testing import CliRunner
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.evaluate import evaluate_runs
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
-from train.split_file import build_manifest, default_plan, write_manifest
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
 

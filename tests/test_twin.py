@@ -23,8 +23,8 @@ from ingest.ati_cal import read_ati_cal
 from ingest.force_log import read_force_log
 from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d
 from pipeline.cli import cli
-from sim.indenter import HandStyle, plan_hand
-from sim.nano17 import FILE_TO_SI, Nano17
+from sim.twin.indenter import HandStyle, plan_hand
+from sim.twin.nano17 import FILE_TO_SI, Nano17
 
 TINY = ["--locations", "1", "--repeats", "2", "--press-seconds", "3", "--pivot-seconds", "5"]
 DATA_FILES = ("indentation.tsv", "indentation_6D.tsv", "pivot.tsv", "force.csv", "force.mat",
@@ -356,9 +356,9 @@ def test_force_mat_log_is_the_csv_log(plain: Path, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_default_session_is_fast_and_deep_like_the_paper(tmp_path: Path) -> None:
-    from sim.twin_folder import synthesize_session
+    from sim.twin.synth_stage import run_synth
 
-    folder = synthesize_session(tmp_path / "default", seed=0)      # its time: bench_twin.py
+    folder = run_synth(tmp_path / "default", seed=0)      # its time: bench_twin.py
     with truth(folder) as t:
         points, press = t["states/points"][()], t["states/press"][()]
     single, multi = [], []

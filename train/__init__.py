@@ -1,7 +1,7 @@
 """The conditional graph neural network (cGNN): model, data over states and folds, training,
 evaluation, and :class:`Predictor` for using a trained model.
 
-``from train import Predictor`` loads torch; ``import train.split`` (numpy only) does not.
+``from train import Predictor`` loads torch; ``import train`` alone does not.
 """
 
 from __future__ import annotations

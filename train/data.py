@@ -19,8 +19,7 @@ import torch
 from core.errors import BadInput
 from core.provenance import sha256_file
 from data_schema.json_docs import check_fold_examples, validate_folds
-from data_schema.states import validate_states
-from train.split_file import example_groups
+from data_schema.states import example_groups, validate_states
 
 SETS = ("single", "multi")
 

@@ -1,7 +1,7 @@
 """Predictors that learn nothing, scored beside every model on the same test examples.
 
 A model's score never stands alone: if it does not beat these, it has learned nothing worth
-shipping, whatever its absolute number (DESIGN.md, "Scoring a model: the references").
+shipping, whatever its absolute number (docs/ARCHITECTURE.md, "Scoring a model").
 
 - **nothing moves**: the deformed points are the input points; the tip, where it is one of the
   points (the lab's 26th point, the MSM's loaded mass: a point at the tip's start), goes to the

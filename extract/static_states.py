@@ -1,0 +1,162 @@
+"""Static states of lab presses: the surface at every force level of each loading phase.
+
+For each press of a synced file, the state at level k x step (k = 0: the untouched surface just
+before contact) is taken at the instant the force magnitude first reaches the level (linear
+between frames). Points and force there are the value at that instant of a straight line fitted
+over the frames within ``half_window_s`` of it, so per-frame marker noise is averaged down
+instead of carried over; the line's slope gives the surface speed, which flags states that were
+not quasi-static. k = 0 averages the frames of the ``rest_window_s`` before the force starts to
+rise (:func:`contact_start`). A
+level the press never reached is absent (never extrapolated).
+
+Flagged, not guessed: a point with fewer than ``min_samples`` finite frames in the window is
+invalid at that state (``valid`` False, NaN); a state whose tip is invalid is dropped (the tip
+is the model's condition); a press with no loading phase is excluded. Both are counted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.protocol import STEP_N
+
+MIN_SAMPLES = 3
+
+
+@dataclass(frozen=True)
+class ExtractParams:
+    """How states are read off a press."""
+
+    step_n: float = STEP_N         # force level spacing, N
+    half_window_s: float = 0.02    # frames within this of the crossing are fitted
+    rest_window_s: float = 0.1     # k = 0: the frames this long before onset
+    max_speed: float | None = None  # m/s: states faster than this are dropped
+    min_samples: int = MIN_SAMPLES
+
+
+@dataclass
+class Press:
+    """What extraction needs of one synced press."""
+
+    time_s: np.ndarray         # (T,) mocap clock, s
+    points: np.ndarray         # (T, P, 3) in the phantom frame, NaN where missing; last = tip
+    force: np.ndarray          # (T,) magnitude, N
+    onset: int                 # first loaded frame
+    peak: int                  # frame of the peak force (end of loading)
+
+
+@dataclass
+class PressStates:
+    """The states of one press, in level order."""
+
+    points: np.ndarray         # (K, P, 3), NaN where invalid
+    valid: np.ndarray          # (K, P) bool
+    force: np.ndarray          # (K,) N
+    step: np.ndarray           # (K,) level index
+    speed: np.ndarray          # (K,) m/s, mean over the surface points
+    time_s: np.ndarray         # (K,) the instant each state was read at (mocap clock)
+    dropped: dict[str, int] = field(default_factory=dict)
+
+
+def crossing_time(time_s: np.ndarray, force: np.ndarray, level: float) -> float | None:
+    """First time ``force`` reaches ``level`` (linear between frames), or None if never."""
+    hit = np.flatnonzero(force >= level)
+    if hit.size == 0:
+        return None
+    i = int(hit[0])
+    if i == 0:
+        return float(time_s[0])
+    f0, f1 = force[i - 1], force[i]
+    return float(time_s[i - 1] + (level - f0) / (f1 - f0) * (time_s[i] - time_s[i - 1]))
+
+
+def contact_start(force: np.ndarray, onset: int) -> int:
+    """The frame where the force starts to rise towards ``onset``: sync's onset is where it
+    passes a contact threshold, but the indenter touches the surface a little earlier. Walks
+    back from onset while the force is above the rest's noise (median + 4 robust sd)."""
+    rest = force[:onset]
+    if rest.size < 5:
+        return onset
+    med = np.median(rest)
+    thr = med + 4 * 1.4826 * np.median(np.abs(rest - med))
+    i = onset
+    while i > 0 and force[i - 1] > thr:
+        i -= 1
+    return i
+
+
+def line_at(t: np.ndarray, values: np.ndarray, at: float, min_samples: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Value and slope at ``at`` of a straight line fitted to ``values`` (T, ...) over ``t``,
+    per column, ignoring NaN; NaN where fewer than ``min_samples`` frames are finite."""
+    v = values.reshape(len(t), -1)
+    ok = np.isfinite(v)
+    n = ok.sum(axis=0)
+    dt = (t - at)[:, None] * ok
+    y = np.where(ok, v, 0.0)
+    mean_t, mean_y = dt.sum(0) / np.maximum(n, 1), y.sum(0) / np.maximum(n, 1)
+    var = ((dt - mean_t) ** 2 * ok).sum(0)
+    cov = ((dt - mean_t) * (y - mean_y) * ok).sum(0)
+    slope = np.where(var > 0, cov / np.where(var > 0, var, 1.0), 0.0)
+    value = mean_y - slope * mean_t
+    enough = n >= min_samples
+    shape = values.shape[1:]
+    return (np.where(enough, value, np.nan).reshape(shape),
+            np.where(enough, slope, np.nan).reshape(shape))
+
+
+def press_states(press: Press, p: ExtractParams, levels: bool = True) -> PressStates:
+    """Every level the loading phase of ``press`` reached, as static states (none when
+    ``levels`` is False: a press with no loading phase)."""
+    t, f = press.time_s, press.force
+    loading = slice(press.onset, press.peak + 1)
+    rows: list[tuple[np.ndarray, float, int, float, float]] = []
+    dropped = {"tip_missing": 0, "too_fast": 0}
+    start = contact_start(f, press.onset)
+    rest = (t >= t[start] - p.rest_window_s) & (t < t[start])
+    top = int(np.floor(np.nanmax(f[loading]) / p.step_n + 1e-9)) if levels else -1
+    for k in range(top + 1):
+        if k == 0:
+            window, at = rest, float(t[rest].mean()) if rest.any() else float("nan")
+        else:
+            at = crossing_time(t[loading], f[loading], k * p.step_n)
+            window = np.abs(t - at) <= p.half_window_s
+        pts, vel = line_at(t[window], press.points[window], at, p.min_samples)
+        force, _ = line_at(t[window], f[window], at, p.min_samples)
+        surface_speed = np.linalg.norm(vel[:-1], axis=-1)
+        speed = float(surface_speed[np.isfinite(surface_speed)].mean()) \
+            if np.isfinite(surface_speed).any() else float("nan")
+        if not np.isfinite(pts[-1]).all():
+            dropped["tip_missing"] += 1
+        elif p.max_speed is not None and speed > p.max_speed:
+            dropped["too_fast"] += 1
+        else:
+            rows.append((pts, float(force), k, speed, at))
+    n_pts = press.points.shape[1]
+    pts = np.array([r[0] for r in rows]).reshape(len(rows), n_pts, 3)
+    return PressStates(points=pts, valid=np.isfinite(pts).all(axis=-1),
+                       force=np.array([r[1] for r in rows]), step=np.array([r[2] for r in rows]),
+                       speed=np.array([r[3] for r in rows]), time_s=np.array([r[4] for r in rows]),
+                       dropped=dropped)
+
+
+def example_pairs(step: np.ndarray, sequence: np.ndarray, rng: np.random.Generator,
+                  multi_per_sequence: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    """Single-step (t, t + 1) and multi-step pairs (d >= 2; up to ``multi_per_sequence``
+    drawn per sequence without replacement, sorted) as (E, 2) state-index arrays."""
+    single, multi = [], []
+    for s in np.unique(sequence):
+        idx = np.flatnonzero(sequence == s)
+        idx = idx[np.argsort(step[idx], kind="stable")]
+        st = step[idx]
+        gap = st[None, :] - st[:, None]
+        i, j = np.nonzero(gap == 1)
+        single += list(zip(idx[i], idx[j], strict=True))
+        i, j = np.nonzero(gap >= 2)
+        if i.size:
+            pick = np.sort(rng.choice(i.size, min(multi_per_sequence, i.size), replace=False))
+            multi += list(zip(idx[i[pick]], idx[j[pick]], strict=True))
+    as_pairs = lambda rows: np.array(rows, dtype=np.int64).reshape(-1, 2)  # noqa: E731
+    return as_pairs(single), as_pairs(multi)

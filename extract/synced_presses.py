@@ -1,0 +1,69 @@
+"""A synced file's presses, read for extraction and moved into the phantom frame.
+
+The rest plane is sync's (``calibration/surface_point``, ``surface_normal``); the in-plane axes
+come from the marker grid and the origin from its centre (:mod:`extract.phantom_frame`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from core.errors import BadInput
+from data_schema.hdf5 import attr_text, h5_reading, read_schema_id
+from data_schema.synced import SYNCED, validate_synced
+from extract.phantom_frame import apply_transform, to_phantom_frame
+from extract.static_states import Press
+
+
+@dataclass
+class Session:
+    """One synced file read for extraction."""
+
+    path: Path
+    name: str
+    transform: np.ndarray                  # (4, 4) lab -> phantom
+    presses: list[Press]
+    locations: list[int]                   # per press, the file's own location id
+    n_points: int
+
+
+def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
+    """A synced file's presses in the phantom frame."""
+    sid = read_schema_id(path)
+    if sid is None or sid[0] != SYNCED.name:
+        raise BadInput(path, f"not a synced file (schema {sid[0] if sid else 'none'!r})")
+    if sid[1].split(".")[0] != SYNCED.version.split(".")[0]:
+        raise BadInput(path, f"synced file of schema version {sid[1]}; this extract reads "
+                             f"{SYNCED.version}: re-run `pipeline sync`")
+    validate_synced(path)
+    with h5_reading(path), h5py.File(path, "r") as f:
+        cal = f["calibration"]
+        keys = sorted(f["presses"].keys())
+        raw = [_press(f["presses"][k]) for k in keys]
+        locations = [int(f["presses"][k].attrs["location"]) for k in keys]
+        rest = _rest_markers(raw)
+        transform = to_phantom_frame(rest, cal["surface_point"][()], cal["surface_normal"][()],
+                                     size_m)
+        name = attr_text(f.attrs.get("name", Path(path).stem))
+    for p in raw:
+        p.points = apply_transform(transform, p.points)
+    return Session(Path(path), name, transform, raw, locations, raw[0].points.shape[1])
+
+
+def _press(g: h5py.Group) -> Press:
+    return Press(time_s=g["time_ns"][()].astype(np.int64) * 1e-9, points=g["points"][()],
+                 force=g["force_magnitude"][()], onset=int(g.attrs["onset_index"]),
+                 peak=int(g.attrs["peak_index"]))
+
+
+def _rest_markers(presses: list[Press]) -> np.ndarray:
+    """Each surface marker's rest position: its median over the frames before every onset."""
+    before = np.concatenate([p.points[: p.onset, :-1] for p in presses])
+    with warnings.catch_warnings():                # a marker never seen at rest: NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(before, axis=0)

@@ -1,0 +1,166 @@
+"""Summaries of the lab's files for ``pipeline inspect``: QTM TSV 3D, 6D and analog exports,
+C3D, QTM MAT, force logs (CSV, MAT, Parquet), ATI .cal and session.toml.
+
+Each reads the file with its ingest reader (so a file inspect accepts, ingest reads) and
+returns the summary keys that apply (:data:`ingest.inspect_stage.KEYS`); the helpers here also
+summarise the series an MCAP file holds (:mod:`ingest.inspect_outputs`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.errors import BadInput
+from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries
+from core.text import attr_text
+from data_schema.session import SCHEMA, VERSION, read_session
+from ingest.ati_cal import read_ati_cal
+from ingest.c3d import read_c3d, read_c3d_analog
+from ingest.force_log import force_log_columns, read_force_log
+from ingest.qtm_mat import read_qtm_mat
+from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d, read_qtm_analog
+
+TIME_NAMES = ("time", "t", "timestamp", "time_s", "times")
+TRIGGER_NAMES = ("trigger", "sync")
+WRENCH_NAMES = ("fx", "fy", "fz", "tx", "ty", "tz", "mx", "my", "mz")
+
+
+def duration_s(time_ns: np.ndarray) -> float | None:
+    """Frames x the mean sample interval (s); None for fewer than 2 samples."""
+    n = int(time_ns.shape[0])
+    if n < 2:
+        return None
+    return float((time_ns[-1] - time_ns[0]) / 1e9 * n / (n - 1))
+
+
+def _series(s: MarkerSeries | BodySeries | ForceSeries) -> dict[str, Any]:
+    """frames, rate and duration of any series."""
+    return {"frames": s.frames, "rate_hz": float(s.rate_hz), "duration_s": duration_s(s.time_ns)}
+
+
+def _events(events: list[tuple[str, int]]) -> list[list[Any]]:
+    return [[label, t / 1e9] for label, t in events]
+
+
+def _file_units(meta: dict[str, Any], default: str) -> str:
+    """The length unit the file was written in (the readers' ``units_in_file``)."""
+    unit = meta.get("units_in_file")
+    return unit if isinstance(unit, str) else default
+
+
+def marker_summary(m: MarkerSeries, default_units: str) -> dict[str, Any]:
+    """The keys of a marker series: timing, names, missing samples, units, events."""
+    return {**_series(m), "markers": list(m.labels), "missing_samples": m.missing_samples(),
+            "units": {"position": _file_units(m.meta, default_units)},
+            "events": _events(m.events)}
+
+
+def inspect_qtm_3d(path: Path) -> dict[str, Any]:
+    """A QTM TSV 3D export."""
+    m = read_qtm_3d(path)
+    return {**marker_summary(m, "mm"), "details": _plain(m.meta)}
+
+
+def inspect_qtm_6d(path: Path) -> dict[str, Any]:
+    """A QTM TSV 6D export: its bodies."""
+    b = read_qtm_6d(path)
+    return {**_series(b), "bodies": list(b.bodies), "missing_samples": b.missing_samples(),
+            "units": {"position": _file_units(b.meta, "mm"), "rotation": "1",
+                      "residual": "mm"},
+            "events": _events(b.events), "details": _plain(b.meta)}
+
+
+def inspect_c3d(path: Path) -> dict[str, Any]:
+    """A C3D export: its markers and, when it has them, its analog channels."""
+    m = read_c3d(path)
+    analog = read_c3d_analog(path).summary() if m.meta.get("analog_rate") else None
+    return {**marker_summary(m, "mm"), "analog": analog, "details": _plain(m.meta)}
+
+
+def inspect_qtm_analog(path: Path) -> dict[str, Any]:
+    """A QTM analog TSV export: its channels."""
+    a = read_qtm_analog(path)
+    return {"frames": a.samples, "rate_hz": a.rate_hz, "duration_s": duration_s(a.time_ns()),
+            "channels": a.names, "units": dict(zip(a.names, a.units, strict=True)),
+            "analog": a.summary(), "details": _plain(a.meta)}
+
+
+def inspect_qtm_mat(path: Path) -> dict[str, Any]:
+    """A QTM MAT export."""
+    m = read_qtm_mat(path)
+    return {**marker_summary(m, "mm"), "details": _plain(m.meta)}
+
+
+def inspect_force(path: Path) -> dict[str, Any]:
+    """A force log without its session.toml: time is the column named like time (in s), a
+    column named trigger or sync is the trigger, every other column a channel."""
+    columns = [str(c) for c in force_log_columns(path)]
+    time_col = next((c for c in columns if c.lower() in TIME_NAMES), columns[0])
+    trigger = next((c for c in columns if c.lower() in TRIGGER_NAMES and c != time_col), None)
+    channels = [c for c in columns if c not in (time_col, trigger)]
+    if not channels:
+        raise BadInput(path, f"a force log needs a time column and channels, found {columns}")
+    wrench = all(c.lower()[:2] in WRENCH_NAMES for c in channels)
+    f = read_force_log(path, time_col, channels, kind="wrench" if wrench else "gauge",
+                       trigger_column=trigger)
+    return {**_series(f), "channels": list(f.channels),
+            "units": {c: u for c, u in zip(f.channels, f.units, strict=True)},
+            "details": {"time_column": time_col, "time_unit_assumed": "s", "kind": f.kind,
+                        "columns": columns,
+                        **({"trigger_column": trigger} if trigger else {})}}
+
+
+def inspect_cal(path: Path) -> dict[str, Any]:
+    """An ATI calibration (.cal XML)."""
+    return calibration_summary(read_ati_cal(path))
+
+
+def calibration_summary(c: AtiCalibration) -> dict[str, Any]:
+    """The keys of an ATI calibration: its units and the matrix."""
+    matrix = np.asarray(c.matrix, dtype=float)
+    return {"units": {"force": c.force_units, "torque": c.torque_units},
+            "calibration": {"serial": c.serial, "body_style": c.body_style,
+                            "calibration": c.calibration, "matrix_shape": list(matrix.shape),
+                            "matrix": matrix.tolist(),
+                            "max_load": np.asarray(c.max_load, dtype=float).tolist()}}
+
+
+def inspect_session(path: Path) -> dict[str, Any]:
+    """A session.toml: which files it names and which markers belong to what."""
+    if path.name != "session.toml":
+        raise BadInput(path, "a session file must be named session.toml inside its folder")
+    cfg = read_session(path.parent)
+    files = {"mocap": cfg.mocap.file, "bodies": cfg.mocap.bodies_file, "force": cfg.force.file,
+             "calibration": cfg.force.calibration, "pivot": cfg.pivot_file}
+    return {
+        "schema": cfg.raw.get("schema", SCHEMA), "schema_version": cfg.raw.get(
+            "schema_version", VERSION),
+        "markers": cfg.mocap.phantom_markers + cfg.mocap.indenter_markers,
+        "channels": [str(c) for c in cfg.force.channels],      # names, or analog numbers
+        "units": {"force_channels": ",".join(cfg.force.units), "force_time": cfg.force.time_unit},
+        "details": {"name": cfg.name, "phantom_markers": len(cfg.mocap.phantom_markers),
+                    "indenter_markers": cfg.mocap.indenter_markers, "force_kind": cfg.force.kind,
+                    "files": {k: v.name for k, v in files.items() if v is not None},
+                    **({"force_rate_hz": cfg.force.rate_hz} if cfg.force.rate_hz else {})},
+    }
+
+
+def plain_value(v: Any) -> Any:
+    """An HDF5 or numpy value as plain text, numbers and lists."""
+    if isinstance(v, bytes):
+        return attr_text(v)
+    if isinstance(v, np.ndarray):
+        return [plain_value(x) for x in v.tolist()]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _plain(meta: dict[str, Any]) -> dict[str, Any]:
+    """Meta values that print and serialise as JSON."""
+    return {str(k): plain_value(v) if isinstance(v, np.ndarray | np.generic | bytes) else
+            (v if isinstance(v, str | int | float | bool | list | dict | None) else str(v))
+            for k, v in meta.items()}

@@ -1,0 +1,78 @@
+"""``pipeline fit-msm``: the click layer over :func:`sim.msm.fit_msm_stage.run_fit_msm`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from pipeline.options import resolve_rrd, rrd_option, seed_option
+from sim.msm import paper
+
+OUT = click.Path(dir_okay=False, path_type=Path)
+IN = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+@click.command("fit-msm")
+@click.argument("states", type=IN)
+@click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
+@click.option("--max-sequences", type=click.IntRange(1), default=10, show_default=True,
+              help="Sequences used (drawn with --seed when the file or fold has more).")
+@click.option("--splits", type=IN, default=None,
+              help="Fold manifest of STATES: fit on the training presses of --fold only, so "
+                   "the fit never sees that fold's test presses.")
+@click.option("--fold", type=click.IntRange(0), default=0, show_default=True)
+@click.option("--start", nargs=2, type=float, default=(paper.K_BETWEEN, paper.K_FIXED),
+              show_default=True,
+              help="Starting k_between k_fixed (N/m; the paper's constants).")
+@click.option("--contact-radius", type=click.FloatRange(0, 0.05), default=None,
+              help="Share the load among the masses within this radius (m) of the tip "
+                   "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "
+                   "own].")
+@click.option("--workers", type=click.IntRange(0), default=0,
+              help="Processes sharing the sequences (default: the cores this process may use).")
+@seed_option
+@rrd_option
+def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
+            fold: int, start: tuple[float, float], contact_radius: float | None,
+            workers: int, seed: int, rrd: Path | None, no_rrd: bool) -> None:
+    """Fit the MSM spring constants to measured states (as the paper found 100 and 21 N/m).
+
+    Reads STATES (a phantom.states file: extracted lab states or MSM states; with --splits,
+    its fold manifest). Finds (k_between, k_fixed) in [1, 1e5] N/m minimising the mean
+    distance between the measured points and the MSM's static response to the measured loads,
+    in the phantom frame (see sim/msm/msm_fit.py). Prints the constants, the distance beside
+    the start constants' and a still surface's (pooled and per press), and says when a
+    constant ends on a bound. Writes --out (when given): the constants, the distances and the
+    full MSM parameters as JSON (phantom.msm_params, read by `pipeline simulate --params`),
+    and a rerun recording of the fitted MSM beside the measured markers (--rrd, default
+    beside --out).
+    """
+    from sim.msm.fit_msm_stage import run_fit_msm
+    from sim.msm.workers import default_workers
+
+    rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None
+    result = run_fit_msm(states, out, rrd_path, splits=splits, fold=fold,
+                         max_sequences=max_sequences, seed=seed, start=start,
+                         contact_radius=contact_radius, workers=workers or default_workers())
+    click.echo(fit_summary(result) + (f"\nwrote {out}" if out else "")
+               + (f", {rrd_path}" if rrd_path else ""))
+
+
+def fit_summary(result) -> str:  # noqa: ANN001 - FitResult, imported lazily
+    """The fit in a few lines: constants, distances against the references, bounds."""
+    mm = 1e3
+    lines = [f"k_between {result.k_between:.4g} N/m, k_fixed {result.k_fixed:.4g} N/m "
+             f"(contact radius {result.contact_radius_m * mm:g} mm) over {result.states} states "
+             f"of {result.sequences} sequences",
+             f"mean distance {result.mean_distance_m * mm:.3f} mm; start constants "
+             f"{result.start_distance_m * mm:.3f} mm; still surface "
+             f"{result.still_distance_m * mm:.3f} mm "
+             f"({result.mean_distance_m / result.still_distance_m:.0%} of it); nothing moves "
+             f"but the tip {result.nothing_moves_distance_m * mm:.3f} mm",
+             "per sequence [mm] (fitted / start / still): " + ", ".join(
+                 f"{r['sequence']}: {r['fitted_m'] * mm:.2f}/{r['start_m'] * mm:.2f}/"
+                 f"{r['still_m'] * mm:.2f}" for r in result.per_sequence)]
+    lines += [f"note: {b}: the fit wants a constant outside the physical range"
+              for b in result.at_bound]
+    return "\n".join(lines)

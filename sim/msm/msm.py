@@ -1,0 +1,330 @@
+"""The surface mass-spring model (MSM) of the paper, and its reference explicit solver.
+
+A 100 x 100 mm single-layer surface of 32 x 32 masses on a triangulated grid: linear springs
+between neighbours along the rows, the columns and one diagonal ((i, j) to (i + 1, j + 1)),
+each with its rest length (so the force depends on the current length: large deflections are
+geometrically nonlinear), and a zero-length "fixed" spring from every mass to its rest position.
+Grid spacing is size / (n - 1) = 100/31 mm. Mass (i, j) rests at (x, y, z) = (j h, i h, 0); the
+surface normal is +z and an indenting force points into the surface (negative z).
+
+The reference solver integrates ``m a = f(x) + f_ext - c v`` explicitly (semi-implicit Euler,
+time step ``dt``) until the paper's stability criterion holds on every mass: ``|v| < v_static``
+and ``|f| < f_static`` (``f`` is the force of the springs and the load, without damping). It is
+what the paper did; :mod:`sim.msm.msm_static` is the fast path that solves the same equilibrium.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from core.errors import BadInput
+from sim.msm import paper
+
+# Edge families as (row offset, column offset): rows, columns, the one diagonal.
+FAMILIES: tuple[tuple[int, int], ...] = ((0, 1), (1, 0), (1, 1))
+
+
+class MSMError(BadInput):
+    """The model's parameters (or a load) make the simulation fail: one clear line, exit 2."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__("msm", what)
+
+    def __reduce__(self) -> tuple:       # so it crosses from a worker process intact
+        return MSMError, (self.what,)
+
+
+@dataclass(frozen=True)
+class MSMParams:
+    """The paper's MSM parameters (SI units)."""
+
+    n: int = paper.GRID_N               # masses per side
+    size: float = paper.SIZE_M          # m, side length of the surface
+    mass: float = paper.MASS_KG         # kg per mass
+    damping: float = paper.DAMPING      # N s/m: damping force -c v on each mass
+    k_between: float = paper.K_BETWEEN  # N/m, springs between masses
+    k_fixed: float = paper.K_FIXED      # N/m, zero-length springs to the rest positions
+    dt: float = paper.DT_S              # s, explicit time step of the reference solver
+    v_static: float = paper.V_STATIC    # m/s, stability criterion on every mass
+    f_static: float = paper.F_STATIC    # N, stability criterion on every mass
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n, int | np.integer) or self.n < 2:
+            raise MSMError(f"n must be an integer >= 2, got {self.n!r}")
+        for name in ("size", "mass", "damping", "k_between", "k_fixed", "dt",
+                     "v_static", "f_static"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float | np.floating) and math.isfinite(value)
+                    and value > 0):
+                raise MSMError(f"{name} must be a finite positive number, got {value!r}")
+
+    @property
+    def spacing(self) -> float:
+        """Rest length of the row and column springs (m)."""
+        return self.size / (self.n - 1)
+
+    def as_dict(self) -> dict[str, float | int]:
+        return asdict(self)
+
+
+class MSM:
+    """Geometry and force kernels of one parameter set; positions are (N, 3) arrays in m."""
+
+    def __init__(self, params: MSMParams | None = None) -> None:
+        self.params = params or MSMParams()
+        n, h = self.params.n, self.params.spacing
+        self.n, self.N = n, n * n
+        ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        self.rest = np.stack([jj * h, ii * h, np.zeros_like(ii, float)], -1).reshape(-1, 3)
+        self.rest_length = {f: h * math.hypot(*f) for f in FAMILIES}
+
+    @cached_property
+    def dt_limit(self) -> float:
+        """Explicit stability limit (s) at the rest state; see :func:`stability_limit`."""
+        return stability_limit(self)
+
+    # -- indexing -----------------------------------------------------------------------------
+    def node(self, i: int, j: int) -> int:
+        """Mass index of grid position (row i, column j)."""
+        return int(i) * self.n + int(j)
+
+    def edges(self) -> np.ndarray:
+        """(E, 2) mass indices of every between-mass spring (rows, columns, diagonals)."""
+        n = self.n
+        idx = np.arange(self.N).reshape(n, n)
+        return np.vstack([np.c_[idx[: n - di, : n - dj].ravel(), idx[di:, dj:].ravel()]
+                          for di, dj in FAMILIES])
+
+    def triangles(self) -> np.ndarray:
+        """(2 (n-1)^2, 3) triangles of the surface, split along the diagonal springs."""
+        n = self.n
+        idx = np.arange(self.N).reshape(n, n)
+        p, r, d, q = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
+        return np.vstack([np.c_[p.ravel(), r.ravel(), d.ravel()],
+                          np.c_[p.ravel(), d.ravel(), q.ravel()]]).astype(np.int32)
+
+    # -- forces and energy --------------------------------------------------------------------
+    def _springs(self, g: np.ndarray):
+        """Per family: ((di, dj), difference vectors, lengths) of the springs of grid ``g``."""
+        n = self.n
+        for di, dj in FAMILIES:
+            d = g[di:, dj:] - g[: n - di, : n - dj]
+            yield (di, dj), d, np.sqrt(np.einsum("...k,...k->...", d, d))
+
+    def energy_forces(self, x: np.ndarray, f_ext: np.ndarray) -> tuple[float, np.ndarray]:
+        """Potential energy (J, with the load's) and the force on every mass (N, 3), no damping."""
+        return self._forces(x, f_ext, with_energy=True)
+
+    def forces(self, x: np.ndarray, f_ext: np.ndarray) -> np.ndarray:
+        """Force on every mass (N, 3): springs plus the load, without damping."""
+        return self._forces(x, f_ext, with_energy=False)[1]
+
+    def _forces(self, x: np.ndarray, f_ext: np.ndarray, with_energy: bool
+                ) -> tuple[float, np.ndarray]:
+        p = self.params
+        n = self.n
+        disp = x - self.rest
+        f = f_ext - p.k_fixed * disp
+        fg = f.reshape(n, n, 3)
+        energy = 0.0
+        if with_energy:
+            energy = 0.5 * p.k_fixed * np.einsum("ij,ij->", disp, disp) - np.einsum(
+                "ij,ij->", f_ext, x)
+        for (di, dj), d, length in self._springs(x.reshape(n, n, 3)):
+            stretch = length - self.rest_length[(di, dj)]
+            if with_energy:
+                energy += 0.5 * p.k_between * np.einsum("ij,ij->", stretch, stretch)
+            fs = (p.k_between * stretch / length)[..., None] * d
+            fg[: n - di, : n - dj] += fs
+            fg[di:, dj:] -= fs
+        return float(energy), f
+
+    def load(self, node: int | np.ndarray, force: np.ndarray) -> np.ndarray:
+        """External force array (N, 3) with ``force`` on one mass, or shared equally among
+        the masses of an index array (a contact patch: the paper's n_n masses, F / n_n each)."""
+        where = np.atleast_1d(node)
+        f_ext = np.zeros((self.N, 3))
+        f_ext[where] = np.asarray(force, dtype=float) / len(where)
+        return f_ext
+
+    # -- stiffness ----------------------------------------------------------------------------
+    def edge_stiffness(self, x: np.ndarray, clamp: bool = False
+                       ) -> dict[tuple[int, int], np.ndarray]:
+        """Per family, the 3x3 tangent stiffness of each spring (rows, cols, 3, 3).
+
+        ``k u u^T + k (1 - L0/L) (I - u u^T)``: the axial term and the geometric (tension)
+        term, the exact Hessian of the spring energy. With ``clamp`` the geometric term of
+        compressed springs is dropped, so every block is positive semi-definite and the
+        assembled matrix (plus ``k_fixed I``) is positive definite whatever the state.
+        """
+        kb = self.params.k_between
+        out = {}
+        for fam, d, length in self._springs(x.reshape(self.n, self.n, 3)):
+            u = d / length[..., None]
+            geo = kb * (1.0 - self.rest_length[fam] / length)
+            if clamp:
+                geo = np.maximum(0.0, geo)
+            k = (kb - geo)[..., None, None] * u[..., :, None] * u[..., None, :]
+            k[..., [0, 1, 2], [0, 1, 2]] += geo[..., None]
+            out[fam] = k
+        return out
+
+    @property
+    def band_width(self) -> int:
+        """Half-bandwidth of the tangent stiffness: masses row-major, three unknowns each."""
+        return 3 * (self.n + 1) + 2
+
+    def stiffness_band(self, x: np.ndarray | None = None, clamp: bool = False) -> np.ndarray:
+        """Tangent stiffness at ``x`` (rest when None) in LAPACK upper band storage.
+
+        ``ab[bw + i - j, j] = K[i, j]`` for ``j - bw <= i <= j`` (``bw`` = :attr:`band_width`):
+        the springs' blocks (:meth:`edge_stiffness`) plus ``k_fixed`` on the diagonal.
+        """
+        x = self.rest if x is None else x
+        n, N, bw = self.n, self.N, self.band_width
+        ab = np.zeros((bw + 1, 3 * N))
+        diag = np.zeros((n, n, 3, 3))
+        diag[..., [0, 1, 2], [0, 1, 2]] = self.params.k_fixed
+        for (di, dj), k in self.edge_stiffness(x, clamp).items():
+            diag[: n - di, : n - dj] += k
+            diag[di:, dj:] += k
+            by_target = np.zeros((n, n, 3, 3))
+            by_target[di:, dj:] = k
+            by_target = by_target.reshape(N, 3, 3)
+            off = di * n + dj
+            for r in range(3):
+                for c in range(3):
+                    ab[bw - 3 * off + r - c, 3 * off + c::3] = -by_target[off:, r, c]
+        diag = diag.reshape(N, 3, 3)
+        for r in range(3):
+            for c in range(r, 3):
+                ab[bw + r - c, c::3] = diag[:, r, c]
+        return ab
+
+
+# -- explicit integration (the paper's reference) ----------------------------------------------
+
+def max_eigenfrequency(model: MSM, x: np.ndarray | None = None) -> float:
+    """Largest angular eigenfrequency sqrt(lambda_max(K) / m) (rad/s) of the model at ``x``.
+
+    Lanczos (``eigsh``) on the band of :meth:`MSM.stiffness_band` viewed as a sparse matrix:
+    ~0.05 s, where LAPACK's banded eigensolver agrees to 1e-15 but takes ~0.6 s.
+    """
+    ab = model.stiffness_band(x)
+    size, bw = ab.shape[1], model.band_width
+    upper = sp.dia_matrix((ab, np.arange(bw, -1, -1)), shape=(size, size))
+    k = (upper + sp.triu(upper, 1).T).tocsr()          # the band's symmetric whole
+    lam = spla.eigsh(k, k=1, which="LA", return_eigenvectors=False, tol=1e-8)[0]
+    return math.sqrt(lam / model.params.mass)
+
+
+def stability_limit(model: MSM, x: np.ndarray | None = None) -> float:
+    """Largest stable time step (s) of damped semi-implicit Euler at ``x`` (rest when None).
+
+    A mode ``x'' = -w^2 x - g x'`` (``g = c/m``) stepped by semi-implicit Euler has the
+    amplification matrix [[1 - w^2 dt^2, dt (1 - g dt)], [-w^2 dt, 1 - g dt]]: trace
+    2 - g dt - w^2 dt^2, determinant 1 - g dt; it is stable iff w^2 dt^2 + 2 g dt < 4, i.e.
+    dt < (sqrt(g^2 + 4 w^2) - g) / w^2, which is 2/w without damping.
+    """
+    w = max_eigenfrequency(model, x)
+    g = model.params.damping / model.params.mass
+    return (math.sqrt(g * g + 4 * w * w) - g) / (w * w)
+
+
+def check_time_step(model: MSM) -> None:
+    """Refuse a time step at or beyond the explicit stability limit of the rest state.
+
+    Under load the stretched springs add geometric stiffness and the limit drops a little
+    (the protocol's 7.5 N diverges at 0.95 of the rest limit); :func:`relax_explicit`
+    catches that as it happens.
+    """
+    if model.params.dt >= model.dt_limit:
+        raise MSMError(f"time step dt={model.params.dt:g} s is at or beyond the explicit "
+                       f"stability limit {model.dt_limit:.4g} s of the rest state; use a "
+                       "smaller dt")
+
+
+def relax_explicit(
+    model: MSM, x: np.ndarray, v: np.ndarray, f_ext: np.ndarray, *,
+    v_tol: float | None = None, f_tol: float | None = None, max_steps: int = 200_000,
+    check_every: int = 50,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Integrate from (x, v) under ``f_ext`` until static; returns (x, v, time steps taken).
+
+    Static means max per-mass |v| < v_tol and max per-mass |f| < f_tol (default: the paper's
+    0.02 m/s and 0.02 N). Divergence (non-finite values, or mechanical energy rising above
+    where it started: a damped system under a constant load only loses energy) and a run that
+    is not static within ``max_steps`` end in :class:`MSMError`; no NaN state is returned.
+    """
+    p = model.params
+    v_tol = p.v_static if v_tol is None else v_tol
+    f_tol = p.f_static if f_tol is None else f_tol
+    start = x
+    x, v = x.copy(), v.copy()
+    dt, c, m = p.dt, p.damping, p.mass
+    e0 = None
+    for step in range(max_steps + 1):
+        if step % check_every == 0:
+            energy, f = model.energy_forces(x, f_ext)
+            total = energy + 0.5 * m * np.einsum("ij,ij->", v, v)
+            e0 = total if e0 is None else e0
+            if not math.isfinite(total) or total > e0 + 1e-6 + 1e-3 * abs(e0):
+                raise MSMError(f"explicit integration diverged after {step} steps: energy "
+                               f"grew from {e0:.4g} J to {total:.4g} J; dt={dt:g} s, stability "
+                               f"limit {model.dt_limit:.4g} s at rest, "
+                               f"{stability_limit(model, start):.4g} s at the start state")
+        else:
+            f = model.forces(x, f_ext)
+        if step > 0 and max_norm(v) < v_tol and max_norm(f) < f_tol:
+            return x, v, step
+        if step == max_steps:
+            break
+        v += (dt / m) * (f - c * v)
+        x += dt * v
+    raise MSMError(f"explicit integration not static after {max_steps} steps of {dt:g} s "
+                   f"(max |v| {max_norm(v):.3g} m/s, max |f| {max_norm(f):.3g} N)")
+
+
+def simulate_reference(
+    model: MSM, node: int, direction: np.ndarray, steps: int = 15, fmax: float = 7.5, *,
+    v_tol: float | None = None, f_tol: float | None = None, max_steps: int = 200_000,
+) -> tuple[np.ndarray, list[int]]:
+    """The paper's protocol for one sequence by explicit integration.
+
+    The force on mass ``node`` grows to ``fmax`` along ``direction`` in ``steps`` equal steps;
+    each step runs from the previous static state (velocities carried over) to the stability
+    criterion. Returns the states (steps + 1, N, 3), the rest state first, and the number of
+    time steps each force step took.
+    """
+    check_time_step(model)
+    direction = unit(direction)
+    x = model.rest.copy()
+    v = np.zeros_like(x)
+    states, counts = [x.copy()], []
+    for t in range(1, steps + 1):
+        x, v, count = relax_explicit(model, x, v, model.load(node, direction * fmax * t / steps),
+                                     v_tol=v_tol, f_tol=f_tol, max_steps=max_steps)
+        states.append(x.copy())
+        counts.append(count)
+    return np.stack(states), counts
+
+
+def unit(direction: np.ndarray) -> np.ndarray:
+    """``direction`` scaled to length 1 (a zero or non-finite vector is refused)."""
+    d = np.asarray(direction, dtype=float)
+    norm = float(np.linalg.norm(d))
+    if d.shape != (3,) or not math.isfinite(norm) or norm == 0:
+        raise MSMError(f"force direction must be a finite non-zero 3-vector, got {direction!r}")
+    return d / norm
+
+
+def max_norm(a: np.ndarray) -> float:
+    """Largest per-mass vector norm of an (N, 3) or flat (3N,) array."""
+    a3 = a.reshape(-1, 3)
+    return float(np.sqrt(np.einsum("ij,ij->i", a3, a3).max()))

@@ -1,0 +1,131 @@
+"""Measured states placed on the MSM grid, ready to compare with the model (``fit-msm``).
+
+A ``phantom.states`` 2.0 file is in the phantom frame, which is the MSM grid's frame
+(footprint ``[0, size]^2``, rest surface at z = 0, +z out of the surface), so measured points
+are placed on the grid where they are, with no frame of their own to guess:
+
+- each point follows the bilinear blend of the four masses around its rest (x, y)
+  (:mod:`sim.msm.msm_sampling`): MSM states (points = the masses) land on their own mass, lab
+  markers between masses;
+- the tip (the point at the tip's rest position: the lab's 26th point, the MSM's loaded mass)
+  is the contact patch: the masses within ``contact_radius`` of it (at least the nearest, the
+  paper's n_n = 1) share the load and the tip follows their mean;
+- the load of a state is ``force_vector`` where the file has it (MSM), else the measured force
+  magnitude along the tip's overall motion in that press (lab: the indenter pushes where it
+  goes; never a guessed sign).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from core.errors import BadInput
+from data_schema.hdf5 import attr_text
+from data_schema.states import validate_states
+from sim.msm.msm import MSM, MSMParams
+from sim.msm.msm_sampling import Sampling, contact_masses, sample_at
+
+TIP_MATCH = 1e-6          # m: a rest point this close to the tip's rest is the tip
+
+
+@dataclass(frozen=True)
+class MeasuredSequence:
+    """One sequence in the grid (= phantom) frame: rest and loaded states of its points."""
+
+    sequence: int            # its id in the file
+    contact_radius: float    # m: the load is shared by the masses this close to the tip
+    contact: np.ndarray      # (M,) masses sharing the load
+    sampling: Sampling       # where each point sits on the grid
+    is_tip: np.ndarray       # (P,) bool: the point that follows the contact patch
+    rest: np.ndarray         # (P, 3) measured rest positions (NaN: missing)
+    forces: np.ndarray       # (T, 3) load of each loaded state, in order
+    points: np.ndarray       # (T, P, 3) measured positions of each loaded state
+
+
+
+def read_measured(path: str | Path, params: MSMParams | None = None,
+                  max_sequences: int | None = None, seed: int = 0,
+                  contact_radius: float | None = None, only: np.ndarray | None = None
+                  ) -> tuple[list[MeasuredSequence], MSMParams]:
+    """The sequences of a states file on the MSM grid, and the grid parameters to fit with.
+
+    For an MSM file the grid (n, size, ...) and contact radius are the ones it was made with.
+    ``only`` keeps those sequence ids (the training presses of a fold); ``max_sequences``
+    then keeps that many of them, drawn with ``seed``.
+    """
+    path = Path(path)
+    validate_states(path)
+    with h5py.File(path, "r") as f:
+        source = attr_text(f.attrs["source"])
+        file_params = f.attrs.get("msm_params")
+        protocol = json.loads(attr_text(f.attrs.get("protocol", "{}")) or "{}")
+        seq, step = f["states/sequence"][()], f["states/step"][()]
+        force = f["states/force"][()].astype(float)
+        fvec = f["states/force_vector"][()].astype(float) if "states/force_vector" in f else None
+        tip = f["states/tip"][()].astype(float)
+        ids = _chosen(np.unique(seq), only, max_sequences, seed, path)
+        rows = {int(s): np.flatnonzero(seq == s) for s in ids}
+        wanted = np.sort(np.concatenate(list(rows.values())))
+        points = dict(zip(wanted.tolist(), f["states/points"][wanted].astype(float),
+                          strict=True))
+    if params is None and source == "msm" and file_params is not None:
+        try:
+            params = MSMParams(**json.loads(attr_text(file_params)))
+        except (TypeError, ValueError) as e:
+            raise BadInput(path, f"unreadable msm_params attribute ({e})") from None
+    if contact_radius is None:
+        contact_radius = float(protocol.get("contact_radius", 0.0)) if source == "msm" else 0.0
+    model = MSM(params or MSMParams())
+    sequences = []
+    for s, r in rows.items():
+        r = r[np.argsort(step[r], kind="stable")]
+        if step[r[0]] != 0:
+            raise BadInput(path, f"sequence {s} has no rest state (step 0)")
+        if len(r) >= 2:
+            loads = fvec[r[1:]] if fvec is not None else _loads_along_tip(force[r[1:]], tip[r])
+            sequences.append(_measured(path, model, s, tip[r[0]],
+                                       [points[int(i)] for i in r], loads, contact_radius))
+    if not sequences:
+        raise BadInput(path, "no sequence with a rest state and a loaded state to fit")
+    return sequences, model.params
+
+
+def _chosen(ids: np.ndarray, only: np.ndarray | None, most: int | None, seed: int,
+            path: Path) -> np.ndarray:
+    """The sequence ids to fit: those in ``only``, at most ``most`` of them (seeded)."""
+    if only is not None:
+        missing = np.setdiff1d(only, ids)
+        if len(missing):
+            raise BadInput(path, f"has no sequence {int(missing[0])} (asked for by the fold)")
+        ids = np.intersect1d(ids, only)
+    if most is not None and len(ids) > most:
+        ids = np.sort(np.random.default_rng(seed).choice(ids, most, replace=False))
+    return ids
+
+
+def _loads_along_tip(force: np.ndarray, tips: np.ndarray) -> np.ndarray:
+    """Lab loads (T, 3): each force magnitude along the tip's motion from rest to its last
+    state (the indenter pushes where it goes); straight down where the tip did not move."""
+    motion = tips[-1] - tips[0]
+    length = np.linalg.norm(motion)
+    direction = motion / length if length > 1e-6 else np.array([0.0, 0.0, -1.0])
+    return force[:, None] * direction
+
+
+def _measured(path: Path, model: MSM, sequence: int, tip_rest: np.ndarray,
+              states: list[np.ndarray], loads: np.ndarray, contact_radius: float
+              ) -> MeasuredSequence:
+    """One sequence placed on the grid."""
+    rest = states[0]
+    if not (np.isfinite(tip_rest).all() and np.isfinite(loads).all()):
+        raise BadInput(path, f"sequence {sequence}: the tip at rest or a load is not finite")
+    is_tip = np.linalg.norm(rest - tip_rest, axis=1) < TIP_MATCH
+    return MeasuredSequence(sequence, contact_radius,
+                            contact_masses(model, tip_rest[:2], contact_radius),
+                            sample_at(model, rest[:, :2]), is_tip, rest, loads,
+                            np.stack(states[1:]))

@@ -1,0 +1,92 @@
+"""``simulate --merge``: the shard files of one sharded run joined into the file one run writes.
+
+Each shard (``simulate --shard I/N``) is a complete states file of a contiguous block of
+locations; joined in shard order, with the example indices shifted by the states before them,
+they give the arrays a one-process run writes, byte for byte. Shards of different runs
+(another protocol, model or solver), missing or repeated shards are refused.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from core.errors import BadInput
+from core.provenance import make_provenance
+from data_schema.hdf5 import attr_text
+from data_schema.states import STATES, validate_states
+from sim.msm.msm_dataset import RESIDUAL_ATTRS, write_states
+from sim.msm.msm_protocol import parse_shard
+
+SAME_ATTRS = ("msm_params", "protocol", "solver")
+
+
+def merge_shards(paths: Sequence[str | Path], out: str | Path
+                 ) -> tuple[dict[str, np.ndarray], dict]:
+    """Join the shard files of one run into the states file ``out`` a one-process run writes;
+    returns its arrays and root attributes."""
+    if not paths:
+        raise BadInput(None, "--merge needs the shard files")
+    shards: dict[int, Path] = {}
+    first: dict | None = None
+    count = None
+    for path in map(Path, paths):
+        validate_states(path)
+        with h5py.File(path, "r") as f:
+            attrs = {k: attr_text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
+        if attrs["source"] != "msm" or not attrs["shard"]:
+            raise BadInput(path, "not an MSM shard (no 'shard' attribute from simulate --shard)")
+        i, n = parse_shard(attrs["shard"])
+        if first is None:
+            first, count = attrs, n
+        for key in SAME_ATTRS:
+            if attrs[key] != first[key]:
+                raise BadInput(path, f"shard of a different run: its {key} differs")
+        if n != count:
+            raise BadInput(path, f"shard {i}/{n} does not belong to a run of {count} shards")
+        if i in shards:
+            raise BadInput(path, f"shard {i}/{n} given twice (also {shards[i]})")
+        shards[i] = path
+    missing = sorted(set(range(count)) - set(shards))
+    if missing:
+        raise BadInput(None, f"shards {missing} of {count} are missing")
+    parts = []
+    for i in range(count):
+        with h5py.File(shards[i], "r") as f:
+            parts.append({name: f[name][()] for name in _dataset_names(f)})
+    arrays = {}
+    offset = np.cumsum([0] + [len(p["states/step"]) for p in parts[:-1]])
+    for name in parts[0]:
+        if name.startswith(("single/", "multi/")):        # state indices: shift per shard
+            chunks = [p[name] + o for p, o in zip(parts, offset, strict=True)]
+        else:
+            chunks = [p[name] for p in parts]
+        arrays[name] = np.concatenate(chunks).astype(parts[0][name].dtype)
+    protocol = json.loads(first["protocol"])
+    prov = make_provenance("simulate --merge", {"shards": count, **protocol},
+                           inputs=[shards[i] for i in range(count)],
+                           schema=STATES.name, schema_version=STATES.version)
+    attrs = {k: v for k, v in _root_attrs(shards[0]).items()
+             if k not in ("shard", "provenance", "schema", "schema_version")}
+    for key in RESIDUAL_ATTRS:
+        values = [_root_attrs(shards[i]).get(key) for i in range(count)]
+        if all(v is not None for v in values):
+            attrs[key] = float(max(values))
+    attrs["provenance"] = json.dumps(prov)
+    write_states(out, arrays, attrs)
+    return arrays, attrs
+
+
+def _dataset_names(f: h5py.File) -> list[str]:
+    names: list[str] = []
+    f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+    return sorted(names)
+
+
+def _root_attrs(path: Path) -> dict:
+    with h5py.File(path, "r") as f:
+        return dict(f.attrs.items())

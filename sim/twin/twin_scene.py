@@ -1,0 +1,132 @@
+"""The scene of a synthetic session: its parameters, where the phantom stands, where it is
+pressed, and the phantom solved along each press.
+
+The phantom frame (bottom centre of the block, z up) is placed on the table, turned a little
+about the vertical (:func:`placement`); the locations are top lattice nodes at least 15 mm
+apart (:func:`choose_locations`); each press is solved at every 0.5 N of its loading and a
+little beyond its peak (:func:`solve_presses`), so that the mocap, the force log and the
+static states all interpolate one solution.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.errors import BadInput
+from core.progress import progress
+from core.protocol import STEP_N
+from sim.twin.indenter import Hand
+from sim.twin.mocap_errors import MocapErrors
+from sim.twin.phantom import LoadPath, Phantom, PhantomSpec
+
+PHANTOM_MARKERS = tuple(f"P{k:02d}" for k in range(25))
+TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
+FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
+
+Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab
+
+
+@dataclass(frozen=True)
+class TwinParams:
+    """Everything that shapes a synthetic session."""
+
+    seed: int = 0
+    locations: int = 5
+    repeats: int = 4
+    press_seconds: float | None = None   # mean duration of one press cycle (None: ~6 s)
+    pivot_seconds: float = 20.0
+    rate_hz: float = 500.0
+    logger_hz: float = 1000.0
+    trigger: bool = True
+    offset_s: float | None = None        # None: drawn, |offset| in [0.3, 3] s, either sign
+    drift_ppm: float | None = None       # None: drawn, |drift| in [10, 60] ppm, either sign
+    force_file: str | None = None        # the file session.toml names: csv or mat (logger),
+                                         # tsv (QTM analog export) or c3d (analog); None: first
+    force_via: str = "logger"            # logger: Speedgoat, own clock; analog: mocap's board
+    errors: MocapErrors = field(default_factory=MocapErrors)
+    phantom: PhantomSpec = field(default_factory=PhantomSpec)
+
+    @property
+    def force_source(self) -> str:
+        """The force file session.toml names (``force_file``, or the route's first)."""
+        return self.force_file or FORCE_FILES.get(self.force_via, ("csv",))[0]
+
+
+def check_params(p: TwinParams) -> None:
+    """Refuse parameters no session can have (named by their synth option)."""
+    checks = [
+        ("--locations", p.locations >= 1, "must be at least 1"),
+        ("--repeats", p.repeats >= 1, "must be at least 1"),
+        ("--force-via", p.force_via in FORCE_FILES, f"must be {' or '.join(FORCE_FILES)}"),
+        ("--force-file", p.force_source in FORCE_FILES.get(p.force_via, ()),
+         f"must be {' or '.join(FORCE_FILES.get(p.force_via, ()))} with --force-via "
+         f"{p.force_via}"),
+        ("--force-via", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
+         "analog needs a force rate that is a whole multiple of the frame rate"),
+        ("--offset", p.force_via != "analog" or (p.offset_s is None and p.drift_ppm is None),
+         "--offset and --drift are the logger's clock; through the analog board there is one"),
+        ("--press-seconds", p.press_seconds is None or 2.0 <= p.press_seconds <= 60.0,
+         "must be between 2 and 60 s"),
+        ("--pivot-seconds", 2.0 <= p.pivot_seconds <= 600.0, "must be between 2 and 600 s"),
+        ("--drift", p.drift_ppm is None or abs(p.drift_ppm) <= 1000.0,
+         "beyond 1000 ppm is not a clock"),
+        ("--offset", p.offset_s is None or abs(p.offset_s) <= 3600.0,
+         "beyond an hour is not plausible"),
+    ]
+    for option, ok, what in checks:
+        if not ok:
+            raise BadInput(option, what)
+
+
+def to_lab_frame(to_lab: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Phantom-frame points (..., 3) in the lab, ``to_lab`` a (4, 4) transform."""
+    return np.asarray(p) @ to_lab[:3, :3].T + to_lab[:3, 3]
+
+
+def placement(rng: np.random.Generator) -> np.ndarray:
+    """Phantom frame -> lab: turned a little about the vertical, somewhere on the table."""
+    yaw = np.radians(rng.uniform(-8.0, 8.0))
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.eye(4)
+    out[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    out[:3, 3] = [rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), 0.0]
+    return out
+
+
+def choose_locations(rng: np.random.Generator, phantom: Phantom, n: int,
+                      min_gap: float = 0.015) -> np.ndarray:
+    """``n`` candidate nodes at least ``min_gap`` apart, in random order."""
+    cand = phantom.candidate_locations()
+    chosen: list[np.ndarray] = []
+    for i in rng.permutation(len(cand)):
+        xy = phantom.contact_point(tuple(cand[i]))[:2]
+        if all(np.linalg.norm(xy - phantom.contact_point(tuple(c))[:2]) >= min_gap
+               for c in chosen):
+            chosen.append(cand[i])
+        if len(chosen) == n:
+            return np.array(chosen)
+    raise BadInput("--locations", f"only {len(chosen)} locations fit on the phantom "
+                         f"({min_gap * 1e3:.0f} mm apart); asked for {n}")
+
+
+def force_levels(fmax: float, top: float) -> np.ndarray:
+    """Force levels to solve: every 0.5 N up to fmax, 0.25 N, fmax and a margin above it."""
+    steps = STEP_N * np.arange(1, int(np.floor(fmax / STEP_N + 1e-9)) + 1)
+    extra = [f for f in (0.25, fmax, top) if np.all(np.abs(steps - f) > 0.01)]
+    return np.unique(np.concatenate([steps, extra]))
+
+
+def solve_presses(phantom: Phantom, hand: Hand, nodes: np.ndarray,
+                   to_lab: np.ndarray) -> list[LoadPath]:
+    """The phantom solved along each press of ``hand`` (its direction in the phantom frame)."""
+    paths = []
+    with progress(range(len(hand.presses)), label="synth: phantom") as bar:
+        for k in bar:
+            press = hand.presses[k]
+            direction = to_lab[:3, :3].T @ press.direction
+            levels = force_levels(press.fmax, hand.max_force(k) + 0.01)
+            paths.append(phantom.load_path(tuple(nodes[press.location]), direction, levels))
+    return paths

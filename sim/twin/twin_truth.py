@@ -1,0 +1,90 @@
+"""``truth.h5`` of a synthetic session (:data:`data_schema.truth.TRUTH`): what really happened.
+
+Names, dtypes and units are the schema's; this module only says which array goes where.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.provenance import make_provenance
+from data_schema.hdf5 import write_h5
+from data_schema.truth import CLOCK_DOC, TRUTH
+from sim.twin.twin import Twin
+from sim.twin.twin_scene import PHANTOM_MARKERS, TwinParams
+
+GZIP = dict.fromkeys((d.path for d in TRUTH.datasets), 1)   # the large series, fast and small
+
+
+def write_truth(path: str | Path, twin: Twin) -> None:
+    """``truth.h5`` (atomically, validated against the schema)."""
+    provenance = make_provenance("synth", _params_record(twin.params), [], TRUTH.name,
+                                 TRUTH.version)
+    write_h5(path, TRUTH, truth_arrays(twin), {"provenance": provenance, **_root_attrs(twin)},
+             gzip=GZIP, track_order=True)
+
+
+def truth_arrays(twin: Twin) -> dict[str, Any]:
+    """Every dataset of ``truth.h5``, by path, in the order they are written."""
+    m, log, st, ind = twin.mocap, twin.log, twin.states, twin.indenter
+    presses = twin.hand.presses
+    rate = twin.params.rate_hz
+    start = np.array([np.flatnonzero(m.press == k)[0] for k in range(len(presses))])
+    end = np.array([np.flatnonzero(m.press == k)[-1] for k in range(len(presses))])
+    peak = np.array([int(np.ceil(p.times[4] * rate - 1e-9)) for p in presses])
+    data: dict[str, Any] = {
+        "point_names": [*PHANTOM_MARKERS, "tip"],
+        "mocap/time_s": m.time_s, "mocap/points": m.points, "mocap/cluster": m.cluster,
+        "mocap/body_origin": m.origin, "mocap/body_rotation": m.rotation,
+        "mocap/visible": m.visible, "mocap/press": m.press,
+        "force/magnitude": m.force, "force/lab": m.force_lab, "force/sensor": m.force_sensor,
+        "force/torque_sensor": m.torque_sensor,
+        "logger/time_s": log.time_s, "logger/mocap_time_s": log.mocap_time_s,
+        "logger/force": log.force, "logger/torque": log.torque,
+        "logger/tool_force": log.tool_force,
+        "clock/offset_s": log.offset_s, "clock/drift_ppm": log.drift_ppm,
+        "calibration/matrix": twin.sensor.calibration.matrix,
+        "calibration/bias": twin.sensor.bias, "calibration/bias_drift": twin.sensor.bias_drift,
+        "calibration/quantum": twin.sensor.quantum, "calibration/noise": twin.sensor.noise,
+        "indenter/markers": ind.markers, "indenter/tip": ind.tip, "indenter/sensor": ind.sensor,
+        "indenter/marker_names": list(ind.names),
+        "phantom/to_lab": twin.to_lab, "phantom/rest_points": m.points[0, :25],
+        "locations/contact": twin.contacts, "locations/node": twin.nodes,
+        "presses/location": [p.location for p in presses],
+        "presses/repeat": [p.repeat for p in presses],
+        "presses/direction": np.array([p.direction for p in presses]),
+        "presses/fmax": [p.fmax for p in presses],
+        "presses/start_frame": start, "presses/peak_frame": peak, "presses/end_frame": end,
+        "presses/times_s": np.array([p.times for p in presses]),
+        "states/points": st.points, "states/force": st.force,
+        "states/force_vector": st.force_vector, "states/step": st.step,
+        "states/press": st.press, "states/location": st.location, "states/time_s": st.time_s,
+        "pivot/point": twin.pivot.point, "pivot/time_s": twin.pivot.time_s,
+        "pivot/cluster": twin.pivot.cluster, "pivot/rotation": twin.pivot.rotation,
+    }
+    if twin.params.trigger:
+        scale = 1.0 + log.drift_ppm * 1e-6
+        data["trigger/mocap_time_s"] = log.pulses
+        data["trigger/logger_time_s"] = log.offset_s + scale * log.pulses
+    return data
+
+
+def _root_attrs(twin: Twin) -> dict[str, Any]:
+    err = twin.params.errors
+    noise = {"residual": "gamma-distributed length in a uniform random direction, independent "
+                         "per sample", "mean_m": err.residual_mean, "sd_m": err.residual_sd}
+    return {"seed": twin.params.seed, "rate_hz": twin.params.rate_hz,
+            "logger_rate_hz": twin.params.logger_hz, "clock_convention": CLOCK_DOC,
+            "units_length": "m", "units_force": "N", "units_time": "s", "noise_model": noise,
+            "clock/offset_s/doc": CLOCK_DOC, "clock/drift_ppm/doc": CLOCK_DOC}
+
+
+def _params_record(p: TwinParams) -> dict[str, object]:
+    record = asdict(p)
+    record["errors"] = asdict(p.errors)
+    record["phantom"] = asdict(p.phantom)
+    return record

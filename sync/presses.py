@@ -1,0 +1,125 @@
+"""Splitting a session into presses, naming each press's location and repeat, cutting them out.
+
+A press runs from contact onset to release: the frames where the force magnitude stays above
+a contact level (a few noise widths), in a run that rises above a detection level. Presses at
+the same place on the phantom (tip within ``radius`` of a location's centre, measured in the
+surface plane) share a location id; locations are numbered in the order they are first
+pressed, repeats within each location. Each press is then cut out of the session's series with
+a margin of unloaded frames on both sides (:func:`cut_presses`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sync.gaps import nan_runs
+
+
+@dataclass
+class Press:
+    """One press on the mocap frame index axis (``release`` is one past the last loaded frame)."""
+
+    onset: int
+    release: int
+    peak: int
+    location: int = -1
+    repeat: int = -1
+
+
+def segment_presses(
+    force_magnitude: np.ndarray,
+    rate_hz: float,
+    detect_n: float = 0.3,
+    contact_n: float = 0.05,
+    min_duration_s: float = 0.2,
+    merge_s: float = 0.05,
+) -> tuple[list[Press], int]:
+    """Complete presses in a force-magnitude series (NaN = unknown), and how many were cut off.
+
+    Runs above ``contact_n`` closer than ``merge_s`` are merged (noise flicker at the contact
+    level); a press is a merged run that peaks above ``detect_n`` and lasts ``min_duration_s``.
+    A press that touches either end of the series or an unknown (NaN) sample was cut off by
+    the end of a recording: its onset or release is not known, so it is left out and only
+    counted (the second value).
+    """
+    f = np.asarray(force_magnitude, float)
+    known = np.isfinite(f)
+    f = np.where(known, f, 0.0)
+    spans: list[list[int]] = []
+    for a, b in nan_runs(f > contact_n):
+        if spans and a - spans[-1][1] < merge_s * rate_hz:
+            spans[-1][1] = b
+        else:
+            spans.append([a, b])
+    presses, cut = [], 0
+    for a, b in spans:
+        if f[a:b].max() <= detect_n or (b - a) < min_duration_s * rate_hz:
+            continue
+        if a == 0 or b == len(f) or not known[a - 1 : b + 1].all():
+            cut += 1
+            continue
+        presses.append(Press(a, b, a + int(np.argmax(f[a:b]))))
+    return presses, cut
+
+
+def assign_locations(
+    centres: np.ndarray, radius: float = 0.010
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Location id and repeat number of each press from its contact point (K, D).
+
+    Greedy in press order: a press joins the nearest known location within ``radius`` (whose
+    centre becomes the mean of its presses), or opens a new one. Returns (location, repeat,
+    location centres (L, D)).
+    """
+    pts = np.asarray(centres, float)
+    members: list[list[int]] = []
+    loc = np.full(len(pts), -1, int)
+    rep = np.full(len(pts), -1, int)
+    for k, p in enumerate(pts):
+        if not np.isfinite(p).all():
+            continue
+        if members:
+            means = np.array([pts[m].mean(axis=0) for m in members])
+            dist = np.linalg.norm(means - p, axis=1)
+            j = int(np.argmin(dist))
+            if dist[j] <= radius:
+                loc[k], rep[k] = j, len(members[j])
+                members[j].append(k)
+                continue
+        loc[k], rep[k] = len(members), 0
+        members.append([k])
+    means = np.array([pts[m].mean(axis=0) for m in members]) if members else np.empty(
+        (0, pts.shape[1]))
+    return loc, rep, means
+
+
+@dataclass
+class PressRecord:
+    """One press, cut out with its margins, on the mocap clock."""
+
+    press: Press                     # indices into this record's frames
+    time_ns: np.ndarray
+    points: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    force_magnitude: np.ndarray
+    depth: np.ndarray
+    quality: np.ndarray
+    force_quality: np.ndarray
+    rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
+
+
+def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
+                ) -> list[PressRecord]:
+    """Each press with ``margin`` frames either side (never into a neighbouring press)."""
+    out = []
+    n = len(series["time_ns"])
+    for k, pr in enumerate(presses):
+        lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
+        hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else n)
+        local = Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat)
+        out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
+                               rest=np.zeros((2, 6))))
+    return out

@@ -1,0 +1,160 @@
+"""The sync stage's math: raw streams (ingest's MCAP) to one synchronised record per press.
+
+Steps, each in its own module of :mod:`sync`:
+
+1. the indenter cluster's shape and the tip offset from the pivot recording, the cluster's pose
+   in every trial frame and the tip it carries, the 26th point (:mod:`sync.tip_track`);
+2. short marker gaps filled, longer ones kept missing and flagged (:mod:`sync.gaps`); the tip
+   track low-passed (zero phase) against the lever arm's noise (:mod:`sync.smooth`); the tip
+   depth below the phantom's rest plane (:mod:`sync.surface`);
+3. the force tared from the unloaded start of the log, calibrated with the 6x6 matrix, and
+   re-tared from the rest level next to every press (:mod:`sync.force_conditioning`);
+4. the clock: one shared clock when the force came through the mocap's analog board,
+   else trigger pulses when recorded, otherwise the tip depth against the force
+   (:mod:`sync.clock_policy`; the calibration record says which policy applied and why);
+5. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock
+   (:mod:`sync.resample`);
+6. presses from contact onset to release, each with its location id and repeat number, cut
+   out with a margin of unloaded frames on both sides; presses cut off by the end of either
+   recording are left out (and counted) (:mod:`sync.presses`).
+
+:func:`sync_session` returns everything in memory; :mod:`sync.sync_stage` reads its input and
+writes it (:mod:`sync.synced_file`) and its view (:mod:`sync.sync_view`). Every bad input is
+one :class:`BadInput` line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from core.errors import BadInput
+from core.series import RawSession
+from data_schema.synced import FORCE_BITS, QUALITY_BITS
+from sync.clock import IDENTITY, ClockFit
+from sync.clock_policy import check_overlap, clock_reason, estimate_clock
+from sync.force import Tare
+from sync.force_conditioning import ConditionedForce, condition_force, over_range
+from sync.gaps import fill_gaps
+from sync.pivot import PivotResult
+from sync.presses import PressRecord, assign_locations, cut_presses, segment_presses
+from sync.resample import antialiased_interpolant
+from sync.smooth import lowpass_track
+from sync.surface import contact_points, rest_surface, tip_depth
+from sync.sync_params import SyncParams, check_params
+from sync.tip_track import check_cluster, track_tip
+
+POOR_FIT = np.uint8(QUALITY_BITS["poor_fit"])
+TIP = "tip"
+
+
+@dataclass
+class SyncResult:
+    """What sync produced: the presses, the calibration, and whole-session series to view."""
+
+    name: str
+    point_names: list[str]
+    presses: list[PressRecord]
+    clock: ClockFit
+    pivot: PivotResult
+    tare: Tare
+    cluster_body: np.ndarray
+    surface_point: np.ndarray
+    surface_normal: np.ndarray
+    location_centres: np.ndarray
+    rate_hz: float
+    calibration: dict[str, Any]
+    presses_cut_off: int = 0         # presses left out: cut off by the end of a recording
+    session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
+
+
+def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResult:
+    """Synchronise a raw session (see the module docstring for the steps)."""
+    p = params or SyncParams()
+    check_params(p)
+    mk = raw.markers
+    rate = float(mk.rate_hz)
+    t_m = mk.time_ns.astype(np.float64) * 1e-9
+    phantom = mk.select(raw.phantom_markers)
+    cluster = mk.select(raw.indenter_markers)
+
+    track = track_tip(raw, p)
+    pose = track.pose
+    points, quality = fill_gaps(t_m, np.concatenate([phantom, track.tip[:, None]], axis=1),
+                                p.max_gap_s)
+    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
+    quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
+    surface_point, normal = rest_surface(phantom, cluster, track.tip, mk.source)
+    depth = tip_depth(points[:, -1], surface_point, normal)
+
+    cf = condition_force(raw, p)
+    force_at = antialiased_interpolant(cf.time_s, cf.wrench, rate, p.passband)
+
+    def magnitude_at(t: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(force_at(t)[:, :3], axis=1)
+
+    clock, clock_note = estimate_clock(raw, p, t_m, depth, cf.time_s, magnitude_at)
+    check_overlap(raw, clock, t_m, cf.time_s)
+
+    sampled = force_at(clock.to_logger(t_m))
+    force_q = np.where(np.isnan(sampled).any(axis=1), FORCE_BITS["outside_log"], 0)
+    over = over_range(raw, sampled)
+    force_q = (force_q | np.where(over, FORCE_BITS["over_range"], 0)).astype(np.uint8)
+    force, torque = sampled[:, :3], sampled[:, 3:]
+    magnitude = np.linalg.norm(force, axis=1)
+
+    presses, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
+    if not presses:
+        whole = "" if not cut_off else (f"; {cut_off} cut off by the end of a recording "
+                                         "left out")
+        raise BadInput(raw.force.source, f"no complete press found (force never rises above "
+                                         f"{p.detect_n:g} N{whole})")
+    check_cluster(raw, pose, presses)
+    centres = contact_points(points[:, -1], presses, surface_point, normal)
+    loc, rep, loc_centres = assign_locations(centres, p.location_radius_m)
+    for pr, lo, re in zip(presses, loc, rep, strict=True):
+        pr.location, pr.repeat = int(lo), int(re)
+    series = {"time_ns": mk.time_ns, "points": points, "quality": quality, "force": force,
+              "torque": torque, "force_magnitude": magnitude, "depth": depth,
+              "force_quality": force_q}
+    records = cut_presses(presses, series, int(round(p.margin_s * rate)))
+    for rec in records:
+        ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
+        rec.rest = cf.rest.at(clock.to_logger(ends))
+    calibration = _calibration_record(raw, track.pivot, cf, clock, p, clock_note)
+    session = {"time_ns": mk.time_ns, "tip": points[:, -1], "depth": depth,
+               "force_magnitude": magnitude, "cluster": cluster,
+               "force_magnitude_unaligned": magnitude_at(IDENTITY.to_logger(t_m)),
+               "quality": quality, "points": points}
+    return SyncResult(
+        name=raw.name, point_names=list(raw.phantom_markers) + [TIP], presses=records,
+        clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,
+        surface_point=surface_point, surface_normal=normal, location_centres=loc_centres,
+        rate_hz=rate, calibration=calibration, presses_cut_off=cut_off, session=session,
+    )
+
+
+def _calibration_record(raw: RawSession, pivot: PivotResult, cf: ConditionedForce,
+                        clock: ClockFit, p: SyncParams, clock_note: str | None
+                        ) -> dict[str, Any]:
+    """What sync measured, with its uncertainty, as plain JSON values."""
+    f, tare, rest = raw.force, cf.tare, cf.rest
+    moved = np.linalg.norm(rest.level[:, :3], axis=1) if len(rest.time_s) else np.zeros(1)
+    return {
+        "tip": {"tip_body_m": pivot.tip_body.tolist(), "rms_m": pivot.rms,
+                "n_poses": pivot.n_poses, "rotation_spread_deg": pivot.rotation_spread_deg,
+                "pivot_lab_m": pivot.pivot_lab.tolist(),
+                "source": None if raw.pivot is None else str(raw.pivot.source)},
+        "force": {"kind": f.kind, "bias": tare.bias.tolist(), "units": list(f.units),
+                  "noise": tare.noise.tolist(), "noise_force_n": cf.noise,
+                  "tare_interval_s": [tare.start / f.rate_hz, tare.stop / f.rate_hz],
+                  "matrix_source": None if raw.calibration is None else
+                  str(raw.calibration.source), "source": str(f.source),
+                  "retare_anchors": len(rest.time_s), "retare_max_n": float(moved.max())},
+        "clock": {**clock.as_dict(), "note": clock_note,
+                  "policy": clock.method, "why": clock_reason(raw, p, clock, clock_note)},
+        "params": asdict(p),
+    }
+

@@ -1,0 +1,23 @@
+"""The train stage runner: a states file and its fold manifest in; the run folder out.
+
+Trains one fold (:func:`train.loop.train_run`: checkpoints and ``log.csv``, written atomically,
+resumed when the folder holds a killed run) and records the curves (:mod:`train.train_view`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from train.loop import TrainOptions, train_run
+from train.model import CGNNConfig
+from train.train_view import write_train_recording
+
+
+def run_train(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
+              init: Path | None = None, device: str = "auto", rrd: bool = True) -> Path:
+    """Train fold ``opts.fold`` into ``out``; with ``rrd``, ``out/train.rrd`` of the curves.
+    Returns the best checkpoint."""
+    best = train_run(data, splits, out, opts, config, init, device)
+    if rrd and (out / "log.csv").is_file():
+        write_train_recording(out / "train.rrd", out / "log.csv")
+    return best
