@@ -261,7 +261,7 @@ def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: States,
         p = predict(model, norm, b)
         sums += torch.stack([loss_sum(p, b, alpha, norm if balanced else None),
                              mean_distance(p, b).sum(),
-                             (p.dforce - b.dforce).abs().sum(), torch.tensor(float(len(rows)))])
+                             (p.dforce - b.dforce).abs().sum(), sums.new_tensor(float(len(rows)))])
     n = max(float(sums[3]), 1.0)
     return {"val_loss": float(sums[0]) / n, "val_ld_mm": float(sums[1]) / n * 1e3,
             "val_force_abs_n": float(sums[2]) / n}
