@@ -1,23 +1,31 @@
 """Region of interest: what running the cGNN near the press only buys in time and costs in error.
 
 An MSM model is trained on the 32 x 32 grid (1024 points), with the recipe of the README's
-"Training that learns" (tip offsets, balanced loss, lr 2e-3). Presses it never saw are simulated
-on the same surface and sampled at its 1024 masses and at a 64 x 64 lattice (4096 points, the
-same physics seen denser; the model never trained at that density, so its error there is the
-whole model's too). For each radius R, through :class:`train.Predictor` on the same presses:
-mean L_d and force error against the MSM's truth and against the whole model, and the median
-latency of ``predict`` (a mesh pressed again: the scene is reused). The default radius is the
-smallest whose mean L_d against truth is within 5 % of the whole model's at both sizes.
+"Training that learns" (tip offsets, balanced loss, rotation, lr 2e-3), or taken from ``--run``
+(a run trained elsewhere, e.g. on a GPU). Presses it never saw are simulated on the same surface
+and sampled at its 1024 masses and at a 64 x 64 lattice (4096 points, the same physics seen
+denser; the model never trained at that density, so its error there is the whole model's too).
+For each radius R, through :class:`train.Predictor` on the same presses: mean L_d and force
+error against the MSM's truth and against the whole model, and the median latency of
+``predict`` (a mesh pressed again: the scene is reused). The default radius is the smallest
+whose mean L_d against truth is within 5 % of the whole model's at both sizes; it proves
+something only where the whole model beats "nothing moves" (the report says when it does not).
 
-    python benchmarks/region_study.py --out out/region [--epochs 15]     (~8 min, 2 cores)
+A model that learns displacement at 1024 points needs more than a CPU's few minutes (~12 s an
+epoch on 2 cores): 15 epochs on 16 presses learn none, 60 epochs on 64 locations x 4
+directions do (a few minutes on a GPU)::
+
+    python benchmarks/region_study.py --out out/region [--epochs 15]            (~8 min, 2 cores)
+    python benchmarks/region_study.py --out out/region64 --device cuda --epochs 60 \
+        --locations 64 --directions 4
+    python benchmarks/region_study.py --out out/region --run out/region64/msm32_run   (time it here)
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import subprocess
-import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +37,10 @@ from sim.msm.msm import MSMParams
 from sim.msm.msm_dataset import generate
 from sim.msm.msm_protocol import Protocol, draw_plan
 from sim.msm.msm_simulate import simulate
-from train.evaluate import load_run
+from split.split_stage import build_manifest, default_plan, write_manifest
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
 from train.predictor import Predictor
-from train.si_model import SIModel
 
 RADII_MM = (5, 10, 15, 20, 30, 45)
 TOLERANCE = 0.05          # the default radius changes mean L_d by less than this
@@ -41,19 +48,17 @@ TRAIN = Protocol(locations=16, directions=2, steps=6, max_angle_deg=30.0)
 UNSEEN = Protocol(locations=4, directions=2, steps=8, max_angle_deg=30.0, seed=1)
 
 
-def model(out: Path, epochs: int, lr: float, device: str, seed: int) -> Predictor:
-    """The 1024-point MSM model (trained here once, then reused), as a predictor."""
+def model(out: Path, epochs: int, lr: float, device: str, seed: int,
+          protocol: Protocol = TRAIN) -> Path:
+    """The 1024-point MSM run (trained here once, resumed or reused after): its folder."""
     data, splits, run = out / "msm32.h5", out / "msm32_splits.json", out / "msm32_run"
     if not splits.is_file():
         out.mkdir(parents=True, exist_ok=True)
-        generate(data, TRAIN, MSMParams(n=32), workers=min(2, os.cpu_count() or 1))
-        subprocess.run([sys.executable, "-m", "pipeline", "-q", "split", str(data), "--out",
-                        str(splits), "--folds", "1", "--seed", str(seed), "--no-rrd"],
-                       check=True)
-    opts = TrainOptions(epochs=epochs, lr=lr, seed=seed, loss="balanced")
+        generate(data, protocol, MSMParams(n=32), workers=min(2, os.cpu_count() or 1))
+        write_manifest(splits, build_manifest(data, default_plan(data, None, None, 1, seed)))
+    opts = TrainOptions(epochs=epochs, lr=lr, seed=seed, loss="balanced", rotate=True)
     train_run(data, splits, run, opts, CGNNConfig(tip_offsets=True), device=device)
-    loaded = load_run(run, device)
-    return Predictor(SIModel(loaded.model, loaded.norm), torch.device(device))
+    return run
 
 
 def presses(side: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
@@ -106,9 +111,12 @@ def nothing_moves(cases: list) -> dict:
 
 
 def region_rows(out: Path, epochs: int = 15, lr: float = 2e-3, device: str = "cpu",
-                seed: int = 0, repeats: int = 30) -> dict:
-    """Every row (1024 and 4096 points, each radius and the whole model), and the default."""
-    pred = model(out, epochs, lr, device, seed)
+                seed: int = 0, repeats: int = 30, run: Path | None = None,
+                protocol: Protocol = TRAIN) -> dict:
+    """Every row (1024 and 4096 points, each radius and the whole model), and the default.
+    ``run``: time and score that trained run instead of training one."""
+    run = run or model(out, epochs, lr, device, seed, protocol)
+    pred = Predictor.load(run, device)
     rows = []
     for side in (32, 64):
         cases = presses(side)
@@ -133,9 +141,16 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("out/region"))
     ap.add_argument("--epochs", type=int, default=15)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--device", choices=["cpu", "cuda"], default="cpu")
+    ap.add_argument("--locations", type=int, default=TRAIN.locations,
+                    help="MSM training locations (a new --out for another protocol)")
+    ap.add_argument("--directions", type=int, default=TRAIN.directions)
+    ap.add_argument("--run", type=Path, help="a trained run to time and score (no training)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    result = region_rows(a.out, a.epochs)
+    protocol = replace(TRAIN, locations=a.locations, directions=a.directions)
+    result = region_rows(a.out, a.epochs, device=a.device, run=a.run, protocol=protocol)
+    print(f"model: {a.run or a.out / 'msm32_run'}")
     print(region_text(result))
 
 
