@@ -50,8 +50,9 @@ from sim.msm.msm_protocol import Protocol
 from train.augment import about_normal, move_batch, tilt
 from train.data import Batch
 from train.evaluate import LoadedRun, example_errors, load_run, metrics
-from train.loop import Prediction, TrainOptions, predict, train_run
+from train.loop import TrainOptions, train_run
 from train.model import CGNN, CGNNConfig
+from train.si_model import Prediction, predict
 
 HAPTIC_MS = 1.0          # a 1 kHz haptic loop's whole budget
 VISUAL_MS = 1000 / 60    # one 60 Hz frame

@@ -113,8 +113,9 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
 
 
 METRIC_ROWS = {
-    "runs": {"run": str, "label": str, "fold": int, "test_set": str, "metrics": dict},
-    "overall": {"label": str, "test_set": str, "folds": int, "metrics": dict,
+    "runs": {"run": str, "label": str, "variant": dict, "fold": int, "test_set": str,
+             "metrics": dict},
+    "overall": {"label": str, "variant": dict, "test_set": str, "folds": int, "metrics": dict,
                 "fold_ld_mean_sd_mm": (int, float)},
 }
 METRIC_LIMITS = {"_mm": 100.0, "_n": 1000.0, "_n2": 1e6}   # beyond the phantom's size, a press

@@ -72,9 +72,10 @@ def _fit(out: Path) -> list[tuple[str, bool, str]]:
 
 
 def variant_of(run: dict) -> str:
-    """'tl', 'notl' or 'msm', from the run folder the demo named."""
-    name = Path(run["run"]).name
-    return "msm" if name == "msm" else name.split("_")[1]
+    """'tl' (fine-tuned), 'msm' (the MSM model) or 'notl' (lab data from scratch), from the
+    variant the run's checkpoint records."""
+    v = run["variant"]
+    return "tl" if v["pretrained"] else "msm" if v["train_data"] == "MSM" else "notl"
 
 
 def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:

@@ -21,6 +21,7 @@ from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
 from data_schema.states import example_groups, validate_states
 from split.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
+from split.split_view import write_split_recording
 
 
 def run_split(states: str | Path, out: str | Path, rrd: str | Path | None = None,
@@ -32,8 +33,6 @@ def run_split(states: str | Path, out: str | Path, rrd: str | Path | None = None
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         write_manifest(tmp_out, doc)
         if tmp_rrd is not None:
-            from split.split_view import write_split_recording  # the manifest needs no rerun
-
             write_split_recording(tmp_rrd, states, doc)
     return doc
 

@@ -173,10 +173,31 @@ def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp
     assert out.with_suffix(".scarcity.png").stat().st_size > 0
 
 
+def test_a_run_records_its_variant_and_a_fine_tuned_one_its_pre_training(dent, tmp_path
+                                                                         ) -> None:
+    """The variant is structured fields in the checkpoint, kept when the pre-training run is
+    gone; the label is built from them, never parsed."""
+    data, splits = dent
+    pre = tmp_path / "pre"
+    _train(dent, pre, epochs=1, point_fraction=0.5)
+    run = tmp_path / "tl"
+    train_run(data, splits, run, TrainOptions(epochs=1, batch=8, rotate=True), SMALL,
+              init=pre / "best.pt", device="cpu")
+    (pre / "best.pt").rename(tmp_path / "moved.pt")
+    variant = load_checkpoint(run / "best.pt")["meta"]["variant"]
+    assert variant == {"model": "cGNN", "train_data": "Exp", "rotate": True, "aug": False,
+                       "pretrained": {"model": "cGNN", "train_data": "Exp", "rotate": False,
+                                      "aug": True, "pretrained": None}}
+    result = evaluate_runs([run])
+    assert result["runs"][0]["variant"] == variant
+    assert result["overall"][0]["label"] == "cGNN/aug Exp (TL)"
+
+
 def test_balanced_loss_puts_each_term_in_its_scale() -> None:
     from train.data import Batch
-    from train.loop import Prediction, learning_rate, loss_sum
+    from train.loop import learning_rate
     from train.normalise import Normaliser
+    from train.si_model import Prediction, loss_sum
 
     pts = torch.zeros(1, 2, 3)
     b = Batch(pts, pts + torch.tensor([0.0, 0.0, 0.002]), torch.ones(1, 2, dtype=torch.bool),

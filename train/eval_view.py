@@ -17,7 +17,7 @@ import rerun.blueprint as rrb
 
 from core.recording import declare_up, phantom_view, recording
 from train.data import Batch
-from train.loop import Prediction
+from train.si_model import Prediction
 
 APP_ID = "phantom-eval"
 ERROR_MM = 2.0

@@ -35,11 +35,11 @@ from train.data import (
     make_batch,
     role_examples,
 )
-from train.loop import Prediction, distances, predict
 from train.normalise import Normaliser
 from train.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
-
-SOURCE_NAMES = {"msm": "MSM", "lab": "Exp"}
+from train.si_model import Prediction, distances, predict
+from train.variant import SOURCE_NAMES, recorded_variant
+from train.variant import label as variant_label
 
 
 @dataclass
@@ -50,28 +50,6 @@ class ExampleErrors:
     ld_mean: np.ndarray      # (E,) m
     ld_max: np.ndarray       # (E,) m
     force_err: np.ndarray    # (E,) N, predicted - true
-
-
-def run_label(meta: dict, source: str) -> str:
-    """The Table 2 name of a run: model/train set, (TL) when fine-tuned from another run."""
-    opts = meta["options"]
-    model = "cGNN" if meta["config"]["use_condition"] else "noCond"
-    data = SOURCE_NAMES.get(source, source)
-    if meta["init"]:
-        init = load_checkpoint(meta["init"])["meta"]
-        aug = "aug " if init["options"]["point_fraction"] else ""
-        return f"{model}/{aug}{_source_name(Path(init['data']['file']))} (TL)"
-    rot = "rot " if opts.get("rotate") else ""
-    return f"{model}/{rot}{'aug ' if opts['point_fraction'] else ''}{data}"
-
-
-def _source_name(data: Path) -> str:
-    """'MSM' or 'Exp' for a states file; '?' where it has moved (only the label needs it)."""
-    try:
-        with h5py.File(data, "r") as f:
-            return SOURCE_NAMES.get(attr_text(f.attrs["source"]), "?")
-    except OSError:
-        return "?"
 
 
 @dataclass
@@ -204,19 +182,21 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
             source = attr_text(f.attrs["source"])
         m = metrics(errs)
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
-        runs.append({"run": str(run_dir), "label": run_label(run.meta, source),
+        variant = recorded_variant(run.meta)
+        runs.append({"run": str(run_dir), "label": variant_label(variant), "variant": variant,
                      "fold": run.meta["options"]["fold"],
                      "test_set": SOURCE_NAMES.get(source, source), "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m)})
         key = (runs[-1]["label"], runs[-1]["test_set"])
         by_label.setdefault(key, []).append((errs, refs, runs[-1]))
     overall = []
-    for (label, test_set), items in by_label.items():
+    for (name, test_set), items in by_label.items():
         pooled = metrics(pool([e for e, _, _ in items]))
         ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
         fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
         fold_ld = [v for v in fold_ld if v is not None] or [0.0]
-        overall.append({"label": label, "test_set": test_set, "folds": len(items),
+        overall.append({"label": name, "variant": items[0][2]["variant"],
+                        "test_set": test_set, "folds": len(items),
                         "fold_ids": [r["fold"] for _, _, r in items],
                         "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
                         "references": ref_m, "gain": gains(pooled["all"], ref_m),

@@ -1,9 +1,7 @@
 """Training the cGNN on one fold: Adam, the paper's loss, validation every epoch, checkpoints.
 
-Loss (paper, "Loss Function"): ``alpha * L_d + MSE(dF)`` with ``L_d`` the mean Euclidean distance
-between predicted and true deformed points, in metres, and the force change in newtons; alpha =
-88 (the paper's weight, which with these units makes the two terms of one order: 0.4 mm x 88 =
-0.035 against a force MSE of a few 1e-3 N^2).
+The loss and the distances are the SI face's (:mod:`train.si_model`): ``alpha * L_d + MSE(dF)``,
+L_d in metres and the force change in newtons (alpha = 88, the paper's), or "balanced".
 
 Each epoch's shuffle and point sampling (``point_fraction``: the paper's aug variant, that
 fraction of the points per sample in training, all in validation and test) come from a
@@ -31,7 +29,6 @@ from core.progress import say
 from train.augment import about_normal, move_batch
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.data import (
-    Batch,
     States,
     example_pairs,
     load_manifest,
@@ -42,6 +39,8 @@ from train.data import (
 from train.distributed import DistContext, from_env
 from train.model import CGNN, CGNNConfig
 from train.normalise import Normaliser
+from train.si_model import loss_sum, mean_distance, predict
+from train.variant import make_variant
 
 EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
 LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
@@ -64,44 +63,6 @@ class TrainOptions:
     loss: str = "paper"              # "paper": alpha L_d + MSE; "balanced": each in its scale
     schedule: str = "constant"       # "constant" or "cosine" (to 1 % of lr at the last epoch)
     patience: int | None = None      # stop after this many epochs without a better validation
-
-
-@dataclass
-class Prediction:
-    """Model outputs in SI units."""
-
-    deformed: torch.Tensor   # (B, N, 3) m
-    dforce: torch.Tensor     # (B,) N
-
-
-def predict(model: torch.nn.Module, norm: Normaliser, b: Batch) -> Prediction:
-    """Deformed points and change of force for a batch."""
-    disp, df = model(norm.points(b.points), norm.condition(b.cond), b.mask)
-    return Prediction(b.points + disp * norm.disp_scale, df * norm.force_scale)
-
-
-def distances(p: Prediction, b: Batch) -> torch.Tensor:
-    """(B, N) Euclidean distance of each predicted point from the truth (0 where masked)."""
-    return torch.linalg.vector_norm(p.deformed - b.target, dim=-1) * b.mask
-
-
-def mean_distance(p: Prediction, b: Batch) -> torch.Tensor:
-    """L_d per example (B,): the mean over its valid points."""
-    return distances(p, b).sum(1) / b.mask.sum(1).clamp(min=1)
-
-
-def loss_sum(p: Prediction, b: Batch, alpha: float, norm: Normaliser | None = None
-             ) -> torch.Tensor:
-    """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean).
-
-    With ``norm`` (the "balanced" loss) each term is in its training scale instead:
-    ``L_d / disp_scale + (dF error / force_scale)^2``, so neither swamps the other whatever
-    the units and data (on the MSM the paper's weights make the force term ~800x the other).
-    """
-    if norm is None:
-        return (alpha * mean_distance(p, b) + (p.dforce - b.dforce) ** 2).sum()
-    return (mean_distance(p, b) / norm.disp_scale
-            + ((p.dforce - b.dforce) / norm.force_scale) ** 2).sum()
 
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
@@ -161,15 +122,18 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
     val = example_pairs(states, role_examples(doc, opts.fold, "val"))
     if len(train) == 0:
         raise BadInput(splits, f"fold {opts.fold} has no training example")
+    init_state = load_checkpoint(init) if init is not None else None
     meta = {"options": asdict(opts), "config": config.to_dict(),
             "data": {"file": str(Path(data).resolve()), "sha256": doc["data"]["sha256"]},
             "splits": str(Path(splits).resolve()),
-            "init": str(Path(init).resolve()) if init else None}
+            "init": str(Path(init).resolve()) if init else None,
+            "variant": make_variant(config.to_dict(), asdict(opts), data,
+                                    init_state and init_state["meta"])}
     torch.manual_seed(opts.seed)
     model = CGNN(config)
     norm = fit_normaliser(states, train, opts.seed)
-    if init is not None:
-        state = load_checkpoint(init)
+    if init_state is not None:
+        state = init_state
         if state["config"] != config.to_dict():
             raise BadInput(init, "its network (widths, k or conditioning) differs from this "
                                  "run's: transfer learning needs the same network")
@@ -208,7 +172,8 @@ def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
 
 def _resumable(meta: dict) -> dict:
     """What a resumed run must share with the one it continues (more epochs may be asked)."""
-    return {**meta, "options": {k: v for k, v in meta["options"].items() if k != "epochs"}}
+    return {**{k: v for k, v in meta.items() if k != "variant"},     # derived from the rest
+            "options": {k: v for k, v in meta["options"].items() if k != "epochs"}}
 
 
 def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from train.data import Batch, States, make_batch
-from train.loop import Prediction
+from train.si_model import Prediction
 
 NAMES = ("nothing moves", "nearest press", "force, linear")
 DISPLACEMENT = ("nothing moves", "nearest press")       # the references that move points
