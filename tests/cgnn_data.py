@@ -16,6 +16,7 @@ import numpy as np
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES
 from extract.static_states import example_pairs
+from split.split_stage import build_manifest, default_plan, write_manifest
 
 SIGMA = 0.015
 GRID = 7
@@ -62,3 +63,17 @@ def write_dent_states(path: Path, places: int = 4, repeats: int = 2, steps: int 
              "step_n": 0.5, "frame": "phantom", "session_names": json.dumps(["dent"])}
     write_h5(path, STATES, arrays, attrs)
     return arrays
+
+
+def write_dent_split(data: Path, splits: Path, ratio: tuple[int, int, int] = (2, 1, 1),
+                     folds: int = 2) -> None:
+    """A fold manifest of a dent states file, grouped by place (seed 0)."""
+    write_manifest(splits, build_manifest(data, default_plan(data, None, ratio, folds, 0)))
+
+
+def dent_fold(d: Path, folds: int = 2) -> tuple[Path, Path]:
+    """``d/states.h5`` of the dent model with its manifest ``d/splits.json``."""
+    data, splits = d / "states.h5", d / "splits.json"
+    write_dent_states(data)
+    write_dent_split(data, splits, folds=folds)
+    return data, splits

@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent, write_dent_states
+from cgnn_data import dent, dent_fold, write_dent_states
 
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train.augment import about_normal, move_batch, tilt
 from train.data import load_states, make_batch
 from train.loop import TrainOptions, train_run
@@ -48,10 +47,7 @@ def test_turns_and_tilts_are_rotations() -> None:
 
 
 def test_rotation_augmented_training_is_seeded_and_differs(tmp_path) -> None:
-    data = tmp_path / "s.h5"
-    write_dent_states(data)
-    splits = tmp_path / "f.json"
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 2, 0)))
+    data, splits = dent_fold(tmp_path)
     runs = {}
     for name, rotate in (("a", True), ("b", True), ("plain", False)):
         opts = TrainOptions(epochs=2, batch=8, lr=3e-3, rotate=rotate)

@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import write_dent_states
+from cgnn_data import dent_fold
 
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train.evaluate import evaluate_runs
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
@@ -31,12 +30,7 @@ OPTIONS = TrainOptions(epochs=2, batch=8, lr=3e-3, loss="balanced", rotate=True,
 
 @pytest.fixture(scope="module")
 def dent(tmp_path_factory) -> tuple[Path, Path]:
-    d = tmp_path_factory.mktemp("dent")
-    data = d / "states.h5"
-    write_dent_states(data)
-    splits = d / "splits.json"
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 2, 0)))
-    return data, splits
+    return dent_fold(tmp_path_factory.mktemp("dent"))
 
 
 def _log(run: Path) -> list[dict]:

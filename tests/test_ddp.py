@@ -11,9 +11,8 @@ import pytest
 import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
-from cgnn_data import write_dent_states
+from cgnn_data import dent_fold
 
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train.checkpoint import load_checkpoint
 from train.loop import TrainOptions, train_run
 from train.model import CGNN, CGNNConfig
@@ -41,9 +40,7 @@ def _free_port() -> int:
 @pytest.mark.skipif(not dist.is_available() or not dist.is_gloo_available(),
                     reason="torch.distributed with gloo is not available")
 def test_two_processes_take_the_steps_of_one(tmp_path) -> None:
-    data, splits = tmp_path / "states.h5", tmp_path / "splits.json"
-    write_dent_states(data)
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 1, 0)))
+    data, splits = dent_fold(tmp_path, folds=1)
     mp.spawn(_worker, args=(2, _free_port(), data, splits, tmp_path / "ddp"), nprocs=2)
     train_run(data, splits, tmp_path / "one", OPTS, SMALL, device="cpu")
     a = load_checkpoint(tmp_path / "ddp" / "last.pt")["model"]

@@ -9,11 +9,10 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import write_dent_states
+from cgnn_data import dent_fold
 from click.testing import CliRunner
 
 from pipeline.cli import cli
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train import Predictor
 from train.checkpoint import load_checkpoint, model_from
 from train.loop import TrainOptions, train_run
@@ -23,9 +22,7 @@ from train.model import CGNNConfig
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
     d = tmp_path_factory.mktemp("pred")
-    data, splits = d / "states.h5", d / "splits.json"
-    write_dent_states(data)
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 1, 0)))
+    data, splits = dent_fold(d, folds=1)
     cfg = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
     train_run(data, splits, d / "run", TrainOptions(epochs=1, batch=8), cfg, device="cpu")
     with h5py.File(data) as f:

@@ -8,11 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import SIGMA, write_dent_states
+from cgnn_data import SIGMA, write_dent_split, write_dent_states
 from click.testing import CliRunner
 
 from pipeline.cli import cli
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train.data import Batch, example_pairs, load_states, make_batch, role_examples
 from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
@@ -27,7 +26,7 @@ def dent(tmp_path_factory) -> tuple[Path, Path]:
     data = d / "states.h5"
     write_dent_states(data, places=4, repeats=2, steps=5)
     splits = d / "splits.json"
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (4, 2, 2), 2, 0)))
+    write_dent_split(data, splits, (4, 2, 2))
     return data, splits
 
 

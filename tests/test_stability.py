@@ -14,14 +14,13 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import write_dent_states
+from cgnn_data import write_dent_split, write_dent_states
 from click.testing import CliRunner
 
 from core.errors import BadInput
 from core.series import frame_times_ns, time_to_ns
 from data_schema.states import validate_states
 from pipeline.cli import cli
-from split.split_stage import build_manifest, default_plan, write_manifest
 from sync.force_conditioning import over_range
 from train.checkpoint import load_checkpoint
 from train.data import load_manifest, role_examples
@@ -43,7 +42,7 @@ def _dent(tmp_path: Path, scale: dict[str, float] | None = None, manifest: bool 
             f[name][...] = f[name][()] * factor
     splits = tmp_path / "splits.json"
     if manifest:
-        write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 2, 0)))
+        write_dent_split(data, splits)
     return data, splits
 
 

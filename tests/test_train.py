@@ -10,13 +10,12 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import write_dent_states
+from cgnn_data import dent_fold, write_dent_states
 from click.testing import CliRunner
 
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
-from split.split_stage import build_manifest, default_plan, write_manifest
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.evaluate import evaluate_runs
 from train.loop import TrainOptions, train_run
@@ -27,12 +26,7 @@ SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=
 
 @pytest.fixture(scope="module")
 def dent(tmp_path_factory) -> tuple[Path, Path]:
-    d = tmp_path_factory.mktemp("dent")
-    data = d / "states.h5"
-    write_dent_states(data)
-    splits = d / "splits.json"
-    write_manifest(splits, build_manifest(data, default_plan(data, None, (2, 1, 1), 2, 0)))
-    return data, splits
+    return dent_fold(tmp_path_factory.mktemp("dent"))
 
 
 def _train(dent, out: Path, **kw) -> Path:
