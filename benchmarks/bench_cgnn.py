@@ -123,7 +123,7 @@ def latency(model: CGNN, peer: PygPeer, device: torch.device, repeats: int,
     print(f"batch-1 latency through Predictor [ms] (median of {repeats}); ratio = PyG peer / "
           f"ours ({next(iter(ours))}); region = {DEFAULT_REGION * 1e3:.0f} mm:")
     for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
-        row = scene_row(ours, them, surface(n, grid), max(5, repeats * 26 // n), sync)
+        row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
         first, region = next(iter(row.values())), row[f"{next(iter(ours))} region"]
         print(f"  N={n:5d} {'grid' if grid else 'random':6s} " + "  ".join(
             f"{k} {v:7.3f}" for k, v in row.items()) + f"  ratio {row['PyG peer'] / first:5.2f}x"
