@@ -132,7 +132,8 @@ def test_train_and_eval_commands_write_runs_tables_and_recordings(dent, tmp_path
     assert res.exit_code == 0, res.output
     assert "| cGNN/Exp | Exp |" in out.with_suffix(".md").read_text()
     ents = set(rrd_entities(out.with_suffix(".rrd")))
-    assert {"/surface/true", "/surface/predicted", "/force/true", "/force/predicted"} <= ents
+    assert {"/surface/true", "/surface/predicted", "/force/true", "/force/predicted",
+            "/table"} <= ents
 
 
 def test_train_bad_input_is_one_line_and_exit_2(dent, tmp_path) -> None:

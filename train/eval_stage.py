@@ -36,7 +36,9 @@ def run_eval(runs: Sequence[Path], out: Path, rrd: Path | None = None, device: s
         write_json(tmp_json, result)
         tmp_table.write_text(table)
         if tmp_rrd is not None:
-            write_eval_recording(tmp_rrd, test_errors(runs[0], device)[2])
+            first = result["runs"][0]
+            write_eval_recording(tmp_rrd, test_errors(runs[0], device)[2],
+                                 f"{first['label']}, fold {first['fold']}", table)
     return result, table
 
 

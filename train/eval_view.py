@@ -1,10 +1,12 @@
-"""The evaluation recording: predicted beside true surfaces, coloured by error, and forces.
+"""The evaluation recording: predicted beside true surfaces, coloured by error, and forces,
+next to the Table-2 scores of every run beside the no-learning references.
 
-Timeline ``example`` (test examples of the first run shown). Entities: ``surface/true`` the
-true deformed points (grey), ``surface/predicted`` the prediction coloured by each point's
-error (blue 0 mm .. red ``ERROR_MM`` and above), ``surface/input`` the undeformed input (faint),
-``surface/tip`` the tip at start and end; ``force/true`` and ``force/predicted`` the change of
-force (N).
+Timeline ``example`` (test examples of the first run, named in the 3-D view's title).
+Entities: ``surface/true`` the true deformed points (grey), ``surface/predicted`` the
+prediction coloured by each point's error (blue 0 mm .. red ``ERROR_MM`` and above),
+``surface/input`` the undeformed input (faint), ``surface/tip`` the tip at start and end;
+``force/true`` and ``force/predicted`` the change of force (N); ``table`` (static) the
+Markdown of ``metrics.md``, so a model that does not beat the references is seen beside it.
 """
 
 from __future__ import annotations
@@ -23,12 +25,17 @@ APP_ID = "phantom-eval"
 ERROR_MM = 2.0
 
 
-def blueprint(centre: np.ndarray, size: float) -> rrb.Blueprint:
-    """The predicted beside the true surface, framed from above; the force change."""
+def blueprint(centre: np.ndarray, size: float, shown: str) -> rrb.Blueprint:
+    """The predicted beside the true surface, framed from above; the force change; the
+    scores beside the references."""
     return rrb.Blueprint(rrb.Horizontal(
-        phantom_view(f"predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) beside true "
-                     "(grey)", ["+ /surface/**"], centre, size, origin="/surface"),
-        rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
+        phantom_view(f"{shown}: predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
+                     "beside true (grey)", ["+ /surface/**"], centre, size, origin="/surface"),
+        rrb.Vertical(
+            rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
+            rrb.TextDocumentView(name="scores beside the no-learning references",
+                                 origin="/table"),
+        ),
         column_shares=[3, 2],
     ), collapse_panels=True)
 
@@ -39,12 +46,15 @@ def error_colors(err_mm: np.ndarray) -> np.ndarray:
     return (np.array([40, 110, 230]) * (1 - t) + np.array([230, 40, 40]) * t).astype(np.uint8)
 
 
-def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]]) -> None:
-    """Log up to the examples in ``shown`` (one run's first test batches)."""
+def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]], name: str,
+                         table: str) -> None:
+    """Log the examples in ``shown`` (the test batches of the run ``name``) and ``table``
+    (the Markdown scores of every run beside the references)."""
     first = shown[0][0].target[0][shown[0][0].mask[0]].cpu().numpy() if shown else np.zeros((1, 3))
     size = max(float(np.ptp(first[:, :2], axis=0).max()), 0.02)
-    with recording(APP_ID, path, blueprint(first.mean(axis=0), size)) as rec:
+    with recording(APP_ID, path, blueprint(first.mean(axis=0), size, name)) as rec:
         declare_up(rec)
+        rec.log("table", rr.TextDocument(table, media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log("force/true", rr.SeriesPoints(names=["true dF [N]"], colors=[(90, 90, 90)],
                                               marker_sizes=[4]), static=True)
         rec.log("force/predicted", rr.SeriesPoints(names=["predicted dF [N]"],
