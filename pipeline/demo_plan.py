@@ -57,7 +57,7 @@ class Settings:
 # The recipe the measurements support (README, "Training that learns"): tip offsets, the
 # balanced loss, rotation augmentation; the paper's own settings are the flags' defaults.
 RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate")
-QUICK = Settings(msm_locations=60, msm_directions=4, pretrain_epochs=12, finetune_epochs=60,
+QUICK = Settings(msm_locations=60, msm_directions=4, pretrain_epochs=40, finetune_epochs=80,
                  lr=2e-3)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
                  pretrain_epochs=250, finetune_epochs=250, lr=1e-4, scarcity_folds=5,
