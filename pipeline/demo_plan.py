@@ -56,7 +56,7 @@ class Settings:
 
 # The recipe the measurements support (README, "Training that learns"): tip offsets, the
 # balanced loss, rotation augmentation; the paper's own settings are the flags' defaults.
-RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate")
+RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99")
 QUICK = Settings(msm_locations=60, msm_directions=4, pretrain_epochs=40, finetune_epochs=80,
                  lr=2e-3)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,

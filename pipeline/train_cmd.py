@@ -38,6 +38,10 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Learning rate: constant (the paper), or cosine from --lr to 1 % of it.")
 @click.option("--patience", type=click.IntRange(min=1), default=None,
               help="Stop after this many epochs without a better validation loss.")
+@click.option("--ema", type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+              default=None,
+              help="Validate and keep an exponential moving average of the weights over the "
+                   "steps with this decay (e.g. 0.99); best.pt holds the average.")
 @click.option("--train-groups", type=click.IntRange(min=1), default=None,
               help="Train on the manifest's first N training groups only (data scarcity).")
 @click.option("--epochs", type=click.IntRange(min=1), default=250, show_default=True)
@@ -56,7 +60,8 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @seed_option
 def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
           point_fraction: float | None, rotate: bool, tip_offsets: bool, loss: str,
-          schedule: str, patience: int | None, train_groups: int | None, epochs: int,
+          schedule: str, patience: int | None, ema: float | None, train_groups: int | None,
+          epochs: int,
           batch: int, lr: float, alpha: float, k: int, device: str, rrd: bool, seed: int) -> None:
     """Train the cGNN on one fold (resumes a killed run in the same --out).
 
@@ -76,7 +81,7 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
         raise click.UsageError("--tip-offsets are the condition C: not with --no-cond")
     opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr, alpha=alpha,
                         point_fraction=point_fraction, train_groups=train_groups, seed=seed,
-                        rotate=rotate, loss=loss, schedule=schedule, patience=patience)
+                        rotate=rotate, loss=loss, schedule=schedule, patience=patience, ema=ema)
     config = CGNNConfig(k=k, use_condition=not no_cond, tip_offsets=tip_offsets)
     best = run_train(data, splits, out, opts, config, init, device, rrd)
     click.echo(f"{out}: trained fold {fold} for {epochs} epochs; best checkpoint {best}"

@@ -221,6 +221,29 @@ def test_patience_stops_early_and_a_resumed_run_stops_alike(dent, tmp_path) -> N
     assert load_checkpoint(tmp_path / "run" / "last.pt")["epoch"] == 2
 
 
+def test_ema_keeps_the_average_of_the_steps_and_resumes_alike(dent, tmp_path) -> None:
+    """With one step per epoch, the kept model is the average a_t = d a_(t-1) + (1 - d) w_t
+    of the stepped weights w_t (w_0: the seeded start), computed here from each epoch's
+    checkpoint; a run resumed epoch by epoch equals an uninterrupted one."""
+    from train.model import CGNN
+
+    opts = {"batch": 10_000, "ema": 0.75, "seed": 3}
+    torch.manual_seed(3)
+    avg = {k: v.clone() for k, v in CGNN(SMALL).state_dict().items()}       # w_0
+    for epochs in (1, 2, 3):
+        _train(dent, tmp_path / "steps", epochs=epochs, **opts)
+        state = load_checkpoint(tmp_path / "steps" / "last.pt")
+        avg = {k: 0.75 * v + 0.25 * state["trained"][k] for k, v in avg.items()}
+    for name, value in state["model"].items():
+        torch.testing.assert_close(value, avg[name], rtol=1e-5, atol=1e-7)
+    _train(dent, tmp_path / "whole", epochs=3, **opts)
+    whole = load_checkpoint(tmp_path / "whole" / "last.pt")
+    for key in ("model", "trained"):
+        for name, value in whole[key].items():
+            assert torch.equal(value, state[key][name]), (key, name)
+    assert "trained" not in load_checkpoint(_train(dent, tmp_path / "plain", epochs=1))
+
+
 def test_tip_offsets_feed_the_first_layer_and_need_the_condition(dent, tmp_path) -> None:
     from train.model import CGNN
 

@@ -2,8 +2,10 @@
 
 ``{"model": state_dict, "optimizer": state_dict, "epoch": int, "best_val": float,
 "config": CGNNConfig.to_dict(), "norm": Normaliser.to_dict(), "meta": {"options", "config",
-"data": {"file", "sha256"}, "splits", "init"}}``: everything inference needs travels with the
-weights, and nothing needs unpickling, so a checkpoint from elsewhere cannot run code on load.
+"data": {"file", "sha256"}, "splits", "init", "variant"}}``, and with ``--ema`` "trained": the
+weights the optimizer steps (``model`` is then their average): everything inference needs
+travels with the weights, and nothing needs unpickling, so a checkpoint from elsewhere cannot
+run code on load.
 :func:`load_checkpoint` checks what it reads (weights of the network its config describes, all
 finite; a usable normaliser; the run's meta) before any of it is used.
 """
@@ -66,6 +68,8 @@ def check_checkpoint(path: str | Path, state: Any) -> None:
     norm = _parsed(path, "norm", Normaliser.from_dict, state["norm"])
     _check_norm(path, norm)
     _check_weights(path, state["model"], config)
+    if "trained" in state:                           # a run that averages its weights
+        _check_weights(path, state["trained"], config)
     _check_meta(path, state["meta"])
 
 

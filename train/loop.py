@@ -14,6 +14,7 @@ phantom a press was. A non-finite or exploding loss stops the run naming epoch a
 
 from __future__ import annotations
 
+import copy
 import csv
 import math
 import time
@@ -63,6 +64,7 @@ class TrainOptions:
     loss: str = "paper"              # "paper": alpha L_d + MSE; "balanced": each in its scale
     schedule: str = "constant"       # "constant" or "cosine" (to 1 % of lr at the last epoch)
     patience: int | None = None      # stop after this many epochs without a better validation
+    ema: float | None = None         # validate and keep an exponential average of the weights
 
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
@@ -111,6 +113,12 @@ class Run:
     best_val: float
     meta: dict
     best_epoch: int = -1
+    averaged: CGNN | None = None   # with ``ema``: the average validated and saved as "model"
+
+    @property
+    def kept(self) -> CGNN:
+        """The weights validated and saved as the run's model."""
+        return self.averaged if self.averaged is not None else self.model
 
 
 def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
@@ -140,6 +148,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         model.load_state_dict(state["model"])
         norm = Normaliser.from_dict(state["norm"])   # one phantom frame: keep its statistics
     model.to(device)
+    averaged = copy.deepcopy(model).requires_grad_(False) if opts.ema is not None else None
     optimizer = torch.optim.Adam(model.parameters(), lr=opts.lr)
     start, best, best_epoch = 0, math.inf, -1
     last = out / "last.pt"
@@ -148,13 +157,22 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         if _resumable(state["meta"]) != _resumable(meta):
             raise BadInput(last, "holds a run with other data, fold, options or network: "
                                  "choose another --out or remove it")
-        model.load_state_dict(state["model"])
+        model.load_state_dict(state.get("trained", state["model"]))
+        if averaged is not None:
+            averaged.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
         norm = Normaliser.from_dict(state["norm"])
         start, best = state["epoch"] + 1, state["best_val"]
         best_epoch = int(state.get("best_epoch", state["epoch"]))
     return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
-               start, best, meta, best_epoch)
+               start, best, meta, best_epoch, averaged)
+
+
+@torch.no_grad()
+def update_average(run: Run, decay: float) -> None:
+    """One step of the exponential average: avg <- decay avg + (1 - decay) weights."""
+    for avg, w in zip(run.averaged.parameters(), run.model.parameters(), strict=True):
+        avg.lerp_(w, 1.0 - decay)
 
 
 def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
@@ -209,6 +227,8 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         run.optimizer.zero_grad(set_to_none=True)
         (loss * ctx.world / len(rows)).backward()     # DDP averages: the global batch's mean
         run.optimizer.step()
+        if run.averaged is not None:
+            update_average(run, opts.ema)
         total += torch.stack([loss.detach(), torch.tensor(float(len(mine)), device=device)])
     total = ctx.total(total)
     return float(total[0] / total[1])
@@ -252,7 +272,7 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
         tic = time.perf_counter()
         train_loss = train_epoch(run, net, opts, epoch, ctx, first)
         first = first or train_loss
-        metrics = evaluate_pairs(run.model, run.norm, run.states, run.val, opts.alpha,
+        metrics = evaluate_pairs(run.kept, run.norm, run.states, run.val, opts.alpha,
                                  balanced=balance(run, opts) is not None) \
             if len(run.val) else {"val_loss": train_loss, "val_ld_mm": math.nan,
                                   "val_force_abs_n": math.nan}
@@ -282,9 +302,11 @@ def _track_best(run: Run, epoch: int, val_loss: float) -> None:
 
 def _checkpoint(run: Run, out: Path, epoch: int, row: dict) -> None:
     """Append the log row; write last.pt, and best.pt when validation improved."""
-    state = {"model": run.model.state_dict(), "optimizer": run.optimizer.state_dict(),
+    state = {"model": run.kept.state_dict(), "optimizer": run.optimizer.state_dict(),
              "epoch": epoch, "best_val": run.best_val, "best_epoch": run.best_epoch,
              "config": run.meta["config"], "norm": run.norm.to_dict(), "meta": run.meta}
+    if run.averaged is not None:
+        state["trained"] = run.model.state_dict()     # what the optimizer steps, for resume
     if run.best_epoch == epoch or not (out / "best.pt").exists():
         save_checkpoint(out / "best.pt", state)
     save_checkpoint(out / "last.pt", state)
