@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA d
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8),
                    tip_offsets=True)
 OPTIONS = TrainOptions(epochs=2, batch=8, lr=3e-3, loss="balanced", rotate=True,
-                       point_fraction=0.5)
+                       point_fraction=0.5, ema=0.9)
 
 
 @pytest.fixture(scope="module")
