@@ -16,13 +16,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 import torch
 
 from core.atomic import atomic_output
 from core.errors import BadInput
-from data_schema.hdf5 import attr_text
 from data_schema.json_docs import validate_metrics
 from train.checkpoint import load_checkpoint, model_from
 from train.data import (
@@ -38,8 +36,8 @@ from train.data import (
 from train.normalise import Normaliser
 from train.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.si_model import Prediction, distances, predict
-from train.variant import SOURCE_NAMES, recorded_variant
 from train.variant import label as variant_label
+from train.variant import recorded_variant, source_name
 
 
 @dataclass
@@ -178,14 +176,12 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
         run = load_run(run_dir, device)
         errs = example_errors(run)[0]
         refs = reference_errors(run)
-        with h5py.File(run.meta["data"]["file"], "r") as f:
-            source = attr_text(f.attrs["source"])
         m = metrics(errs)
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
         variant = recorded_variant(run.meta)
         runs.append({"run": str(run_dir), "label": variant_label(variant), "variant": variant,
                      "fold": run.meta["options"]["fold"],
-                     "test_set": SOURCE_NAMES.get(source, source), "metrics": m,
+                     "test_set": source_name(run.meta["data"]["file"]), "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m)})
         key = (runs[-1]["label"], runs[-1]["test_set"])
         by_label.setdefault(key, []).append((errs, refs, runs[-1]))
