@@ -8,11 +8,14 @@ function: tests/test_cgnn_model.py checks it against PyG within 1e-5).
 
 Measured in one run, medians over repeats:
 - batch-1 latency through :class:`train.Predictor` (ONNX Runtime and torch backends) at 26,
-  1024 and 4096 points: ``predict``, ``predict_force``, ``predict`` in region mode (the default
-  radius), and the peer behind the same SI numpy interface; the ratio is peer / ours. The scene
-  is a mesh pressed again (same points, new press), so the predictor's scene cache is warm;
-- where a warm ``predict`` spends its time: the predictor's checks against the network, and
-  the network's heaviest operators;
+  1024 and 4096 points, for the paper's network and for ours with tip offsets (the recipe):
+  ``predict``, ``predict_force`` and ``predict`` in region mode (the default radius) on a mesh
+  pressed again (same points, new press: the predictor's scene is known), ``predict`` on a new
+  mesh every call (nothing kept), and the peer behind the same SI numpy interface; the ratio
+  is peer / ours. The paper's network reads the press in its heads only, so on a known mesh
+  only its heads run (:mod:`train.predictor`); with tip offsets the whole network runs;
+- where a warm ``predict`` of the tip-offset network spends its time: the predictor's checks
+  against the network, and the network's heaviest operators;
 - training samples/s at batch 32 x 1024 points (forward, backward, Adam step), and where the
   time of one of our steps goes (torch.profiler, top operators);
 - with ``--device cuda``: the same on the GPU, plus batch-1 latency replayed as a CUDA graph.
@@ -61,19 +64,22 @@ class PygPeer(nn.Module):
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor) -> tuple[torch.Tensor, ...]:
         b, n, _ = points.shape
-        x, outs = points, []
+        x, outs = self.model.inputs(points, cond), []
         for conv in self.convs:
             edges = pyg_knn_edges(x.detach(), self.model.config.k)
             x = torch.relu(conv(x.reshape(b * n, -1), edges)).reshape(b, n, -1)
             outs.append(x)
         f = Features(torch.cat(outs, -1), cond)
-        return self.model.displacement(f), self.model.force(f)
+        return self.model.heads(self.model.scene_terms(f), cond)
 
 
 def median_ms(fn: Callable[[], object], repeats: int, sync: Callable[[], None]) -> float:
-    """Median wall time of ``fn`` in milliseconds (after warm-up)."""
-    for _ in range(max(3, repeats // 10)):
+    """Median wall time of ``fn`` in milliseconds, after a warm-up of a tenth of the repeats
+    and at least 50 ms (the steady state of a loop: another call's threads have settled)."""
+    start, calls = time.perf_counter(), 0
+    while calls < max(3, repeats // 10) or time.perf_counter() - start < 0.05:
         fn()
+        calls += 1
     sync()
     times = []
     for _ in range(repeats):
@@ -113,31 +119,49 @@ class PeerPredictor:
         return (p + disp[0] * NORM.disp_scale).cpu().numpy(), float(df[0]) * NORM.force_scale
 
 
-def latency(model: CGNN, peer: PygPeer, device: torch.device, repeats: int,
-            sync: Callable[[], None]) -> None:
-    """Batch-1 latency through the predictor (a mesh pressed again: the scene is reused)."""
-    si = SIModel(model, NORM)
-    ours = {b: Predictor(si, device, b) for b in (("onnx", "torch") if device.type == "cpu"
-                                                   else ("torch",))}
-    them = PeerPredictor(peer, device)
-    print(f"batch-1 latency through Predictor [ms] (median of {repeats}); ratio = PyG peer / "
-          f"ours ({next(iter(ours))}); region = {DEFAULT_REGION * 1e3:.0f} mm:")
-    for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
-        row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
-        first, region = next(iter(row.values())), row[f"{next(iter(ours))} region"]
-        print(f"  N={n:5d} {'grid' if grid else 'random':6s} " + "  ".join(
-            f"{k} {v:7.3f}" for k, v in row.items()) + f"  ratio {row['PyG peer'] / first:5.2f}x"
-            f" (region {row['PyG peer'] / region:5.1f}x)")
+def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> None:
+    """Batch-1 latency through the predictor, for the paper's network and ours with tip
+    offsets (a mesh pressed again: the scene is reused; and a new mesh every call)."""
+    backends = ("onnx", "torch") if device.type == "cpu" else ("torch",)
+    print(f"batch-1 latency through Predictor [ms] (median of >= 30); ratio = PyG peer / "
+          f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; 'new' = a new mesh "
+          "every call (nothing cached):")
+    for cfg in (CGNNConfig(), CGNNConfig(tip_offsets=True)):
+        torch.manual_seed(0)
+        model = CGNN(cfg).to(device).eval()
+        si = SIModel(model, NORM)
+        ours = {b: Predictor(si, device, b) for b in backends}
+        them = PeerPredictor(PygPeer(model).to(device).eval(), device)
+        print(f" {'tip offsets (our recipe)' if cfg.tip_offsets else 'the paper network'}"
+              f" ({'press-dependent' if cfg.tip_offsets else 'press-independent'}):")
+        for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
+            row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
+            ratio = {what: row["PyG peer"] / row[f"{backends[0]} {what}"]
+                     for what in ("predict", "region", "new")}
+            print(f"  N={n:5d} {'grid' if grid else 'random':6s} "
+                  + "  ".join(f"{k} {v:7.3f}" for k, v in row.items())
+                  + f"  ratio {ratio['predict']:5.2f}x (region {ratio['region']:5.1f}x, "
+                    f"new {ratio['new']:4.1f}x)")
     if device.type == "cpu":
         where_the_time_goes(ours["onnx"], si, repeats)
 
 
 def scene_row(ours: dict[str, Predictor], them: PeerPredictor, pts: np.ndarray, reps: int,
               sync: Callable[[], None]) -> dict[str, float]:
-    """Median ms of each backend's predict, predict_force and region predict, and the peer's."""
+    """Median ms of each backend's predict, predict_force, region predict and predict on a
+    new mesh each call (two meshes in turn), and the peer's."""
+    moved = pts.copy()
+    moved[0, 2] += np.float32(1e-4)
+    turn = [pts, moved]                      # the meshes in turn: each call is a new scene
+
+    def new(p: Predictor) -> None:
+        turn.reverse()
+        p.predict(turn[0], PRESS)
+
     calls = {"predict": lambda p: p.predict(pts, PRESS),
              "force": lambda p: p.predict_force(pts, PRESS),
-             "region": lambda p: p.predict(pts, PRESS, region=DEFAULT_REGION)}
+             "region": lambda p: p.predict(pts, PRESS, region=DEFAULT_REGION),
+             "new": new}
     row = {f"{b} {what}": median_ms(lambda p=p, fn=fn: fn(p), reps, sync)
            for b, p in ours.items() for what, fn in calls.items()}
     row["PyG peer"] = median_ms(lambda: them.predict(pts, PRESS), reps, sync)
@@ -155,12 +179,12 @@ def where_the_time_goes(pred: Predictor, si: SIModel, repeats: int) -> None:
     network's heaviest operators (torch's profiler on the same graph)."""
     from torch.profiler import ProfilerActivity, profile
 
-    print("where the time goes (onnx predictor, warm scene) [ms]:")
+    print("where the time goes (onnx predictor, tip offsets, warm scene) [ms]:")
     for n in (26, 1024):
         pts = surface(n, False)
         scene = pred._scene_of(pts)
         checks = median_ms(partial(checked, pred, pts), repeats, lambda: None)
-        net = median_ms(partial(pred.backend.full, scene.points[None], PRESS[None],
+        net = median_ms(partial(pred.backend.run, "full", scene.points[None], PRESS[None],
                                 scene.neighbours[None]), repeats, lambda: None)
         args = (torch.from_numpy(pts)[None], torch.from_numpy(PRESS)[None],
                 torch.from_numpy(scene.neighbours)[None])
@@ -249,7 +273,7 @@ def main() -> None:
     print(f"device {device}"
           + (f" ({torch.cuda.get_device_name()})" if device.type == "cuda" else
              f", {torch.get_num_threads()} threads") + f", torch {torch.__version__}")
-    latency(model, peer, device, a.repeats, sync)
+    latency(device, a.repeats, sync)
     if device.type == "cuda":
         cuda_graph_latency(model, a.repeats)
     training(model.train(), peer.train(), device, a.train_steps, sync)

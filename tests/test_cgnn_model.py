@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from train.edgeconv import DynamicEdgeConv, knn
+from train.edgeconv import BLOCK, DynamicEdgeConv, knn
 from train.model import CGNN, CGNNConfig
 
 
@@ -37,6 +37,19 @@ def test_knn_is_the_nearest_points_itself_included() -> None:
     brute = torch.cdist(x, x).argsort(dim=-1)[..., :5]
     assert (idx.sort(-1).values == brute.sort(-1).values).all()
     assert (idx == torch.arange(50).view(1, 50, 1)).any(-1).all()
+
+
+def test_knn_in_pieces_is_the_brute_force_nearest() -> None:
+    """Past BLOCK distances the search runs in pieces (samples, then rows of one sample):
+    the same neighbours as sorting every distance, masked points never chosen."""
+    torch.manual_seed(2)
+    n = 1100                                 # 2 x 1100^2 > BLOCK, and 1100 rows > BLOCK // n
+    x = torch.randn(2, n, 16)
+    mask = torch.rand(2, n) > 0.1
+    assert 2 * n * n > BLOCK and n > BLOCK // n
+    d = torch.cdist(x, x).masked_fill(~mask.unsqueeze(1), float("inf"))
+    brute = d.argsort(dim=-1)[..., :5]
+    assert (knn(x, 5, mask).sort(-1).values == brute.sort(-1).values).all()
 
 
 def test_masked_points_are_never_neighbours() -> None:
@@ -94,3 +107,23 @@ def test_a_masked_point_does_not_change_the_others() -> None:
     keep = mask[0]
     torch.testing.assert_close(d1[0, keep], d2[0, keep])
     torch.testing.assert_close(f1, f2)
+
+
+@pytest.mark.parametrize("kw", [{}, {"tip_offsets": True}, {"use_condition": False}])
+def test_heads_are_the_paper_heads_on_the_concatenated_input(kw: dict) -> None:
+    """The heads' split first layer is the paper's: each MLP on [features, C] (local: per
+    point with C repeated; global: max and mean over the valid points, then C)."""
+    m = _model(**kw)
+    x, c = torch.randn(2, 30, 3), torch.randn(2, 6)
+    mask = torch.rand(2, 30) > 0.2
+    f = m.features(x, c, mask)
+    local = f.local
+    pooled = [local.masked_fill(~mask[..., None], -torch.inf).amax(1),
+              (local * mask[..., None]).sum(1) / mask.sum(1, keepdim=True)]
+    if m.config.use_condition:
+        local = torch.cat([local, c[:, None].expand(-1, 30, -1)], -1)
+        pooled.append(c)
+    disp, force = m(x, c, mask)
+    torch.testing.assert_close(disp, m.disp_head(local), atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(force, m.force_head(torch.cat(pooled, -1))[:, 0],
+                               atol=1e-5, rtol=1e-5)

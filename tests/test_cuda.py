@@ -8,6 +8,7 @@ generator lives on the CPU) and the same arithmetic, so the two agree to float32
 from __future__ import annotations
 
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -65,3 +66,22 @@ def test_eval_and_predictor_on_cuda_give_the_cpu_answers(dent, tmp_path) -> None
     assert got[1] == pytest.approx(want[1], abs=1e-5)
     region = Predictor.load(run, "cuda").predict(points, cond, region=0.02)
     assert region[0].shape == points.shape and np.isfinite(region[0]).all()
+
+
+def test_a_known_scene_on_cuda_gives_the_cpu_answers(dent, tmp_path) -> None:
+    """The paper's network keeps a scene's head terms on a first press and runs the heads
+    alone after: on CUDA as on the CPU, for a new press and in a region."""
+    run = tmp_path / "run"
+    train_run(*dent, run, OPTIONS, replace(SMALL, tip_offsets=False), device="cpu")
+    g = (np.arange(7) + 0.5) / 7 * 0.1
+    points = np.stack([*np.meshgrid(g, g), np.zeros((7, 7))], -1).reshape(-1, 3)
+    presses = [np.array([0.05, 0.05, 0.0, 0.05, 0.05, -d], np.float32) for d in (2e-3, 3e-3)]
+    cpu = Predictor.load(run, "cpu", backend="torch")
+    gpu = Predictor.load(run, "cuda")
+    for cond in presses:                     # a new scene, then a press on the known one
+        want, got = cpu.predict(points, cond), gpu.predict(points, cond)
+        np.testing.assert_allclose(got[0], want[0], atol=1e-6)
+        assert got[1] == pytest.approx(want[1], abs=1e-5)
+        assert gpu.predict_force(points, cond) == pytest.approx(want[1], abs=1e-5)
+    np.testing.assert_allclose(gpu.predict(points, presses[0], region=0.02)[0],
+                               cpu.predict(points, presses[0], region=0.02)[0], atol=1e-6)

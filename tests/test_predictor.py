@@ -19,15 +19,27 @@ from train.loop import TrainOptions, train_run
 from train.model import CGNNConfig
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
-    d = tmp_path_factory.mktemp("pred")
+def _trained(d: Path, **kw) -> tuple[Path, np.ndarray, np.ndarray]:
+    """A small model trained one epoch on the dent data: (run, a state's points, a press)."""
     data, splits = dent_fold(d, folds=1)
-    cfg = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
+    cfg = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8),
+                     **kw)
     train_run(data, splits, d / "run", TrainOptions(epochs=1, batch=8), cfg, device="cpu")
     with h5py.File(data) as f:
         points, tip = f["states/points"][3], f["states/tip"][3]
     return d / "run", points, np.r_[tip, tip - [0, 0, 1e-3]].astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
+    """The paper's network: press-independent, so a scene's features are cached."""
+    return _trained(tmp_path_factory.mktemp("pred"))
+
+
+@pytest.fixture(scope="module")
+def offsets_run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
+    """With tip offsets: the graph layers read the press, so every press runs them."""
+    return _trained(tmp_path_factory.mktemp("pred_offsets"), tip_offsets=True)
 
 
 def test_predict_is_the_network_in_si_units(run) -> None:
@@ -109,12 +121,16 @@ def _surface(points: np.ndarray, n: int, seed: int) -> np.ndarray:
     return np.concatenate([points, extra])[:n].astype(np.float32)
 
 
+@pytest.mark.parametrize("model", ["run", "offsets_run"])
 @pytest.mark.parametrize("backend", ["torch", "onnx"])
 @pytest.mark.parametrize("n", [26, 1024])
-def test_every_backend_gives_the_networks_answer(run, backend: str, n: int) -> None:
+def test_every_backend_gives_the_networks_answer(request, model: str, backend: str, n: int
+                                                 ) -> None:
+    """Whole network, force alone, and a new press on the same scene (for the paper's
+    network, from the scene's cached terms) against the network as training runs it."""
     if backend == "onnx":
         pytest.importorskip("onnxruntime")
-    path, points, cond = run
+    path, points, cond = request.getfixturevalue(model)
     pts = _surface(points, n, n)
     p = Predictor.load(path, backend=backend)
     deformed, df = p.predict(pts, cond)
@@ -123,7 +139,11 @@ def test_every_backend_gives_the_networks_answer(run, backend: str, n: int) -> N
     assert df == pytest.approx(ref_df, abs=1e-5)
     assert p.predict_force(pts, cond) == pytest.approx(ref_df, abs=1e-5)
     cond2 = cond + np.array([0, 0, 0, 1e-3, 0, -1e-3], np.float32)   # same scene, new press
-    np.testing.assert_allclose(p.predict(pts, cond2)[0], _bare(path, pts, cond2)[0], atol=1e-5)
+    again, df2 = p.predict(pts, cond2)
+    ref2, ref_df2 = _bare(path, pts, cond2)
+    np.testing.assert_allclose(again, ref2, atol=1e-5)
+    assert df2 == pytest.approx(ref_df2, abs=1e-5)
+    assert p.predict_force(pts, cond2) == pytest.approx(ref_df2, abs=1e-5)
 
 
 def test_points_changed_in_place_are_seen(run) -> None:
@@ -144,8 +164,9 @@ def test_segment_distance_is_euclidean() -> None:
     np.testing.assert_allclose(segment_distance(pts, start, start), [5, 5, np.sqrt(2), 6])
 
 
-def test_region_covering_the_surface_is_the_whole_model(run) -> None:
-    path, points, cond = run
+@pytest.mark.parametrize("model", ["run", "offsets_run"])
+def test_region_covering_the_surface_is_the_whole_model(request, model: str) -> None:
+    path, points, cond = request.getfixturevalue(model)
     pts = _surface(points, 300, 3)
     p = Predictor.load(path)
     whole, df = p.predict(pts, cond)
@@ -153,8 +174,10 @@ def test_region_covering_the_surface_is_the_whole_model(run) -> None:
     assert p.predict_force(pts, cond, region=10.0) == pytest.approx(df, abs=1e-5)
 
 
-def test_region_runs_the_network_on_the_press_and_its_rings(run) -> None:
-    path, points, cond = run
+def test_region_runs_the_network_on_the_press_and_its_rings(offsets_run) -> None:
+    """A model whose layers read the press: the network runs on the points near the tip's
+    path and the rings its layers read, and the force pools over them."""
+    path, points, cond = offsets_run
     pts = _surface(points, 300, 4)
     radius, k = 0.015, 5
     deformed, df = Predictor.load(path).predict(pts, cond, region=radius)
@@ -173,6 +196,27 @@ def test_region_runs_the_network_on_the_press_and_its_rings(run) -> None:
     ref, ref_df = _bare(path, pts[order], cond)
     np.testing.assert_allclose(deformed[core], ref[: core.sum()], atol=1e-5)
     assert df == pytest.approx(ref_df, abs=1e-5)
+
+
+def test_region_of_a_cached_scene_is_the_whole_model_near_the_press(run) -> None:
+    """The paper's network on a known scene: the whole surface's features are cached, so a
+    region moves the points near the tip's path exactly as the whole model does, leaves the
+    rest at rest, and its force is the whole surface's."""
+    path, points, cond = run
+    pts = _surface(points, 300, 4)
+    pts += np.random.default_rng(0).normal(0, 1e-5, pts.shape).astype(np.float32)  # no ties
+    radius = 0.015
+    p = Predictor.load(path)
+    deformed, df = p.predict(pts, cond, region=radius)
+    a, b = cond[:3].astype(np.float64), cond[3:].astype(np.float64)
+    t = np.clip((pts - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+    core = np.linalg.norm(pts - a - t[:, None] * (b - a), axis=1) <= radius
+    assert 10 < core.sum() < len(pts) - 50
+    ref, ref_df = _bare(path, pts, cond)
+    np.testing.assert_allclose(deformed[core], ref[core], atol=1e-5)
+    np.testing.assert_array_equal(deformed[~core], pts[~core])
+    assert df == pytest.approx(ref_df, abs=1e-5)
+    assert p.predict_force(pts, cond, region=radius) == pytest.approx(ref_df, abs=1e-5)
 
 
 def test_region_must_be_a_positive_radius(run) -> None:

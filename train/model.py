@@ -15,11 +15,17 @@ paper's network has to learn from absolute positions (the follow-up cEGCL feeds 
 The first layer's graph is the kNN of the points themselves (with tip offsets the distance of
 two inputs is sqrt(3) times that of their points: the same neighbours). A caller that already
 has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
+
+Each head's first layer is split in two, ``W [features, C] + b = (W_f features + b) + W_C C``
+(:meth:`CGNN.scene_terms`, then :meth:`CGNN.heads`): the same function, with no per-point copy
+of C; and without tip offsets the first part does not depend on the press, so a surface pressed
+again needs only the second (``press_independent``; :class:`train.Predictor` caches it).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from itertools import islice
 from typing import Any
 
 import torch
@@ -79,6 +85,15 @@ class Features:
     mask: torch.Tensor | None = field(default=None)
 
 
+@dataclass
+class HeadTerms:
+    """What a surface gives each head's first layer before the press is added: (B, N, H) for
+    the displacement head (None when only the force is asked), (B, H) for the force head."""
+
+    disp: torch.Tensor | None
+    force: torch.Tensor
+
+
 class CGNN(nn.Module):
     """Predicts each point's displacement and the change of force (normalised units)."""
 
@@ -95,30 +110,36 @@ class CGNN(nn.Module):
         self.disp_head = mlp([local + cond, *config.disp_widths, 3])
         self.force_head = mlp([2 * local + cond, *config.force_widths, 1])
 
-    def features(self, points: torch.Tensor, cond: torch.Tensor,
+    def inputs(self, points: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        """The first layer's input: the points (B, N, 3), or with tip offsets
+        [p, p - c_start, p - c_end] (B, N, 9)."""
+        if not self.config.tip_offsets:
+            return points
+        tips = cond.reshape(-1, 1, 2, 3)
+        return torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
+
+    def features(self, points: torch.Tensor, cond: torch.Tensor | None,
                  mask: torch.Tensor | None = None,
                  neighbours: torch.Tensor | None = None) -> Features:
         """The three edge convolutions' outputs, concatenated (``neighbours``: the points'
-        kNN (B, N, k), if known)."""
-        x, outs = points, []
-        if self.config.tip_offsets:
-            tips = cond.reshape(-1, 1, 2, 3)
-            x = torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
+        kNN (B, N, k), if known; ``cond`` may be None when ``press_independent``)."""
+        x, outs = self.inputs(points, cond), []
         for i, conv in enumerate(self.convs):
             x = torch.relu(conv(x, mask, neighbours if i == 0 else None))  # (B, N, O)
             outs.append(x)
         return Features(torch.cat(outs, dim=-1),
                          cond if self.config.use_condition else None, mask)
 
-    def displacement(self, f: Features) -> torch.Tensor:
-        """Per-point displacement (B, N, 3) from the local features and C."""
-        x = f.local
-        if f.cond is not None:
-            x = torch.cat([x, f.cond.unsqueeze(1).expand(-1, x.shape[1], -1)], dim=-1)
-        return self.disp_head(x)
+    @property
+    def press_independent(self) -> bool:
+        """True when the graph layers never read C (the paper's network, without tip
+        offsets): a surface's features are then the same for every press, and a caller
+        pressing one surface again computes them once (:meth:`scene_terms`)."""
+        return not self.config.tip_offsets
 
-    def force(self, f: Features) -> torch.Tensor:
-        """Change of force (B,) from max- and mean-pooled features and C."""
+    def scene_terms(self, f: Features, displacement: bool = True) -> HeadTerms:
+        """Each head's first linear layer on what the press does not change (bias in): the
+        local features, and the max- and mean-pooled ones. ``displacement=False``: force only."""
         x = f.local
         if f.mask is None:
             pooled = [x.amax(dim=1), x.mean(dim=1)]
@@ -127,18 +148,51 @@ class CGNN(nn.Module):
             count = m.sum(dim=1).clamp(min=1)
             pooled = [x.masked_fill(~m, float("-inf")).amax(dim=1),
                       x.masked_fill(~m, 0.0).sum(dim=1) / count]
-        g = torch.cat(pooled if f.cond is None else [*pooled, f.cond], dim=-1)
-        return self.force_head(g).squeeze(-1)
+        g = torch.cat(pooled, dim=-1)
+        return HeadTerms(_leading(self.disp_head[0], x) if displacement else None,
+                         _leading(self.force_head[0], g))
+
+    def heads(self, terms: HeadTerms, cond: torch.Tensor | None
+              ) -> tuple[torch.Tensor | None, torch.Tensor]:
+        """(displacement (B, N, 3) or None, change of force (B,)): C's part of each head's
+        first layer added to the scene's, then the rest of the head."""
+        force = _rest(self.force_head, self._add_press(self.force_head[0], terms.force, cond))
+        if terms.disp is None:
+            return None, force.squeeze(-1)
+        disp = _rest(self.disp_head, self._add_press(self.disp_head[0], terms.disp, cond))
+        return disp, force.squeeze(-1)
+
+    def _add_press(self, first: nn.Linear, scene: torch.Tensor, cond: torch.Tensor | None
+                 ) -> torch.Tensor:
+        """``first([features, C])`` from ``scene`` = its features' part: adds C's part."""
+        if cond is None or not self.config.use_condition:
+            return scene
+        press = cond @ first.weight[:, -CONDITION:].T                        # (B, H)
+        return scene + press.view(press.shape[0], *[1] * (scene.dim() - 2), -1)
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor,
                 mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor]:
         """(displacement (B, N, 3), change of force (B,)), normalised."""
         f = self.features(points, cond, mask, neighbours)
-        return self.displacement(f), self.force(f)
+        return self.heads(self.scene_terms(f), f.cond)
 
     def forward_force(self, points: torch.Tensor, cond: torch.Tensor,
                       mask: torch.Tensor | None = None,
                       neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """Only the change of force (B,): the displacement head is skipped."""
-        return self.force(self.features(points, cond, mask, neighbours))
+        f = self.features(points, cond, mask, neighbours)
+        return self.heads(self.scene_terms(f, displacement=False), f.cond)[1]
+
+
+def _rest(head: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """``head`` after its first layer."""
+    for layer in islice(head, 1, None):
+        x = layer(x)
+    return x
+
+
+def _leading(first: nn.Linear, x: torch.Tensor) -> torch.Tensor:
+    """``first`` on the leading ``x.shape[-1]`` inputs of its own (bias in, C's columns left
+    out): the head's input ``[x, C]`` is never built, so no (B, N, F + 6) copy is made."""
+    return nn.functional.linear(x, first.weight[:, :x.shape[-1]], first.bias)

@@ -3,16 +3,27 @@
 Points are (N, 3) float32 in metres in the phantom frame (any N >= k + 1: 26 lab points, 1024
 MSM masses, a mesh's vertices); the condition is C = [tip start, tip end] (6,), metres.
 ``predict`` gives the deformed points and the change of force; ``predict_force`` (a haptic
-loop at 1 kHz) runs the graph layers and the force head only.
+loop at 1 kHz) skips the displacement head.
 
 What is done once, not per call: the network runs in ONNX Runtime where it is installed (CPU;
 ``backend="torch"`` keeps torch, the only choice on a GPU), and a scene's points are checked and
 their 3-D neighbour graph (the first layer's) built once, then reused while the caller passes
-the same points again (a mesh pressed at 1 kHz). ``region=R`` (metres) runs the network only on
-the points within R of the tip's path and the graph's rings around them, and leaves the rest
-where they are (:mod:`train.region`): how a 4096-point mesh runs at haptic rates.
-``DEFAULT_REGION`` is the radius the benchmarks time; what a radius costs in error is measured
-by ``benchmarks/region_study.py`` (the speed-accuracy report's region rows), not assumed.
+the same points again (a mesh pressed at 1 kHz).
+
+What a press needs depends on the model:
+- the paper's network (no tip offsets) reads C only in its heads, so a surface's features are
+  the same for every press. A scene's first press runs the whole network once and keeps each
+  head's surface terms; every later press on it runs the heads alone (C's part of their first
+  layer and the rest): the same answer, at a fraction of the time. ``region=R`` (metres) then
+  runs the displacement head on the points within R of the tip's path only and leaves the
+  rest at rest; the force is always the whole surface's.
+- with tip offsets (our recipe) every layer reads the press, so every press runs the whole
+  network. ``region=R`` runs it only on the points within R of the tip's path and the graph's
+  rings around them, and leaves the rest where they are; the force head pools over that
+  region (:mod:`train.region`).
+Either way region mode is how a 4096-point mesh runs at haptic rates. ``DEFAULT_REGION`` is
+the radius the benchmarks time; what a radius costs in error is measured by
+``benchmarks/region_study.py`` (the speed-accuracy report's region rows), not assumed.
 
 Refused with ValueError: fewer than k + 1 points, a non-finite value, or coordinates in another
 unit (farther from the training data's centre than 20 times its extent: millimetres fed where
@@ -32,7 +43,7 @@ import torch
 
 from train.backends import make_backend
 from train.checkpoint import load_checkpoint, model_from
-from train.region import neighbour_table, region
+from train.region import near_path, neighbour_table, region
 from train.si_model import SIModel
 
 UNIT_FACTOR = 20.0
@@ -47,6 +58,8 @@ class Scene:
     points: np.ndarray         # (N, 3) float32, a private copy
     neighbours: np.ndarray     # (N, k) int64
     reach: float               # the farthest point's distance from the training centre, m
+    terms: tuple[np.ndarray, np.ndarray] | None = None   # a press-independent model's
+    #                                                 head terms, once its first press has run
 
 
 class Predictor:
@@ -55,6 +68,7 @@ class Predictor:
     def __init__(self, si: SIModel, device: torch.device, backend: str = "auto") -> None:
         self.norm, self.k = si.norm, si.model.config.k
         self.hops = len(si.model.convs)
+        self.press_independent = si.model.press_independent
         self.backend = make_backend(si, device, backend)
         self.extrapolating = False
         self._scene: Scene | None = None
@@ -73,30 +87,65 @@ class Predictor:
                 ) -> tuple[np.ndarray, float]:
         """Deformed points (N, 3) float32 in metres, and the change of force in newtons."""
         scene, c = self._scene_of(points), self._condition(condition)
+        if self.press_independent:
+            return self._pressed(scene, c, region)
         if region is None:
-            deformed, df = self.backend.full(scene.points[None], c, scene.neighbours[None])
-            return deformed, df
+            deformed, df = self.backend.run("full", scene.points[None], c, scene.neighbours[None])
+            return deformed[0], float(df[0])
         core, used = self._region(scene, c, region)
         sub = scene.points[used]
-        moved, df = self.backend.full(sub[None], c, neighbour_table(sub, self.k)[None])
+        moved, df = self.backend.run("full", sub[None], c, neighbour_table(sub, self.k)[None])
         deformed = scene.points.copy()
-        deformed[core] = moved[: len(core)]
-        return deformed, df
+        deformed[core] = moved[0, : len(core)]
+        return deformed, float(df[0])
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
                       region: float | None = None) -> float:
         """The change of force (N) alone: the displacement head is not run."""
         scene, c = self._scene_of(points), self._condition(condition)
+        if self.press_independent:           # the whole surface's force, from its terms
+            self._check_radius(region)
+            if scene.terms is None:
+                return self._pressed(scene, c, None)[1]
+            return float(self.backend.run("pressed_force", scene.terms[1], c)[0][0])
         if region is None:
-            return self.backend.force(scene.points[None], c, scene.neighbours[None])
+            return float(self.backend.run("force", scene.points[None], c,
+                                          scene.neighbours[None])[0][0])
         sub = scene.points[self._region(scene, c, region)[1]]
-        return self.backend.force(sub[None], c, neighbour_table(sub, self.k)[None])
+        return float(self.backend.run("force", sub[None], c,
+                                      neighbour_table(sub, self.k)[None])[0][0])
+
+    def _pressed(self, scene: Scene, c: np.ndarray, radius: float | None
+                 ) -> tuple[np.ndarray, float]:
+        """A press-independent model: a new scene runs the network once and keeps its head
+        terms; a known one runs the heads alone, in a region on the core's points only."""
+        self._check_radius(radius)
+        core = slice(None) if radius is None else \
+            near_path(scene.points, c[0, :3], c[0, 3:], radius, self.k + 1)
+        if scene.terms is None:
+            *terms, moved, df = self.backend.run("new_scene", scene.points[None],
+                                                 scene.neighbours[None], c)
+            scene.terms = (terms[0], terms[1])
+            moved = moved[:, core]
+        else:
+            disp_terms, force_terms = scene.terms
+            moved, df = self.backend.run("pressed", scene.points[None, core],
+                                         disp_terms[:, core], force_terms, c)
+        if radius is None:
+            return moved[0], float(df[0])
+        deformed = scene.points.copy()
+        deformed[core] = moved[0]
+        return deformed, float(df[0])
 
     def _region(self, scene: Scene, c: np.ndarray, radius: float
                 ) -> tuple[np.ndarray, np.ndarray]:
-        if not (np.isfinite(radius) and radius > 0):
-            raise ValueError(f"region must be a positive radius in metres, got {radius}")
+        self._check_radius(radius)
         return region(scene.points, scene.neighbours, c[0, :3], c[0, 3:], radius, self.hops)
+
+    @staticmethod
+    def _check_radius(radius: float | None) -> None:
+        if radius is not None and not (np.isfinite(radius) and radius > 0):
+            raise ValueError(f"region must be a positive radius in metres, got {radius}")
 
     def _scene_of(self, points: np.ndarray) -> Scene:
         """The cached scene when ``points`` are the last call's, else a new one, checked."""

@@ -29,16 +29,23 @@ def segment_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> 
     return np.linalg.norm(points - start - t[:, None] * axis, axis=1)
 
 
+def near_path(points: np.ndarray, start: np.ndarray, end: np.ndarray, radius: float,
+              least: int) -> np.ndarray:
+    """Indices of the points within ``radius`` of the tip's path, in order; at least
+    ``least`` of them (the nearest), so a graph on them exists."""
+    dist = segment_distance(points, start, end)
+    core = np.flatnonzero(dist <= radius)
+    if len(core) < least:
+        core = np.sort(np.argpartition(dist, least - 1)[:least])
+    return core
+
+
 def region(points: np.ndarray, table: np.ndarray, start: np.ndarray, end: np.ndarray,
            radius: float, hops: int) -> tuple[np.ndarray, np.ndarray]:
     """(core, used): indices of the points within ``radius`` of the tip's path (at least
     k + 1, the nearest, so the graph exists), and of those plus ``hops`` rings of neighbours
     (``table``), the core first."""
-    dist = segment_distance(points, start, end)
-    core = np.flatnonzero(dist <= radius)
-    least = table.shape[1] + 1
-    if len(core) < least:
-        core = np.sort(np.argpartition(dist, least - 1)[:least])
+    core = near_path(points, start, end, radius, table.shape[1] + 1)
     inside = np.zeros(len(points), dtype=bool)
     inside[core] = True
     ring = inside.copy()

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from train.data import Batch
-from train.model import CGNN
+from train.model import CGNN, HeadTerms
 from train.normalise import Normaliser
 
 OPSET = 17
@@ -77,7 +77,12 @@ def loss_sum(p: Prediction, b: Batch, alpha: float, norm: Normaliser | None = No
 
 
 class SIModel(nn.Module):
-    """The network with its normaliser folded in."""
+    """The network with its normaliser folded in.
+
+    Besides the whole network (``forward``, ``force``), a press-independent model
+    (:attr:`CGNN.press_independent`) is also run in two parts: :meth:`scene`, once per surface,
+    and :meth:`pressed` / :meth:`pressed_force` per press, from the scene's head terms.
+    """
 
     def __init__(self, model: CGNN, norm: Normaliser) -> None:
         super().__init__()
@@ -95,38 +100,103 @@ class SIModel(nn.Module):
         return self.model.forward_force(n.points(points), n.condition(condition), None,
                                         neighbours) * n.force_scale
 
+    def scene(self, points: torch.Tensor, neighbours: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """A surface's head terms, (B, N, H) and (B, H): all a press-independent model
+        computes that does not depend on the press (refused for one that reads C earlier)."""
+        if not self.model.press_independent:
+            raise ValueError("this model's graph layers read the press (tip offsets): "
+                             "a surface's features are not the same for every press")
+        terms = self.model.scene_terms(self.model.features(self.norm.points(points), None,
+                                                           None, neighbours))
+        return terms.disp, terms.force
 
-class ForceOnly(nn.Module):
-    """:meth:`SIModel.force` as a module's forward (what an exporter traces)."""
+    def scene_and_press(self, points: torch.Tensor, neighbours: torch.Tensor,
+                        condition: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """A new surface's head terms and its first press's answer, in one run:
+        (disp terms, force terms, deformed points, change of force)."""
+        disp_terms, force_terms = self.scene(points, neighbours)
+        return disp_terms, force_terms, *self.pressed(points, disp_terms, force_terms, condition)
 
-    def __init__(self, si: SIModel) -> None:
+    def pressed(self, points: torch.Tensor, disp_terms: torch.Tensor,
+                force_terms: torch.Tensor, condition: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`forward` from the scene's head terms (of ``points``, or of a subset of them
+        in the same order): deformed points (B, N, 3) m and the change of force (B,) N."""
+        disp, df = self.model.heads(HeadTerms(disp_terms, force_terms),
+                                    self.norm.condition(condition))
+        return points + disp * self.norm.disp_scale, df * self.norm.force_scale
+
+    def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor
+                      ) -> torch.Tensor:
+        """:meth:`force` from the scene's force terms: the change of force (B,) N."""
+        _, df = self.model.heads(HeadTerms(None, force_terms), self.norm.condition(condition))
+        return df * self.norm.force_scale
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One way to call :class:`SIModel`: its method, named inputs and outputs. Inputs and
+    outputs named in ``PER_POINT`` have N as their axis 1 (dynamic in an exported graph)."""
+
+    method: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+
+ENTRIES = {
+    "export": Entry("forward", ("points", "condition"), ("deformed", "dforce")),
+    "full": Entry("forward", ("points", "condition", "neighbours"), ("deformed", "dforce")),
+    "force": Entry("force", ("points", "condition", "neighbours"), ("dforce",)),
+    "new_scene": Entry("scene_and_press", ("points", "neighbours", "condition"),
+                       ("disp_terms", "force_terms", "deformed", "dforce")),
+    "pressed": Entry("pressed", ("points", "disp_terms", "force_terms", "condition"),
+                     ("deformed", "dforce")),
+    "pressed_force": Entry("pressed_force", ("force_terms", "condition"), ("dforce",)),
+}
+PER_POINT = ("points", "neighbours", "disp_terms", "deformed")
+
+
+def entries(si: SIModel) -> tuple[str, ...]:
+    """The entries a predictor of ``si`` runs: for a press-independent model a new scene
+    (its terms and first answer in one run, so one session runs per call) and the press
+    from known terms; otherwise the whole network and the force alone."""
+    if si.model.press_independent:
+        return ("new_scene", "pressed", "pressed_force")
+    return ("full", "force")
+
+
+class Call(nn.Module):
+    """An entry of :class:`SIModel` as a module's forward (what an exporter traces)."""
+
+    def __init__(self, si: SIModel, entry: str) -> None:
         super().__init__()
-        self.si = si
+        self.si, self.method = si, ENTRIES[entry].method
 
-    def forward(self, points: torch.Tensor, condition: torch.Tensor,
-                neighbours: torch.Tensor | None = None) -> torch.Tensor:
-        return self.si.force(points, condition, neighbours)
+    def forward(self, *args: torch.Tensor) -> torch.Tensor | tuple[torch.Tensor, ...]:
+        return getattr(self.si, self.method)(*args)
 
 
-def to_onnx(si: SIModel, out: str | Path | io.BytesIO, *, force_only: bool = False,
-            with_neighbours: bool = False, example_points: int = 26) -> None:
-    """Trace ``si`` (or its force alone) to ONNX, N a dynamic axis. ``with_neighbours`` adds
-    the input ``neighbours`` (1, N, k) int64, the first layer's graph, given by the caller."""
-    module = ForceOnly(si) if force_only else si
-    k = si.model.config.k
-    points = torch.rand(1, example_points, 3) * 0.1
-    args: tuple = (points, torch.rand(1, 6) * 0.1)
-    names = ["points", "condition"]
-    axes = {"points": {1: "N"}}
-    if with_neighbours:
-        args += (torch.cdist(points, points).topk(k, largest=False).indices,)
-        names.append("neighbours")
-        axes["neighbours"] = {1: "N"}
-    outputs = ["dforce"] if force_only else ["deformed", "dforce"]
-    if not force_only:
-        axes["deformed"] = {1: "N"}
+def example_inputs(si: SIModel, entry: str, n: int = 26) -> tuple[torch.Tensor, ...]:
+    """Inputs of the right shapes and types for ``entry`` at ``n`` points (for tracing)."""
+    points = torch.rand(1, n, 3) * 0.1
+    made = {"points": points, "condition": torch.rand(1, 6) * 0.1,
+            "neighbours": torch.cdist(points, points).topk(si.model.config.k,
+                                                           largest=False).indices,
+            "disp_terms": torch.rand(1, n, si.model.disp_head[0].out_features),
+            "force_terms": torch.rand(1, si.model.force_head[0].out_features)}
+    return tuple(made[name] for name in ENTRIES[entry].inputs)
+
+
+def to_onnx(si: SIModel, out: str | Path | io.BytesIO, entry: str = "export",
+            example_points: int = 26) -> None:
+    """Trace one entry of ``si`` to ONNX (default: the whole network, computing its own
+    graph, as ``pipeline export`` writes it), N a dynamic axis."""
+    e = ENTRIES[entry]
+    axes = {name: {1: "N"} for name in (*e.inputs, *e.outputs) if name in PER_POINT}
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)     # the TorchScript exporter
-        torch.onnx.export(module.eval(), args, out if isinstance(out, io.BytesIO) else str(out),
-                          input_names=names, output_names=outputs, opset_version=OPSET,
-                          dynamic_axes=axes, dynamo=False)
+        torch.onnx.export(Call(si, entry).eval(), example_inputs(si, entry, example_points),
+                          out if isinstance(out, io.BytesIO) else str(out),
+                          input_names=list(e.inputs), output_names=list(e.outputs),
+                          opset_version=OPSET, dynamic_axes=axes, dynamo=False)
