@@ -126,7 +126,7 @@ def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> Non
     print(f"batch-1 latency through Predictor [ms] (median of >= 30); ratio = PyG peer / "
           f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; 'new' = a new mesh "
           "every call (nothing cached):")
-    for cfg in (CGNNConfig(), CGNNConfig(tip_offsets=True)):
+    for cfg in (CGNNConfig(), CGNNConfig(tip_offsets=True)):     # the last is profiled below
         torch.manual_seed(0)
         model = CGNN(cfg).to(device).eval()
         si = SIModel(model, NORM)
@@ -142,7 +142,7 @@ def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> Non
                   + "  ".join(f"{k} {v:7.3f}" for k, v in row.items())
                   + f"  ratio {ratio['predict']:5.2f}x (region {ratio['region']:5.1f}x, "
                     f"new {ratio['new']:4.1f}x)")
-    if device.type == "cpu":
+    if device.type == "cpu":                 # the tip-offset network: it runs whole per press
         where_the_time_goes(ours["onnx"], si, repeats)
 
 

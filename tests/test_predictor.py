@@ -37,6 +37,12 @@ def run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
 
 
 @pytest.fixture(scope="module")
+def nocond_run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
+    """Without C (noCond): its traced graphs have no condition input."""
+    return _trained(tmp_path_factory.mktemp("pred_nocond"), use_condition=False)
+
+
+@pytest.fixture(scope="module")
 def offsets_run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
     """With tip offsets: the graph layers read the press, so every press runs them."""
     return _trained(tmp_path_factory.mktemp("pred_offsets"), tip_offsets=True)
@@ -121,7 +127,7 @@ def _surface(points: np.ndarray, n: int, seed: int) -> np.ndarray:
     return np.concatenate([points, extra])[:n].astype(np.float32)
 
 
-@pytest.mark.parametrize("model", ["run", "offsets_run"])
+@pytest.mark.parametrize("model", ["run", "offsets_run", "nocond_run"])
 @pytest.mark.parametrize("backend", ["torch", "onnx"])
 @pytest.mark.parametrize("n", [26, 1024])
 def test_every_backend_gives_the_networks_answer(request, model: str, backend: str, n: int
@@ -207,6 +213,7 @@ def test_region_of_a_cached_scene_is_the_whole_model_near_the_press(run) -> None
     pts += np.random.default_rng(0).normal(0, 1e-5, pts.shape).astype(np.float32)  # no ties
     radius = 0.015
     p = Predictor.load(path)
+    p.predict(pts, cond + np.array([0, 0, 0, 0, 0, 1e-3], np.float32))   # the scene is known
     deformed, df = p.predict(pts, cond, region=radius)
     a, b = cond[:3].astype(np.float64), cond[3:].astype(np.float64)
     t = np.clip((pts - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)

@@ -51,11 +51,14 @@ class OnnxBackend:
             to_onnx(si.cpu(), buf, entry)
             self.sessions[entry] = ort.InferenceSession(buf.getvalue(), opts,
                                                         providers=["CPUExecutionProvider"])
+        self.inputs = {e: [i.name for i in s.get_inputs()] for e, s in self.sessions.items()}
 
     def run(self, entry: str, *arrays: np.ndarray) -> list[np.ndarray]:
         """The outputs of ``entry`` (named in ``ENTRIES``) on ``arrays``, in its order."""
-        return self.sessions[entry].run(None, dict(zip(ENTRIES[entry].inputs, arrays,
-                                                       strict=True)))
+        session = self.sessions[entry]
+        given = dict(zip(ENTRIES[entry].inputs, arrays, strict=True))
+        # a traced graph has no input its outputs do not read (noCond: no condition)
+        return session.run(None, {name: given[name] for name in self.inputs[entry]})
 
 
 def make_backend(si: SIModel, device: torch.device, backend: str = "auto"

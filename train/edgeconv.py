@@ -23,7 +23,8 @@ BLOCK = 1 << 20     # distances per piece of the kNN on a CPU: 4 MB, which stays
 def knn(features: torch.Tensor, k: int, mask: torch.Tensor | None = None) -> torch.Tensor:
     """Indices (B, N, k) of each point's k nearest points by feature distance, itself included.
 
-    ``mask`` (B, N) bool: points that may be neighbours (False for a missing marker).
+    ``mask`` (B, N) bool: points that may be neighbours (False for a missing marker; its
+    features must still be finite, as the data's zero-filled points are: inf - inf is NaN).
 
     Squared distances up to a per-row constant, ``|x_j|^2 - 2 x_i.x_j`` (``|x_i|^2`` does not
     change a row's order), with a masked point's ``|x_j|^2`` set to infinity: one matrix

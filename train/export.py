@@ -3,6 +3,7 @@
 The exported graph takes SI inputs and gives SI outputs (normalisation inside, from
 :mod:`train.si_model`): ``points`` (1, N, 3) metres in the phantom frame with N free,
 ``condition`` (1, 6) metres; outputs ``deformed`` (1, N, 3) metres and ``dforce`` (1,) newtons.
+A noCond model reads no condition, and its graph has no such input.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 Points are (N, 3) float32 in metres in the phantom frame (any N >= k + 1: 26 lab points, 1024
 MSM masses, a mesh's vertices); the condition is C = [tip start, tip end] (6,), metres.
 ``predict`` gives the deformed points and the change of force; ``predict_force`` (a haptic
-loop at 1 kHz) skips the displacement head.
+loop at 1 kHz) skips the displacement head (except on the paper's network's first press of a
+scene, which keeps both heads' terms for the presses after it).
 
 What is done once, not per call: the network runs in ONNX Runtime where it is installed (CPU;
 ``backend="torch"`` keeps torch, the only choice on a GPU), and a scene's points are checked and
@@ -21,7 +22,9 @@ What a press needs depends on the model:
   network. ``region=R`` runs it only on the points within R of the tip's path and the graph's
   rings around them, and leaves the rest where they are; the force head pools over that
   region (:mod:`train.region`).
-Either way region mode is how a 4096-point mesh runs at haptic rates. ``DEFAULT_REGION`` is
+Either way region mode is how a 4096-point mesh runs at haptic rates; for the paper's network
+on a mesh that changes every call it saves nothing (each new mesh runs the whole network, so
+that a press's answer never depends on which presses came before). ``DEFAULT_REGION`` is
 the radius the benchmarks time; what a radius costs in error is measured by
 ``benchmarks/region_study.py`` (the speed-accuracy report's region rows), not assumed.
 

@@ -1,11 +1,14 @@
 """Region of interest: the points a press can move, so the network runs on those alone.
 
 A press moves the surface near the tip's path and leaves the far surface where it is. The
-region is every point within ``radius`` of the segment from the tip's start to its end (the
-core, whose predictions are used) plus the rings the graph layers read around it (``hops``
-steps along each point's k nearest neighbours, so the core's points keep the neighbours they
-would have in the whole surface). Points outside the core stay at rest; the force head pools
-over the region only. The report (``benchmarks/speed_accuracy.py``) measures what that costs.
+core is every point within ``radius`` of the segment from the tip's start to its end
+(:func:`near_path`): its predictions are used, and the points outside it stay at rest. A
+model whose layers read the press (tip offsets) runs on the region: the core plus the rings
+its graph layers read around it (``hops`` steps along each point's k nearest neighbours, so
+the core's points keep the neighbours they would have in the whole surface; :func:`region`),
+and its force head pools over that region. The paper's network on a known scene needs only
+the core (its heads run on the core's cached terms; :mod:`train.predictor`). The report
+(``benchmarks/speed_accuracy.py``) measures what a radius costs.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ def segment_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> 
 def near_path(points: np.ndarray, start: np.ndarray, end: np.ndarray, radius: float,
               least: int) -> np.ndarray:
     """Indices of the points within ``radius`` of the tip's path, in order; at least
-    ``least`` of them (the nearest), so a graph on them exists."""
+    ``least`` of them (the nearest: k + 1, so a graph on them exists)."""
     dist = segment_distance(points, start, end)
     core = np.flatnonzero(dist <= radius)
     if len(core) < least:
