@@ -104,7 +104,8 @@ class Predictor:
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
                       region: float | None = None) -> float:
-        """The change of force (N) alone: the displacement head is not run."""
+        """The change of force (N) alone: the displacement head is not run (but for the
+        paper's network's first press of a new scene, which keeps both heads' terms)."""
         scene, c = self._scene_of(points), self._condition(condition)
         if self.press_independent:           # the whole surface's force, from its terms
             self._check_radius(region)
