@@ -15,9 +15,10 @@ Measured in one run, medians over repeats:
   is peer / ours. The paper's network reads the press in its heads only, so on a known mesh
   only its heads run (:mod:`train.predictor`); with tip offsets the whole network runs;
 - where a warm ``predict`` of the tip-offset network spends its time: the predictor's checks
-  against the network, and the network's heaviest operators;
-- training samples/s at batch 32 x 1024 points (forward, backward, Adam step), and where the
-  time of one of our steps goes (torch.profiler, top operators);
+  against the network, and the network's heaviest operators (ONNX Runtime's profiler);
+- training samples/s at batch 32 x 1024 points (forward, backward, Adam step), the part of a
+  step both share (heads, loss, Adam: it bounds the ratio), and where the time of one of our
+  steps goes (torch.profiler, top operators);
 - with ``--device cuda``: the same on the GPU, plus batch-1 latency replayed as a CUDA graph.
 
     python benchmarks/bench_cgnn.py [--threads 2] [--device cpu|cuda] [--repeats 200]
@@ -26,10 +27,15 @@ Measured in one run, medians over repeats:
 from __future__ import annotations
 
 import argparse
+import io
+import json
 import statistics
+import tempfile
 import time
+from collections import Counter
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -38,7 +44,7 @@ from torch import nn
 from train.model import CGNN, CGNNConfig, Features
 from train.normalise import Normaliser
 from train.predictor import DEFAULT_REGION, Predictor
-from train.si_model import SIModel
+from train.si_model import ENTRIES, SIModel, to_onnx
 
 
 def pyg_knn_edges(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -176,27 +182,41 @@ def checked(pred: Predictor, pts: np.ndarray) -> None:
 
 def where_the_time_goes(pred: Predictor, si: SIModel, repeats: int) -> None:
     """Split one warm ``predict`` into the predictor's checks and the network, and name the
-    network's heaviest operators (torch's profiler on the same graph)."""
-    from torch.profiler import ProfilerActivity, profile
-
+    network's heaviest operators (ONNX Runtime's own profiler on the same graph)."""
     print("where the time goes (onnx predictor, tip offsets, warm scene) [ms]:")
     for n in (26, 1024):
         pts = surface(n, False)
         scene = pred._scene_of(pts)
         checks = median_ms(partial(checked, pred, pts), repeats, lambda: None)
-        net = median_ms(partial(pred.backend.run, "full", scene.points[None], PRESS[None],
-                                scene.neighbours[None]), repeats, lambda: None)
-        args = (torch.from_numpy(pts)[None], torch.from_numpy(PRESS)[None],
-                torch.from_numpy(scene.neighbours)[None])
-        with torch.inference_mode(), profile(activities=[ProfilerActivity.CPU]) as prof:
-            for _ in range(5):
-                si(*args)
-        ops = sorted(prof.key_averages(), key=lambda e: -e.self_cpu_time_total)
-        total = sum(e.self_cpu_time_total for e in ops)
-        top = ", ".join(f"{e.key.removeprefix('aten::')} {100 * e.self_cpu_time_total / total:.0f}%"
-                        for e in ops[:5])
-        print(f"  N={n:5d}: checks and scene {checks:6.3f}  network {net:6.3f}  (torch's "
-              f"operators on the same graph: {top})")
+        feed = (scene.points[None], PRESS[None], scene.neighbours[None])
+        net = median_ms(partial(pred.backend.run, "full", *feed), repeats, lambda: None)
+        top = ", ".join(f"{op} {share:.0f}%" for op, share in onnx_operators(si, feed)[:6])
+        print(f"  N={n:5d}: checks and scene {checks:6.3f}  network {net:6.3f}  (its operators: "
+              f"{top})")
+
+
+def onnx_operators(si: SIModel, feed: tuple[np.ndarray, ...], runs: int = 50
+                   ) -> list[tuple[str, float]]:
+    """ONNX Runtime's operators by their share (%) of the whole network's kernel time."""
+    import onnxruntime as ort
+
+    buf = io.BytesIO()
+    to_onnx(si, buf, "full")
+    with tempfile.TemporaryDirectory() as tmp:
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads, opts.inter_op_num_threads = torch.get_num_threads(), 1
+        opts.enable_profiling, opts.profile_file_prefix = True, f"{tmp}/ort"
+        session = ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"])
+        inputs = dict(zip(ENTRIES["full"].inputs, feed, strict=True))
+        for _ in range(runs):
+            session.run(None, inputs)
+        events = json.loads(Path(session.end_profiling()).read_text())
+    spent = Counter()
+    for e in events:
+        if e.get("cat") == "Node" and e["name"].endswith("_kernel_time"):
+            spent[e["args"]["op_name"]] += e["dur"]
+    total = sum(spent.values())
+    return [(op, 100 * t / total) for op, t in spent.most_common()]
 
 
 def cuda_graph_latency(model: CGNN, repeats: int) -> None:
@@ -218,24 +238,30 @@ def cuda_graph_latency(model: CGNN, repeats: int) -> None:
 
 def training(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
              sync: Callable[[], None], batch: int = 32, n: int = 1024) -> None:
+    """Samples/s of ours and the peer, and what the two share: the heads, the loss and Adam
+    (timed on fixed features), which bounds the ratio even if graph layers cost nothing."""
     x = torch.rand(batch, n, 3, device=device)
     c, y = torch.rand(batch, 6, device=device), torch.rand(batch, n, 3, device=device)
     f = torch.rand(batch, device=device)
+    local = torch.rand(batch, n, sum(o for _, o in model.config.edge_widths), device=device,
+                       requires_grad=True)
     print(f"training samples/s at batch {batch} x {n} points (forward + backward + Adam):")
-    rates = {}
-    for name, net in (("ours", model), ("PyG peer", peer)):
-        opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
 
-        def step(net=net, opt=opt) -> None:
-            d, df = net(x, c)
-            loss = 88 * (d - y).norm(dim=-1).mean() + ((df - f) ** 2).mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
+    def step(forward: Callable[[], tuple[torch.Tensor, torch.Tensor]]) -> None:
+        d, df = forward()
+        loss = 88 * (d - y).norm(dim=-1).mean() + ((df - f) ** 2).mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
 
-        rates[name] = batch / (median_ms(step, steps, sync) / 1e3)
-    print(f"  ours {rates['ours']:8.1f}  PyG peer {rates['PyG peer']:8.1f}  ratio "
-          f"{rates['ours'] / rates['PyG peer']:5.2f}x")
+    ms = {name: median_ms(partial(step, fn), steps, sync) for name, fn in (
+        ("ours", partial(model, x, c)), ("PyG peer", partial(peer, x, c)),
+        ("shared", lambda: model.heads(model.scene_terms(Features(local, c)), c)))}
+    print(f"  ours {batch / ms['ours'] * 1e3:8.1f}  PyG peer {batch / ms['PyG peer'] * 1e3:8.1f}"
+          f"  ratio {ms['PyG peer'] / ms['ours']:5.2f}x; per step: ours {ms['ours']:.0f} ms, "
+          f"peer {ms['PyG peer']:.0f} ms, shared by both (heads, loss, Adam) {ms['shared']:.0f}"
+          f" ms: with free graph layers the ratio could reach {ms['PyG peer'] / ms['shared']:.1f}x")
     if device.type == "cpu":
         profile_step(model, x, c, y, f)
 

@@ -2,6 +2,10 @@
 predictors that learn nothing (issue 16's table), so anyone can re-measure it.
 
     python benchmarks/bench_learning.py --seeds 0 1 2 [--out /tmp/bench_learning] [--jobs 2]
+    python benchmarks/bench_learning.py --no-tip-offsets --out /tmp/bench_paper_network
+
+``--no-tip-offsets`` runs the paper's network instead of the recipe's (``pipeline demo
+--no-tip-offsets``): what the speed of a mesh pressed again costs in accuracy (README).
 
 Per seed it runs ``pipeline demo --quick --seed S`` (each seed its own phantom session and
 calibration presses; unchanged steps are skipped on a second run) and prints, from its
@@ -33,10 +37,11 @@ from train.scarcity import curve  # noqa: E402
 REFS = ("nothing moves", "nearest press", "force, linear")
 
 
-def run_demo(out: Path, seed: int, jobs: int | None) -> float:
-    """``pipeline demo --quick`` for one seed; its wall time (s)."""
+def run_demo(out: Path, seed: int, jobs: int | None, extra: tuple[str, ...] = ()) -> float:
+    """``pipeline demo --quick`` for one seed (``extra``: more demo options); its wall time
+    (s)."""
     cmd = [sys.executable, "-m", "pipeline", "-q", "demo", "--quick", "--out", str(out),
-           "--seed", str(seed)] + (["--jobs", str(jobs)] if jobs else [])
+           "--seed", str(seed), *extra] + (["--jobs", str(jobs)] if jobs else [])
     tic = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return time.perf_counter() - tic
@@ -78,10 +83,10 @@ def report(out: Path, seed: int, seconds: float) -> None:
           f"linear force {msm['references']['force, linear']['force_abs_n']:.3f} N)")
     tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
     sc = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
-    gains = [f"{r['gain']['ld_gain']:+.0%}" for r in by["tl"]]
+    gains = {v: ", ".join(f"{r['gain']['ld_gain']:+.0%}" for r in by[v]) for v in ("tl", "notl")}
     print(f"\nTL vs scratch: fold means {1 - np.mean(tl) / np.mean(sc):.0%} lower, better in "
-          f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; TL gain over "
-          f"the best reference per fold: {', '.join(gains)}")
+          f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; gain over "
+          f"the best reference per fold: TL {gains['tl']}; scratch {gains['notl']}")
     rows = scarcity_rows(out)
     for name in ("TL", "no TL", "nothing moves", "nearest press"):
         groups, ld = curve(rows, name, "ld_mean_mm")
@@ -95,10 +100,14 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_learning"))
     ap.add_argument("--jobs", type=int, default=None)
+    ap.add_argument("--no-tip-offsets", action="store_true",
+                    help="the paper's network (demo --no-tip-offsets): what its speed costs in "
+                         "accuracy; use another --out")
     a = ap.parse_args()
+    extra = ("--no-tip-offsets",) if a.no_tip_offsets else ()
     for seed in a.seeds:
         out = a.out / f"seed{seed}"
-        report(out, seed, run_demo(out, seed, a.jobs))
+        report(out, seed, run_demo(out, seed, a.jobs, extra))
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import click
 
-from pipeline.demo_plan import PAPER, QUICK, SMOKE, Step, demo_steps
+from pipeline.demo_plan import PAPER, PAPER_NETWORK, QUICK, RECIPE, SMOKE, Step, demo_steps
 from pipeline.options import seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
 
@@ -39,10 +39,13 @@ from pipeline.stage_cache import is_fresh, write_stamp
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Independent training runs side by side [default: the CPU cores; 1 on a "
                    "GPU].")
+@click.option("--no-tip-offsets", is_flag=True,
+              help="Train the paper's network (the recipe without --tip-offsets): much faster "
+                   "for a predictor pressing one mesh again, less accurate (README, Latency).")
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
-         device: str, jobs: int | None, seed: int) -> None:
+         device: str, jobs: int | None, no_tip_offsets: bool, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
@@ -60,7 +63,8 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     settings = SMOKE if smoke else QUICK if quick else PAPER
     jobs = jobs or (1 if _on_gpu(device) else _cores())
     started = time.perf_counter()
-    steps = demo_steps(out, seed, settings, device)
+    steps = demo_steps(out, seed, settings, device,
+                       PAPER_NETWORK if no_tip_offsets else RECIPE)
     for batch in _batches(steps):
         _run_batch(ctx, batch, force, jobs)
     missed = summary(out, time.perf_counter() - started, quick=quick)

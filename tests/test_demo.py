@@ -16,7 +16,7 @@ from data_schema.states import validate_states
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.demo_plan import SMOKE, demo_steps
+from pipeline.demo_plan import PAPER_NETWORK, SMOKE, demo_steps
 
 
 def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
@@ -54,3 +54,16 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     assert again.exit_code == 0, again.output
     steps = demo_steps(out, 0, SMOKE)
     assert again.output.count("(unchanged since its last run: skipped)") == len(steps)
+
+
+def test_no_tip_offsets_trains_the_papers_network_with_the_rest_of_the_recipe(tmp_path):
+    """``--no-tip-offsets`` changes every training run's network and nothing else."""
+    ours = demo_steps(tmp_path, 0, SMOKE)
+    paper = demo_steps(tmp_path, 0, SMOKE, recipe=PAPER_NETWORK)
+    trains = [(a.args, b.args) for a, b in zip(ours, paper, strict=True) if a.args[0] == "train"]
+    assert len(trains) == 1 + 2 * SMOKE.folds
+    for with_offsets, without in trains:
+        assert "--tip-offsets" in with_offsets and "--tip-offsets" not in without
+        assert [a for a in with_offsets if a != "--tip-offsets"] == list(without)
+    assert [a.args for a in ours if a.args[0] != "train"] == \
+        [b.args for b in paper if b.args[0] != "train"]
