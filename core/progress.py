@@ -37,3 +37,8 @@ def say(text: str) -> None:
     """One progress line on stderr (an epoch's loss, say), unless quiet."""
     if not _QUIET:
         click.echo(text, err=True)
+
+
+def warn(text: str) -> None:
+    """A warning line on stderr, shown even when quiet: something the user must know."""
+    click.echo(f"warning: {text}", err=True)

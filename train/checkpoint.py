@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 import pickle
 import re
+import warnings
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +44,9 @@ def load_checkpoint(path: str | Path, device: str | torch.device = "cpu") -> dic
     """Read a checkpoint safely (``weights_only``) and check it; a damaged, foreign or unsafe
     file is bad input, in one line."""
     try:
-        state = torch.load(path, map_location=device, weights_only=True)
+        with warnings.catch_warnings():     # torch's own warning on a foreign pickle: our
+            warnings.simplefilter("ignore")  # one line below says what is wrong
+            state = torch.load(path, map_location=device, weights_only=True)
     except FileNotFoundError:
         raise BadInput(path, "no such checkpoint") from None
     except pickle.UnpicklingError as e:
@@ -87,10 +91,15 @@ def _check_norm(path: str | Path, norm: Normaliser) -> None:
               "scale": (norm.scale, PLAUSIBLE_M, "m"), "extent": (norm.extent, PLAUSIBLE_M, "m"),
               "disp_scale": (norm.disp_scale, PLAUSIBLE_M, "m"),
               "force_scale": (norm.force_scale, PLAUSIBLE_N, "N")}
+    if norm.envelope is not None:           # the training envelope (signed: sizes only)
+        values |= {f"envelope.{name}": (abs(value), PLAUSIBLE_N if "force" in name else
+                                        PLAUSIBLE_M, "N" if "force" in name else "m")
+                   for name, value in asdict(norm.envelope).items()}
     for name, (value, limit, unit) in values.items():
-        if not math.isfinite(value) or (name != "centre" and value <= 0):
+        scale = name != "centre" and not name.startswith("envelope")
+        if not math.isfinite(value) or (scale and value <= 0):
             raise BadInput(path, f"checkpoint norm.{name} is {value}: not a finite "
-                                 + ("value" if name == "centre" else "positive scale"))
+                                 + ("positive scale" if scale else "value"))
         if value > limit:
             raise BadInput(path, f"checkpoint norm.{name} is {value:.4g} {unit}, more than a "
                                  f"plausible {limit:g} {unit}: {SCALED_UNIT[unit]}?")

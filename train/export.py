@@ -3,21 +3,59 @@
 The exported graph takes SI inputs and gives SI outputs (normalisation inside, from
 :mod:`train.si_model`): ``points`` (1, N, 3) metres in the phantom frame with N free,
 ``condition`` (1, 6) metres; outputs ``deformed`` (1, N, 3) metres and ``dforce`` (1,) newtons.
-A noCond model reads no condition, and its graph has no such input.
+Every graph reads the condition: its outputs are gated by the press length (no motion, no
+change: :func:`train.si_model.press_gate`), a noCond model's too.
+
+What the graph carries: the no-motion gate and neighbour selection that does not depend on the
+order of the points. What it cannot carry (an ONNX graph cannot refuse an input) is written
+into the file's ``metadata_props`` (:func:`guards`), with the training envelope as JSON, so
+that a runtime can check inputs as :class:`train.Predictor` does.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+
+import onnx
 
 from core.atomic import atomic_output
 from train.checkpoint import load_checkpoint, model_from
-from train.si_model import SIModel, to_onnx
+from train.edgeconv import EXTRA
+from train.predictor import EXTRAPOLATION_FACTOR, LARGE, UNIT_FACTOR
+from train.si_model import GATE_SHARE, SIModel, to_onnx
 
 
 def export_onnx(run: str | Path, out: str | Path) -> None:
-    """Write ``out`` (ONNX) from a run folder or checkpoint, N a dynamic axis."""
+    """Write ``out`` (ONNX) from a run folder or checkpoint, N a dynamic axis, with the
+    guards it lacks and the training envelope in its metadata."""
     run = Path(run)
     si = SIModel(*model_from(load_checkpoint(run / "best.pt" if run.is_dir() else run)))
     with atomic_output(out) as tmp:
         to_onnx(si, tmp)
+        graph = onnx.load(str(tmp))
+        for key, value in guards(si).items():
+            entry = graph.metadata_props.add()
+            entry.key, entry.value = key, value
+        onnx.save(graph, str(tmp))
+
+
+def guards(si: SIModel) -> dict[str, str]:
+    """The exported graph's ``metadata_props``: units, what it does and does not check, and
+    the training envelope (JSON; ``envelope`` null for a checkpoint that did not keep it)."""
+    k, norm = si.model.config.k, si.norm
+    return {
+        "units": "points, condition and deformed in metres (phantom frame); dforce in newtons",
+        "carried": "no motion, no change: outputs times min(1, |tip end - tip start| / "
+                   f"({GATE_SHARE:g} x envelope.press_min)); neighbour ties broken by the "
+                   "points' coordinates "
+                   f"(tie groups up to k + {EXTRA} = {k + EXTRA} candidates wide)",
+        "not_checked": f"NaN or inf in gives NaN out; fewer than k + 1 = {k + 1} points are "
+                       "not refused; no unit check (train.Predictor refuses points farther "
+                       f"than {UNIT_FACTOR:g} x extent from centre) and no envelope check (it "
+                       f"flags points beyond {EXTRAPOLATION_FACTOR:g} x extent and presses "
+                       "outside the envelope); memory grows as N^2 (the kNN is one N x N "
+                       f"matrix: train.Predictor runs torch above {LARGE} points)",
+        "training_envelope": json.dumps({"centre": list(norm.centre), "extent": norm.extent,
+                                         "envelope": norm.to_dict().get("envelope")}),
+    }

@@ -7,9 +7,16 @@ Each epoch's shuffle and point sampling (``point_fraction``: the paper's aug var
 fraction of the points per sample in training, all in validation and test) come from a
 generator seeded by (seed, epoch), so a run killed after epoch e and resumed from ``last.pt``
 draws exactly what the uninterrupted run drew: same weights. ``best.pt`` is the epoch with the
-lowest validation loss. ``rotate`` turns each training example about the surface normal by
+lowest validation loss; with ``no_val`` (no validation set, said explicitly) it is the last
+epoch. ``rotate`` turns each training example about the surface normal by
 a random angle (drawn from the same generator), so the model cannot lean on where on the
 phantom a press was. A non-finite or exploding loss stops the run naming epoch and batch.
+
+Training that cannot learn says so: a fold without validation examples is refused unless
+``no_val`` says so; training examples in which nothing moves (no point by a micrometre, the
+force not by a millinewton: below any lab's noise) are refused before training; a training
+loss that does not move over the first epochs is a warning, kept in the checkpoints' meta
+("notes") and the recording.
 """
 
 from __future__ import annotations
@@ -18,7 +25,7 @@ import copy
 import csv
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +33,11 @@ import torch
 from torch.nn.parallel import DistributedDataParallel
 
 from core.errors import BadInput
-from core.progress import say
+from core.progress import say, warn
 from train.augment import about_normal, move_batch
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.data import (
+    Batch,
     States,
     example_pairs,
     load_manifest,
@@ -39,11 +47,22 @@ from train.data import (
 )
 from train.distributed import DistContext, from_env
 from train.model import CGNN, CGNNConfig
-from train.normalise import Normaliser
+from train.normalise import Envelope, Normaliser, highest_tip
 from train.si_model import loss_sum, mean_distance, predict
 from train.variant import make_variant
 
 EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
+# Nothing to learn: no point of any training example moves by STILL_M and the force changes by
+# less than STILL_N, both below any lab's noise (markers ~0.1 mm, the force sensor ~10 mN).
+STILL_M = 1e-6
+STILL_N = 1e-3
+# A loss that does not move: the loss of a fixed probe of training examples (all points, no
+# augmentation: no sampling noise) changed by less than STALL_REL of itself from before
+# training to the end of the first STALL_EPOCHS epochs (or of the run, when shorter). A run
+# that learns moves it by percents there (see README for the figures).
+STALL_EPOCHS = 3
+STALL_REL = 1e-4
+STALL_PROBE = 64       # training examples in the probe
 LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
               "samples_per_s")
 
@@ -65,6 +84,7 @@ class TrainOptions:
     schedule: str = "constant"       # "constant" or "cosine" (to 1 % of lr at the last epoch)
     patience: int | None = None      # stop after this many epochs without a better validation
     ema: float | None = None         # validate and keep an exponential average of the weights
+    no_val: bool = False             # train without validation: best.pt is the last epoch
 
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
@@ -80,14 +100,77 @@ def seeded(seed: int, epoch: int, device: torch.device) -> torch.Generator:
     return torch.Generator(device="cpu").manual_seed(seed * 1_000_003 + epoch)
 
 
+def check_options(opts: TrainOptions) -> None:
+    """Refuse a non-finite or non-positive rate or weight (the CLI bounds them further), so
+    that a caller's NaN never reaches the optimizer or shows as a diverged loss."""
+    for name in ("lr", "alpha", "ema", "point_fraction"):
+        value = getattr(opts, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise BadInput(None, f"--{name.replace('_', '-')} {value}: must be a finite "
+                                 "positive number")
+
+
+def check_learnable(states: States, pairs: torch.Tensor, data: Path, fold: int,
+                    chunk: int = 256) -> None:
+    """Refuse training examples in which nothing moves: no point by ``STILL_M`` and the force
+    not by ``STILL_N`` (a model trained on them learns "nothing moves", silently)."""
+    moved = changed = 0.0
+    for rows in pairs.split(chunk):
+        s, e = rows[:, 0], rows[:, 1]
+        both = states.valid[s] & states.valid[e]
+        d = (states.points[e] - states.points[s]).norm(dim=-1) * both
+        moved = max(moved, float(d.max()))
+        changed = max(changed, float((states.force[e] - states.force[s]).abs().max()))
+    if moved < STILL_M and changed < STILL_N:
+        raise BadInput(data, f"nothing to learn: in the {len(pairs)} training examples of "
+                             f"fold {fold} no point moves more than {moved * 1e6:.3g} um and "
+                             f"the force changes by at most {changed * 1e3:.3g} mN (below "
+                             f"{STILL_M * 1e6:g} um and {STILL_N * 1e3:g} mN, any lab's noise)")
+
+
+def probe_loss(run: Run, opts: TrainOptions) -> float:
+    """The loss of the trained weights on the first ``STALL_PROBE`` training examples."""
+    return evaluate_pairs(run.model, run.norm, run.states, run.train[:STALL_PROBE], opts.alpha,
+                          balanced=balance(run, opts) is not None)["val_loss"]
+
+
+def stalled(before: float, after: float, epochs: int) -> str | None:
+    """A warning when the probe's loss moved by less than ``STALL_REL`` of itself."""
+    change = abs(after - before) / max(abs(before), 1e-30)
+    if change >= STALL_REL:
+        return None
+    return (f"the training loss did not move: {before:.7g} -> {after:.7g} on {STALL_PROBE} "
+            f"training examples over the first {epochs} epoch(s) (relative change "
+            f"{change:.2g} < {STALL_REL:g}); the model is barely learning: raise --lr or "
+            "check the data")
+
+
+def note_warning(run: Run, text: str) -> None:
+    """A warning line on stderr (even with --quiet), kept in the checkpoints' meta."""
+    warn(text)
+    run.meta.setdefault("notes", []).append(f"warning: {text}")
+
+
 def fit_normaliser(states: States, pairs: torch.Tensor, seed: int, most: int = 2000
                    ) -> Normaliser:
-    """Statistics of (at most ``most``, seeded) training examples."""
+    """Statistics of (at most ``most``, seeded) training examples, with the training envelope
+    (:func:`training_envelope`)."""
     rng = np.random.default_rng(seed)
     keep = pairs[np.sort(rng.choice(len(pairs), min(most, len(pairs)), replace=False))]
     b = make_batch(states, keep)
     m = b.mask.numpy()
-    return Normaliser.fit(b.points.numpy(), m, (b.target - b.points).numpy(), b.dforce.numpy())
+    norm = Normaliser.fit(b.points.numpy(), m, (b.target - b.points).numpy(), b.dforce.numpy())
+    return replace(norm, envelope=training_envelope(states, pairs, b))
+
+
+def training_envelope(states: States, pairs: torch.Tensor, sample: Batch) -> Envelope:
+    """What the training examples span: press lengths, tip depths and forces of every one
+    (the no-motion gate's shortest press must leave each of them whole), the tip's height
+    above the surface of ``sample``'s."""
+    s, e = pairs[:, 0], pairs[:, 1]
+    cond = torch.cat([states.tip[s], states.tip[e]], dim=1).numpy()
+    gap = highest_tip(sample.points.numpy(), sample.mask.numpy(), sample.cond[:, :3].numpy())
+    return Envelope.fit(cond, (states.force[e] - states.force[s]).numpy(), gap)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -124,12 +207,20 @@ class Run:
 def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
             init: Path | None, device: torch.device) -> Run:
     """Load data and fold, build or resume the model and optimizer."""
+    check_options(opts)
     doc = load_manifest(splits, data)
     states = load_states(data)
     train = example_pairs(states, role_examples(doc, opts.fold, "train", data, opts.train_groups))
     val = example_pairs(states, role_examples(doc, opts.fold, "val"))
     if len(train) == 0:
         raise BadInput(splits, f"fold {opts.fold} has no training example")
+    if len(val) == 0 and not opts.no_val:
+        raise BadInput(splits, f"fold {opts.fold} has no validation example, so best.pt "
+                               "could only be chosen by the training loss: split with a "
+                               "validation share, or give --no-val (best.pt = the last epoch)")
+    if opts.no_val:
+        val = val[:0]
+    check_learnable(states, train, data, opts.fold)
     init_state = load_checkpoint(init) if init is not None else None
     meta = {"options": asdict(opts), "config": config.to_dict(),
             "data": {"file": str(Path(data).resolve()), "sha256": doc["data"]["sha256"]},
@@ -146,7 +237,8 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
             raise BadInput(init, "its network (widths, k or conditioning) differs from this "
                                  "run's: transfer learning needs the same network")
         model.load_state_dict(state["model"])
-        norm = Normaliser.from_dict(state["norm"])   # one phantom frame: keep its statistics
+        # one phantom frame: keep its statistics; the envelope is this run's training data's
+        norm = replace(Normaliser.from_dict(state["norm"]), envelope=norm.envelope)
     model.to(device)
     averaged = copy.deepcopy(model).requires_grad_(False) if opts.ema is not None else None
     optimizer = torch.optim.Adam(model.parameters(), lr=opts.lr)
@@ -163,6 +255,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
         optimizer.load_state_dict(state["optimizer"])
         norm = Normaliser.from_dict(state["norm"])
         start, best = state["epoch"] + 1, state["best_val"]
+        meta["notes"] = list(state["meta"].get("notes", []))
         best_epoch = int(state.get("best_epoch", state["epoch"]))
     return Run(model, norm, optimizer, states.to(device), train.to(device), val.to(device),
                start, best, meta, best_epoch, averaged)
@@ -189,9 +282,11 @@ def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
 
 
 def _resumable(meta: dict) -> dict:
-    """What a resumed run must share with the one it continues (more epochs may be asked)."""
-    return {**{k: v for k, v in meta.items() if k != "variant"},     # derived from the rest
-            "options": {k: v for k, v in meta["options"].items() if k != "epochs"}}
+    """What a resumed run must share with the one it continues (more epochs may be asked;
+    an option a run from before it existed lacks takes its default)."""
+    options = {**asdict(TrainOptions()), **meta["options"]}
+    return {**{k: v for k, v in meta.items() if k not in ("variant", "notes")},  # derived
+            "options": {k: v for k, v in options.items() if k != "epochs"}}
 
 
 def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
@@ -263,7 +358,11 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
     net = DistributedDataParallel(run.model) if ctx.world > 1 else run.model
     if ctx.main:
         out.mkdir(parents=True, exist_ok=True)
+    if opts.no_val:
+        _note(run, "no validation (--no-val): best.pt is the last epoch", ctx.main)
     first = None
+    probe = probe_loss(run, opts) if run.start_epoch == 0 and ctx.main else None
+    probe_at = min(STALL_EPOCHS, opts.epochs) - 1        # the epoch after which it is checked
     for epoch in range(run.start_epoch, opts.epochs):
         if _agreed(ctx, stopped_early(run, opts, epoch), run.train.device):
             say(f"stopped after epoch {epoch}: no better validation in {opts.patience} epochs "
@@ -272,20 +371,48 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
         tic = time.perf_counter()
         train_loss = train_epoch(run, net, opts, epoch, ctx, first)
         first = first or train_loss
-        metrics = evaluate_pairs(run.kept, run.norm, run.states, run.val, opts.alpha,
-                                 balanced=balance(run, opts) is not None) \
-            if len(run.val) else {"val_loss": train_loss, "val_ld_mm": math.nan,
-                                  "val_force_abs_n": math.nan}
+        if probe is not None and epoch == probe_at \
+                and (stall := stalled(probe, probe_loss(run, opts), epoch + 1)):
+            note_warning(run, stall)
+        metrics = _validate(run, opts)
         secs = time.perf_counter() - tic
         row = {"epoch": epoch, "train_loss": train_loss, **metrics, "seconds": secs,
                "samples_per_s": len(run.train) / secs}
-        _track_best(run, epoch, row["val_loss"])
+        _track_best(run, epoch, row["val_loss"], last=opts.no_val)
         if ctx.main:
             _checkpoint(run, out, epoch, row)
-            say(f"epoch {epoch + 1}/{opts.epochs}: train {train_loss:.5f}, val "
-                f"{metrics['val_loss']:.5f} (L_d {metrics['val_ld_mm']:.3f} mm, |dF| "
-                f"{metrics['val_force_abs_n']:.3f} N), {row['samples_per_s']:.0f} samples/s")
+            say(_epoch_line(row, opts.epochs, validated=len(run.val) > 0))
     return out / "best.pt"
+
+
+def _validate(run: Run, opts: TrainOptions) -> dict[str, float]:
+    """The validation metrics of the kept weights; NaN without validation (``no_val``)."""
+    if len(run.val) == 0:
+        return {"val_loss": math.nan, "val_ld_mm": math.nan, "val_force_abs_n": math.nan}
+    return evaluate_pairs(run.kept, run.norm, run.states, run.val, opts.alpha,
+                          balanced=balance(run, opts) is not None)
+
+
+def _epoch_line(row: dict, epochs: int, validated: bool) -> str:
+    """One epoch's progress line."""
+    val = (f"val {row['val_loss']:.5f} (L_d {row['val_ld_mm']:.3f} mm, |dF| "
+           f"{row['val_force_abs_n']:.3f} N)") if validated else "no validation"
+    return (f"epoch {row['epoch'] + 1}/{epochs}: train {row['train_loss']:.5f}, {val}, "
+            f"{row['samples_per_s']:.0f} samples/s")
+
+
+def _note(run: Run, text: str, main: bool) -> None:
+    """A choice the run made, said once and kept in the checkpoints' meta ("notes")."""
+    if text not in run.meta.get("notes", []):
+        run.meta.setdefault("notes", []).append(text)
+    if main:
+        say(text)
+
+
+def run_notes(out: Path) -> list[str]:
+    """The notes (choices, warnings) kept in a run folder's last checkpoint."""
+    last = out / "last.pt"
+    return list(load_checkpoint(last)["meta"].get("notes", [])) if last.is_file() else []
 
 
 def _agreed(ctx: DistContext, stop: bool, device: torch.device) -> bool:
@@ -294,9 +421,12 @@ def _agreed(ctx: DistContext, stop: bool, device: torch.device) -> bool:
     return bool(ctx.total(torch.tensor([float(stop)], device=device)) > 0)
 
 
-def _track_best(run: Run, epoch: int, val_loss: float) -> None:
-    """Remember the best validation loss and its epoch (every rank alike)."""
-    if val_loss < run.best_val or run.best_epoch < 0:
+def _track_best(run: Run, epoch: int, val_loss: float, last: bool = False) -> None:
+    """Remember the best validation loss and its epoch (every rank alike); with ``last``
+    (no validation), the last epoch is the best."""
+    if last:
+        run.best_val, run.best_epoch = val_loss, epoch
+    elif val_loss < run.best_val or run.best_epoch < 0:
         run.best_val, run.best_epoch = min(run.best_val, val_loss), epoch
 
 

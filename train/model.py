@@ -13,7 +13,9 @@ first layer each point's offset from the tip's start and end, [p, p - c_start, p
 paper's network has to learn from absolute positions (the follow-up cEGCL feeds the same).
 
 The first layer's graph is the kNN of the points themselves (with tip offsets the distance of
-two inputs is sqrt(3) times that of their points: the same neighbours). A caller that already
+two inputs is sqrt(3) times that of their points: the same neighbours). Every layer breaks a
+tie between neighbours by the points' own coordinates (:func:`train.edgeconv.knn`), so the
+output does not depend on the order of the points, even on a regular grid. A caller that already
 has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
 
 Each head's first layer is split in two, ``W [features, C] + b = (W_f features + b) + W_C C``
@@ -31,7 +33,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from train.edgeconv import DynamicEdgeConv
+from train.edgeconv import DynamicEdgeConv, tiebreak
 
 CONDITION = 6
 
@@ -123,9 +125,9 @@ class CGNN(nn.Module):
                  neighbours: torch.Tensor | None = None) -> Features:
         """The three edge convolutions' outputs, concatenated (``neighbours``: the points'
         kNN (B, N, k), if known; ``cond`` may be None when ``press_independent``)."""
-        x, outs = self.inputs(points, cond), []
+        x, outs, key = self.inputs(points, cond), [], tiebreak(points)   # key: ties' breaker
         for i, conv in enumerate(self.convs):
-            x = torch.relu(conv(x, mask, neighbours if i == 0 else None))  # (B, N, O)
+            x = torch.relu(conv(x, mask, neighbours if i == 0 else None, key))  # (B, N, O)
             outs.append(x)
         return Features(torch.cat(outs, dim=-1),
                          cond if self.config.use_condition else None, mask)

@@ -14,13 +14,39 @@ the core (its heads run on the core's cached terms; :mod:`train.predictor`). The
 from __future__ import annotations
 
 import numpy as np
+import torch
 from scipy.spatial import cKDTree
+
+from train.edgeconv import TIE, WIDEST, Points, ranked, tiebreak
 
 
 def neighbour_table(points: np.ndarray, k: int) -> np.ndarray:
-    """Each point's k nearest points (N, k) int64, itself included (a 3-D tree, no N x N)."""
-    _, idx = cKDTree(points).query(points, k=k)
-    return idx.reshape(len(points), k).astype(np.int64)
+    """Each point's k nearest points (N, k) int64, itself included, nearest first (a 3-D
+    tree, no N x N), as the network's own kNN chooses them: the tree's order where the k + 1
+    nearest distances are all apart by more than ``TIE`` (relative), and elsewhere (ties: a
+    grid) the tree's candidates ranked by :func:`train.edgeconv.ranked`, which breaks a tie
+    by the points' coordinates, not by their order, searching again with more where a tie
+    crosses the k-th."""
+    tree, n = cKDTree(points), len(points)
+    want = min(k + 1, n)
+    dist, cand = tree.query(points, k=want)
+    dist, cand = dist.reshape(n, want), cand.reshape(n, want).astype(np.int64)
+    table = cand[:, :k].copy()
+    rows = np.flatnonzero((np.diff(dist, axis=1) <= TIE * dist[:, 1:]).any(axis=1))
+    p = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
+    flat = Points(p, tiebreak(p), n)
+    while len(rows):
+        found = torch.from_numpy(cand[rows].reshape(len(rows), 1, -1))
+        idx, wide = ranked(found, torch.ones_like(found, dtype=torch.bool),
+                           p[rows].unsqueeze(1), flat,
+                           torch.zeros(len(rows), 1, 1, dtype=torch.long), k)
+        table[rows] = idx[:, 0].numpy()
+        if want >= min(n, WIDEST):
+            break
+        rows, want = rows[wide[:, 0].numpy()], min(4 * want, n, WIDEST)
+        cand = np.zeros((n, want), np.int64)
+        cand[rows] = tree.query(points[rows], k=want)[1].reshape(len(rows), want)
+    return table
 
 
 def segment_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:

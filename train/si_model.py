@@ -28,6 +28,8 @@ from train.model import CGNN, HeadTerms
 from train.normalise import Normaliser
 
 OPSET = 17
+MIN_PRESS = 1e-9      # m: the gate's ramp where the checkpoint has no training envelope
+GATE_SHARE = 0.1      # of the shortest training press: the gate's ramp
 
 
 @dataclass
@@ -38,13 +40,42 @@ class Prediction:
     dforce: torch.Tensor     # (B,) N
 
 
+def press_gate(norm: Normaliser, condition: torch.Tensor) -> torch.Tensor:
+    """The no-motion gate (B,): ``min(1, |tip end - tip start| / ramp)``, the ramp
+    ``GATE_SHARE`` of the shortest training press.
+
+    Every output is multiplied by it, so a tip that does not move moves no point and changes
+    no force, by construction (in torch, in the ONNX graph, in every entry), and a press far
+    shorter than any learned shrinks linearly to nothing (small strains are linear). It is 1
+    on every press of at least a tenth of the shortest learned: training is unchanged, and so
+    is a held-out press a little shorter than the training ones (it is flagged by
+    :class:`train.Predictor`, not scaled). A checkpoint without the training envelope takes
+    ``MIN_PRESS``: a step from 0 to 1."""
+    shortest = norm.envelope.press_min if norm.envelope is not None else 0.0
+    ramp = max(GATE_SHARE * shortest, MIN_PRESS)
+    length = torch.linalg.vector_norm(condition[..., 3:] - condition[..., :3], dim=-1)
+    return torch.clamp(length / ramp, max=1.0)
+
+
 def in_si(model: nn.Module, norm: Normaliser, points: torch.Tensor, condition: torch.Tensor,
           mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
           ) -> tuple[torch.Tensor, torch.Tensor]:
     """Deformed points (B, N, 3) m and the change of force (B,) N from points (B, N, 3) m and
-    C (B, 6) m: normalise, run ``model`` (a :class:`CGNN`, possibly DDP-wrapped), denormalise."""
+    C (B, 6) m: normalise, run ``model`` (a :class:`CGNN`, possibly DDP-wrapped), denormalise,
+    gate (:func:`press_gate`)."""
     disp, df = model(norm.points(points), norm.condition(condition), mask, neighbours)
-    return points + disp * norm.disp_scale, df * norm.force_scale
+    return in_metres(norm, points, disp, df, condition)
+
+
+def in_metres(norm: Normaliser, points: torch.Tensor, disp: torch.Tensor | None,
+              df: torch.Tensor, condition: torch.Tensor
+              ) -> tuple[torch.Tensor | None, torch.Tensor]:
+    """The network's normalised outputs as deformed points (B, N, 3) m (None when ``disp``
+    is) and the change of force (B,) N, gated by the press (:func:`press_gate`)."""
+    gate = press_gate(norm, condition)
+    deformed = None if disp is None else \
+        points + disp * (gate.view(-1, 1, 1) * norm.disp_scale)
+    return deformed, df * (gate * norm.force_scale)
 
 
 def predict(model: nn.Module, norm: Normaliser, b: Batch) -> Prediction:
@@ -97,8 +128,9 @@ class SIModel(nn.Module):
               neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """The change of force (B,) N alone: the displacement head is not run."""
         n = self.norm
-        return self.model.forward_force(n.points(points), n.condition(condition), None,
-                                        neighbours) * n.force_scale
+        df = self.model.forward_force(n.points(points), n.condition(condition), None,
+                                      neighbours)
+        return in_metres(n, points, None, df, condition)[1]
 
     def scene(self, points: torch.Tensor, neighbours: torch.Tensor
               ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -125,13 +157,13 @@ class SIModel(nn.Module):
         in the same order): deformed points (B, N, 3) m and the change of force (B,) N."""
         disp, df = self.model.heads(HeadTerms(disp_terms, force_terms),
                                     self.norm.condition(condition))
-        return points + disp * self.norm.disp_scale, df * self.norm.force_scale
+        return in_metres(self.norm, points, disp, df, condition)
 
     def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor
                       ) -> torch.Tensor:
         """:meth:`force` from the scene's force terms: the change of force (B,) N."""
         _, df = self.model.heads(HeadTerms(None, force_terms), self.norm.condition(condition))
-        return df * self.norm.force_scale
+        return df * (press_gate(self.norm, condition) * self.norm.force_scale)
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,14 @@
 
 Timeline ``epoch``. Entities: ``loss/train``, ``loss/val`` (the paper's loss, 88 L_d[m] +
 MSE[N^2]); ``val/ld_mm`` (validation mean distance error, mm); ``val/force_abs_n`` (validation
-force error, N); ``speed/samples_per_s``. One quantity per plot.
+force error, N); ``speed/samples_per_s``. One quantity per plot. ``notes/i``: the run's choices
+and warnings (no validation set, a loss that did not move) as text.
 """
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -38,8 +40,9 @@ def blueprint() -> rrb.Blueprint:
     ), collapse_panels=True)
 
 
-def write_train_recording(path: str | Path, log_csv: str | Path) -> None:
-    """A recording of the curves in a run's ``log.csv``."""
+def write_train_recording(path: str | Path, log_csv: str | Path,
+                          notes: Sequence[str] = ()) -> None:
+    """A recording of the curves in a run's ``log.csv``, and its ``notes`` as text."""
     with open(log_csv, newline="") as f:
         rows = list(csv.DictReader(f))
     epochs = np.array([int(r["epoch"]) for r in rows])
@@ -49,3 +52,6 @@ def write_train_recording(path: str | Path, log_csv: str | Path) -> None:
             values = np.array([float(r[col]) for r in rows])
             rec.send_columns(entity, indexes=[rr.TimeColumn("epoch", sequence=epochs)],
                              columns=rr.Scalars.columns(scalars=values))
+        for i, note in enumerate(notes):
+            level = rr.TextLogLevel.WARN if note.startswith("warning") else rr.TextLogLevel.INFO
+            rec.log(f"notes/{i}", rr.TextLog(note, level=level), static=True)
