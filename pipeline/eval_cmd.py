@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import resolve_rrd, rrd_option
+from pipeline.options import bounded_int, resolve_rrd, rrd_option
 
 
 @click.command(name="eval")
@@ -17,9 +17,9 @@ from pipeline.options import resolve_rrd, rrd_option
 @click.option("--scarcity", is_flag=True,
               help="Also retrain each run's fold on 1..n training groups, with and without "
                    "its transfer learning, and write the curve (.scarcity.json/.csv/.png).")
-@click.option("--scarcity-epochs", type=click.IntRange(min=1), default=None,
+@click.option("--scarcity-epochs", type=bounded_int(1), default=None,
               help="Epochs of each scarcity run [default: the run's own].")
-@click.option("--scarcity-groups", type=click.IntRange(min=1), default=None,
+@click.option("--scarcity-groups", type=bounded_int(1), default=None,
               help="Retrain on 1..N training groups only [default: all of the fold's].")
 @click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
 @click.option("--strict", is_flag=True,

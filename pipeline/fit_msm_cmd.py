@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import resolve_rrd, rrd_option, seed_option
+from pipeline.options import bounded_int, finite_float, resolve_rrd, rrd_option, seed_option
 from sim.msm import paper
 
 OUT = click.Path(dir_okay=False, path_type=Path)
@@ -16,20 +16,21 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.command("fit-msm")
 @click.argument("states", type=IN)
 @click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
-@click.option("--max-sequences", type=click.IntRange(1), default=10, show_default=True,
+@click.option("--max-sequences", type=bounded_int(1), default=10, show_default=True,
               help="Sequences used (drawn with --seed when the file or fold has more).")
 @click.option("--splits", type=IN, default=None,
               help="Fold manifest of STATES: fit on the training presses of --fold only, so "
                    "the fit never sees that fold's test presses.")
-@click.option("--fold", type=click.IntRange(0), default=0, show_default=True)
-@click.option("--start", nargs=2, type=float, default=(paper.K_BETWEEN, paper.K_FIXED),
+@click.option("--fold", type=bounded_int(0), default=0, show_default=True)
+@click.option("--start", nargs=2, type=finite_float(unit="N/m"),
+              default=(paper.K_BETWEEN, paper.K_FIXED),
               show_default=True,
               help="Starting k_between k_fixed (N/m; the paper's constants).")
-@click.option("--contact-radius", type=click.FloatRange(0, 0.05), default=None,
+@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"), default=None,
               help="Share the load among the masses within this radius (m) of the tip "
                    "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "
                    "own].")
-@click.option("--workers", type=click.IntRange(0), default=0,
+@click.option("--workers", type=bounded_int(0), default=0,
               help="Processes sharing the sequences (default: the cores this process may use).")
 @seed_option
 @rrd_option

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -57,3 +58,123 @@ def seed_option(f: Callable[..., Any]) -> Callable[..., Any]:
     """``--seed N``: every random choice of the command derives from it."""
     return click.option("--seed", type=int, default=0, show_default=True,
                         help="Random seed; same seed, same bytes of data.")(f)
+
+
+class _OneLineRange:
+    """What a bounded click type shares: the range check and its one-line refusal."""
+
+    min: float | None
+    max: float | None
+    min_open: bool
+    max_open: bool
+    unit: str = ""
+    why: str = ""
+
+    def _check(self, x: float, value: Any, param: click.Parameter | None) -> None:
+        """Refuse ``x`` (typed as ``value``) outside the range: BadInput naming the option."""
+        lo_ok = self.min is None or (x > self.min if self.min_open else x >= self.min)
+        hi_ok = self.max is None or (x < self.max if self.max_open else x <= self.max)
+        if not (lo_ok and hi_ok):
+            shown = f"{value}" + (f" {self.unit}" if self.unit else "")
+            raise BadInput(None, f"{_option_name(param)} {shown}: must be {self.describe()}"
+                           + (f" ({self.why})" if self.why else ""))
+
+    def describe(self) -> str:
+        """The accepted range in words, e.g. ``in (0, 1]`` or ``> 0``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.min is not None and self.max is not None:
+            return (f"in {'(' if self.min_open else '['}{self.min:g}, {self.max:g}"
+                    f"{')' if self.max_open else ']'}{unit}")
+        if self.min is not None:
+            return f"{'>' if self.min_open else '>='} {self.min:g}{unit}"
+        if self.max is not None:
+            return f"{'<' if self.max_open else '<='} {self.max:g}{unit}"
+        return "finite"
+
+    def _describe_range(self) -> str:
+        """The range in --help (click's form), nothing when there is none."""
+        if self.min is None and self.max is None:
+            return ""
+        return super()._describe_range()  # type: ignore[misc]
+
+
+class FiniteFloat(_OneLineRange, click.FloatRange):
+    """A finite float within optional bounds; anything else is one line naming the option.
+
+    NaN, inf and out-of-range values are refused as :class:`~core.errors.BadInput` (the CLI
+    prints ``error: --lr nan: ...`` and exits with status 2), not click's three-line usage
+    error, and never reach a stage where they would surface as a traceback or a misleading
+    "diverged". ``why`` (optional) is appended to a range refusal: what the bound protects.
+    A FloatRange, so that --help shows the range as click does (``[default: 7.5; 0<x<=1000]``).
+    """
+
+    def __init__(self, min: float | None = None, max: float | None = None,  # noqa: A002
+                 min_open: bool = False, max_open: bool = False, unit: str = "",
+                 why: str = "") -> None:
+        click.FloatRange.__init__(self, min, max, min_open, max_open)
+        self.unit, self.why = unit, why
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        """``value`` as a float, or BadInput naming the option and what is wrong."""
+        name = _option_name(param)
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise BadInput(None, f"{name} {value!r}: not a number") from None
+        if not math.isfinite(x):
+            raise BadInput(None, f"{name} {value}: not a finite number")
+        self._check(x, f"{x:g}", param)
+        return x
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return "FLOAT"
+
+
+class BoundedInt(_OneLineRange, click.IntRange):
+    """A whole number within optional bounds, refused in one line (as :class:`FiniteFloat`)."""
+
+    def __init__(self, min: int | None = None, max: int | None = None,  # noqa: A002
+                 unit: str = "", why: str = "") -> None:
+        click.IntRange.__init__(self, min, max)
+        self.unit, self.why = unit, why
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> int:
+        """``value`` as an int, or BadInput naming the option and what is wrong."""
+        try:
+            x = int(value)
+        except (TypeError, ValueError, OverflowError):
+            raise BadInput(None, f"{_option_name(param)} {value!r}: not a whole number") \
+                from None
+        self._check(x, x, param)
+        return x
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return "INTEGER"
+
+
+def finite_float(min: float | None = None, max: float | None = None,  # noqa: A002
+                 min_open: bool = False, max_open: bool = False, unit: str = "",
+                 why: str = "") -> FiniteFloat:
+    """A click type: a finite float in [min, max] (open ends with ``min_open``/``max_open``).
+
+    ``finite_float()`` alone refuses only NaN and inf. ``unit`` is shown with the value in a
+    refusal; ``why`` says what the bound protects (e.g. "a step below the force noise").
+    """
+    return FiniteFloat(min, max, min_open, max_open, unit, why)
+
+
+def bounded_int(min: int | None = None, max: int | None = None,  # noqa: A002
+                unit: str = "", why: str = "") -> BoundedInt:
+    """A click type: a whole number in [min, max], refused in one line naming the option."""
+    return BoundedInt(min, max, unit, why)
+
+
+def _option_name(param: click.Parameter | None) -> str:
+    """The option as the user typed it (``--lr``), or the argument's name."""
+    if param is None:
+        return "value"
+    opts = getattr(param, "opts", None) or []
+    longest = max(opts, key=len) if opts else (param.name or "value")
+    return longest if longest.startswith("-") else longest.upper()

@@ -7,33 +7,44 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import resolve_rrd, rrd_option, seed_option
+from core.protocol import THICKNESS_M
+from pipeline.options import bounded_int, finite_float, resolve_rrd, rrd_option, seed_option
 from sim.msm import paper
 
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
+SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
 
 
 @click.command()
 @click.option("--out", required=True, type=OUT, help="States file to write (HDF5).")
-@click.option("--locations", type=click.IntRange(1), default=paper.LOCATIONS, show_default=True,
+@click.option("--locations", type=bounded_int(1), default=paper.LOCATIONS, show_default=True,
               help="Random masses loaded, one per location.")
-@click.option("--directions", type=click.IntRange(1), default=paper.DIRECTIONS,
+@click.option("--directions", type=bounded_int(1), default=paper.DIRECTIONS,
               show_default=True,
               help="Force directions per location: the normal + random ones within 45 deg.")
-@click.option("--steps", type=click.IntRange(1), default=paper.STEPS, show_default=True,
+@click.option("--steps", type=bounded_int(1), default=paper.STEPS, show_default=True,
               help="Equal force steps up to --fmax.")
-@click.option("--fmax", type=float, default=paper.FMAX_N, show_default=True,
-              help="Largest force (N).")
-@click.option("--k-between", type=float, default=paper.K_BETWEEN, show_default=True,
+@click.option("--fmax", type=finite_float(0, 1e3, min_open=True, unit="N",
+                                          why="beyond any indentation"),
+              default=paper.FMAX_N,
+              show_default=True,
+              help="Largest force (N). Refused when it drives the MSM deeper than its surface "
+                   "is wide (100 mm); states deeper than --thickness are counted.")
+@click.option("--k-between", type=SPRING, default=paper.K_BETWEEN, show_default=True,
               help="Between-mass spring constant (N/m).")
-@click.option("--k-fixed", type=float, default=paper.K_FIXED, show_default=True,
+@click.option("--k-fixed", type=SPRING, default=paper.K_FIXED, show_default=True,
               help="Fixed-spring constant (N/m).")
+@click.option("--thickness", type=finite_float(0, 1, min_open=True, unit="m"),
+              default=THICKNESS_M, show_default=True,
+              help="The phantom's thickness (m): states whose tip goes deeper are counted in "
+                   "the closing line.")
 @click.option("--params", "params_file", type=IN, default=None,
               help="Spring constants and contact radius from `pipeline fit-msm --out` "
                    "(phantom.msm_params JSON): overrides --k-between, --k-fixed and "
                    "--contact-radius.")
-@click.option("--contact-radius", type=float, default=0.0, show_default=True,
+@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
+              default=0.0, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
                    "one: the indenter's contact patch (0: one mass, the paper's n_n = 1).")
 @click.option("--layout", type=IN, default=None,
@@ -41,27 +52,30 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
                    "rest positions, with the loaded patch's centre as the tip (the last "
                    "point), and load only inside the markers' footprint: the graph the "
                    "network is fine-tuned on.")
-@click.option("--max-angle", type=click.FloatRange(0, 90), default=paper.MAX_ANGLE_DEG,
+@click.option("--max-angle", type=finite_float(0, 90, unit="deg"), default=paper.MAX_ANGLE_DEG,
               show_default=True,
               help="Largest angle of a force direction from the normal (degrees).")
-@click.option("--tol", type=float, default=paper.STATIC_TOL_N, show_default=True,
+@click.option("--tol", type=finite_float(1e-9, 1e-2, unit="N",
+                                         why="below 1e-9 N float64 cannot settle; above "
+                                             "1e-2 N the states are not static"),
+              default=paper.STATIC_TOL_N, show_default=True,
               help="Static tolerance: largest force left on any mass (N) of the float64 "
                    "solution. Points are stored as float32 (~1e-8 m quantisation at 0.1 m), "
                    "which leaves a residual of ~1e-6 to 1e-5 N whatever --tol is; both are "
                    "stored (max_residual_N, stored_residual_N).")
-@click.option("--workers", type=click.IntRange(0), default=0,
+@click.option("--workers", type=bounded_int(0), default=0,
               help="Processes (default: the cores this process may use).")
 @click.option("--shard", metavar="I/N", default=None,
               help="Simulate only block I (0-based) of N contiguous blocks of locations.")
 @click.option("--merge", is_flag=True,
               help="Join the SHARDS files of one sharded run into --out instead of simulating.")
-@click.option("--rrd-sequences", type=click.IntRange(0), default=4, show_default=True,
+@click.option("--rrd-sequences", type=bounded_int(0), default=4, show_default=True,
               help="Sequences shown in the recording.")
 @click.argument("shards", nargs=-1, type=IN)
 @seed_option
 @rrd_option
 def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float,
-             k_between: float, k_fixed: float, params_file: Path | None,
+             k_between: float, k_fixed: float, thickness: float, params_file: Path | None,
              contact_radius: float, layout: Path | None, max_angle: float, tol: float,
              workers: int, shard: str | None, merge: bool, rrd_sequences: int,
              shards: tuple[Path, ...], seed: int, rrd: Path | None, no_rrd: bool) -> None:
@@ -77,7 +91,9 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
     integration (max_residual_N: the largest force left on any mass of any state). Points are
     stored as float32: their ~1e-8 m quantisation leaves ~1e-6 to 1e-5 N on a mass
     (stored_residual_N), a floor no --tol lowers. Also writes a rerun recording of a few
-    sequences (--rrd, default beside --out).
+    sequences (--rrd, default beside --out). The surface has no floor: states whose tip goes
+    deeper than the phantom's thickness (--thickness) are counted in the closing line, and an
+    --fmax that drives the MSM deeper than its surface is wide is refused before simulating.
 
     \b
     Sharded (cluster jobs), then merged into the same arrays as one run:
@@ -94,7 +110,7 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
     if merge:
         if shard is not None:
             raise click.UsageError("--merge and --shard exclude each other")
-        run = run_merge(shards, out, rrd_path, rrd_sequences)
+        run = run_merge(shards, out, rrd_path, rrd_sequences, thickness)
         what = f"merged {len(shards)} shards"
     else:
         if shards:
@@ -106,12 +122,18 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
         run = run_simulate(out, rrd_path, protocol, MSMParams(k_between=k_between,
                                                               k_fixed=k_fixed),
                            tol=tol, workers=n_workers, shard=shard, layout=layout,
-                           params_file=params_file, rrd_sequences=rrd_sequences)
+                           params_file=params_file, rrd_sequences=rrd_sequences,
+                           thickness=thickness)
         sim = run.sim
         what = (f"simulated {len(sim.locations)} locations with {n_workers} workers "
                 f"(max residual {sim.max_residual:.2g} N solved, "
                 f"{sim.stored_residual:.2g} N as stored in float32)")
     a = run.arrays
+    deep, deepest = run.beyond_thickness
     click.echo(f"{out}: {len(a['states/step'])} states, {len(a['single/start'])} single-step and "
-               f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s"
+               f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s; "
+               + (f"{deep} states deeper than the phantom's {thickness * 1e3:g} mm thickness "
+                  f"(deepest {deepest * 1e3:.1f} mm: lower --fmax or stiffen the springs to "
+                  "stay inside it)" if deep else
+                  f"deepest {deepest * 1e3:.1f} mm, within the phantom's {thickness * 1e3:g} mm")
                + (f"; recording {rrd_path}" if rrd_path else ""))

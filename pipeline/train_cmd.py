@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import seed_option
+from core.errors import BadInput
+from pipeline.options import bounded_int, finite_float, seed_option
 
 EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 
@@ -15,13 +16,13 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--data", required=True, type=EXISTING, help="States file (phantom.states 2.0).")
 @click.option("--splits", required=True, type=EXISTING,
               help="Fold manifest of that file (phantom.folds 2.0, from `pipeline split`).")
-@click.option("--fold", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--fold", type=bounded_int(0), default=0, show_default=True)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Run folder: best.pt, last.pt, log.csv, train.rrd.")
 @click.option("--init", type=EXISTING, default=None,
               help="Start from this checkpoint (transfer learning from an MSM run).")
 @click.option("--no-cond", is_flag=True, help="The noCond ablation: no condition C.")
-@click.option("--point-fraction", type=click.FloatRange(0, 1, min_open=True), default=None,
+@click.option("--point-fraction", type=finite_float(0, 1, min_open=True), default=None,
               help="The aug variant: this fraction of the points per sample in training.")
 @click.option("--rotate", is_flag=True,
               help="Rotation augmentation: turn each training example about the surface "
@@ -36,22 +37,29 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.option("--schedule", type=click.Choice(["constant", "cosine"]), default="constant",
               show_default=True,
               help="Learning rate: constant (the paper), or cosine from --lr to 1 % of it.")
-@click.option("--patience", type=click.IntRange(min=1), default=None,
+@click.option("--patience", type=bounded_int(1), default=None,
               help="Stop after this many epochs without a better validation loss.")
-@click.option("--ema", type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
-              default=None,
+@click.option("--ema", type=finite_float(0, 1, min_open=True, max_open=True), default=None,
               help="Validate and keep an exponential moving average of the weights over the "
                    "steps with this decay (e.g. 0.99); best.pt holds the average.")
-@click.option("--train-groups", type=click.IntRange(min=1), default=None,
+@click.option("--no-val", is_flag=True,
+              help="Train without a validation set (a fold that has none is refused "
+                   "otherwise): best.pt is then the last epoch.")
+@click.option("--train-groups", type=bounded_int(1), default=None,
               help="Train on the manifest's first N training groups only (data scarcity).")
-@click.option("--epochs", type=click.IntRange(min=1), default=250, show_default=True)
-@click.option("--batch", type=click.IntRange(min=1), default=32, show_default=True)
-@click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=1e-4,
-              show_default=True)
-@click.option("--alpha", type=click.FloatRange(min=0, min_open=True), default=88.0,
+@click.option("--epochs", type=bounded_int(1), default=250, show_default=True)
+@click.option("--batch", type=bounded_int(1), default=32, show_default=True)
+@click.option("--lr", type=finite_float(0, 1, min_open=True, why="Adam's step size: above 1 "
+                                                                 "it diverges"),
+              default=1e-4, show_default=True,
+              help="Learning rate; a training loss that does not move over the first 3 "
+                   "epochs (below 1e-4 of itself) is warned of.")
+@click.option("--alpha", type=finite_float(0, 1e4, min_open=True,
+                                           why="beyond 1e4 the force term no longer counts"),
+              default=88.0,
               show_default=True,
               help="Weight of the mean distance (m) against the force MSE (N^2) in the loss.")
-@click.option("--k", type=click.IntRange(min=2), default=5, show_default=True,
+@click.option("--k", type=bounded_int(2), default=5, show_default=True,
               help="Neighbours per point, itself included.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True)
@@ -60,8 +68,8 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 @seed_option
 def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_cond: bool,
           point_fraction: float | None, rotate: bool, tip_offsets: bool, loss: str,
-          schedule: str, patience: int | None, ema: float | None, train_groups: int | None,
-          epochs: int,
+          schedule: str, patience: int | None, ema: float | None, no_val: bool,
+          train_groups: int | None, epochs: int,
           batch: int, lr: float, alpha: float, k: int, device: str, rrd: bool, seed: int) -> None:
     """Train the cGNN on one fold (resumes a killed run in the same --out).
 
@@ -70,8 +78,11 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
     its scale (--loss balanced); Adam; validation every epoch. Writes --out/best.pt (lowest
     validation loss) and last.pt (each epoch; both atomic, loaded with weights_only), log.csv
     (epoch, losses, validation errors, samples/s) and train.rrd. A NaN or exploding loss stops
-    with the epoch and batch named. Under torchrun it trains data-parallel (gloo on CPU, nccl
-    on GPU).
+    with the epoch and batch named. Refused: a fold without validation examples (unless
+    --no-val), training examples in which nothing moves (no point by 1 um, the force not by
+    1 mN). A training loss that does not move over the first 3 epochs is warned of (stderr,
+    the checkpoints' meta "notes" and train.rrd). Under torchrun it trains data-parallel
+    (gloo on CPU, nccl on GPU).
     """
     from train.loop import TrainOptions
     from train.model import CGNNConfig
@@ -79,10 +90,17 @@ def train(data: Path, splits: Path, fold: int, out: Path, init: Path | None, no_
 
     if tip_offsets and no_cond:
         raise click.UsageError("--tip-offsets are the condition C: not with --no-cond")
+    if no_val and patience is not None:
+        raise BadInput(None, "--patience counts epochs without a better validation loss: "
+                             "not with --no-val")
     opts = TrainOptions(fold=fold, epochs=epochs, batch=batch, lr=lr, alpha=alpha,
                         point_fraction=point_fraction, train_groups=train_groups, seed=seed,
-                        rotate=rotate, loss=loss, schedule=schedule, patience=patience, ema=ema)
+                        rotate=rotate, loss=loss, schedule=schedule, patience=patience, ema=ema,
+                        no_val=no_val)
     config = CGNNConfig(k=k, use_condition=not no_cond, tip_offsets=tip_offsets)
-    best = run_train(data, splits, out, opts, config, init, device, rrd)
+    run = run_train(data, splits, out, opts, config, init, device, rrd)
+    best = f"{run.best} (the last epoch: --no-val, no validation)" if no_val else str(run.best)
+    warnings = [n for n in run.notes if n.startswith("warning")]
     click.echo(f"{out}: trained fold {fold} for {epochs} epochs; best checkpoint {best}"
-               + (f"; recording {out / 'train.rrd'}" if rrd else ""))
+               + (f"; recording {out / 'train.rrd'}" if rrd else "")
+               + (f"; {len(warnings)} warning(s), see above" if warnings else ""))

@@ -186,8 +186,11 @@ def test_merge_refuses_incomplete_or_mixed_shards(tmp_path):
     (["--locations", "2000"], "exceeds"),
     (["--shard", "2/2"], "--shard"),
     (["--shard", "x"], "I/N"),
-    (["--k-fixed", "0"], "k_fixed"),
-    (["--tol", "0"], "tolerance"),
+    (["--k-fixed", "0"], "--k-fixed"),
+    (["--tol", "0"], "--tol"),
+    (["--fmax", "nan"], "--fmax"),
+    (["--k-between", "inf"], "--k-between"),
+    (["--contact-radius", "nan"], "--contact-radius"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
     out = tmp_path / "x.h5"

@@ -20,10 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from core.protocol import THICKNESS_M
 from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES, validate_states
 from sim.msm.msm import MSM, MSMError, MSMParams
+from sim.msm.msm_depth import check_depth, check_states_depth
 from sim.msm.msm_layout import footprint
 from sim.msm.msm_protocol import Plan, Protocol, draw_plan, shard_locations
 from sim.msm.msm_simulate import Simulated, simulate
@@ -108,20 +110,24 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
 def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
              tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
              command_params: dict | None = None, layout: np.ndarray | None = None,
-             inputs: Sequence[Path] = ()) -> tuple[Simulated, dict[str, np.ndarray]]:
+             inputs: Sequence[Path] = (), thickness: float = THICKNESS_M
+             ) -> tuple[Simulated, dict[str, np.ndarray]]:
     """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
     simulation and the arrays written.
 
     With ``layout`` (a lab's rest points, :func:`sim.msm.msm_layout.lab_layout`) the states
     are the MSM sampled at those points plus the tip, and the loads fall inside the layout's
     footprint (where the lab pressed), so the network pre-trains on the graph it is
-    fine-tuned on.
+    fine-tuned on. A protocol that drives the MSM deeper than its surface is wide is refused
+    before simulating (:mod:`sim.msm.msm_depth`; ``thickness``, the phantom's, in the message).
     """
     check_tol(tol)
     model = MSM(params)
     plan = draw_plan(protocol, model.N, None if layout is None else footprint(model, layout))
     locs = shard_locations(protocol.locations, shard)
+    check_depth(plan, params, locs, thickness)
     sim = simulate(plan, params, locs, tol, workers, layout)
+    check_states_depth(plan, params, sim.tips, thickness)
     prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
                            inputs=list(inputs), schema=STATES.name,
                            schema_version=STATES.version)

@@ -17,9 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from core.atomic import atomic_outputs
+from core.protocol import THICKNESS_M
 from data_schema.json_docs import MSM_PARAMS, validate_json_doc
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_dataset import generate
+from sim.msm.msm_depth import beyond
 from sim.msm.msm_layout import lab_layout
 from sim.msm.msm_protocol import Protocol, parse_shard
 from sim.msm.msm_shards import merge_shards
@@ -35,38 +37,46 @@ class Simulation:
     arrays: dict[str, np.ndarray]
     seconds: float
     sim: Simulated | None = None          # None: joined from shards
+    thickness: float = THICKNESS_M        # m, the phantom's
+
+    @property
+    def beyond_thickness(self) -> tuple[int, float]:
+        """States deeper than the phantom's thickness, and the deepest depth (m)."""
+        return beyond(self.arrays["states/tip"], self.thickness)
 
 
 def run_simulate(out: str | Path, rrd: str | Path | None = None,
                  protocol: Protocol | None = None, params: MSMParams | None = None, *,
                  tol: float = DEFAULT_TOL, workers: int = 1, shard: str | None = None,
                  layout: str | Path | None = None, params_file: str | Path | None = None,
-                 rrd_sequences: int = 4) -> Simulation:
+                 rrd_sequences: int = 4, thickness: float = THICKNESS_M) -> Simulation:
     """Simulate ``protocol`` (or shard ``"I/N"`` of it) into ``out`` and the recording ``rrd``.
 
     ``params_file`` (fit-msm's JSON) overrides the spring constants and the contact radius;
-    ``layout`` (a lab states file) samples the MSM at its markers.
+    ``layout`` (a lab states file) samples the MSM at its markers. ``thickness`` (m, the
+    phantom's): states deeper are counted (:attr:`Simulation.beyond_thickness`).
     """
     protocol, params = protocol or Protocol(), params or MSMParams()
     if params_file is not None:
         params, protocol = _fitted(params_file, params, protocol)
     shard_ij = parse_shard(shard) if shard else None
     command = {**asdict(protocol), "k_between": params.k_between, "k_fixed": params.k_fixed,
-               "tol": tol, "shard": shard, "layout": str(layout) if layout else None}
+               "tol": tol, "shard": shard, "layout": str(layout) if layout else None,
+               "thickness": thickness}
     inputs = [Path(p) for p in (params_file, layout) if p is not None]
     points = lab_layout(layout) if layout is not None else None
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
         sim, arrays = generate(tmp_out, protocol, params, tol=tol, workers=workers,
                                shard=shard_ij, command_params=command, layout=points,
-                               inputs=inputs)
+                               inputs=inputs, thickness=thickness)
         seconds = time.perf_counter() - started
         _record(tmp_rrd, arrays, params, protocol.step_n, rrd_sequences)
-    return Simulation(arrays, seconds, sim)
+    return Simulation(arrays, seconds, sim, thickness)
 
 
 def run_merge(shards: Sequence[str | Path], out: str | Path, rrd: str | Path | None = None,
-              rrd_sequences: int = 4) -> Simulation:
+              rrd_sequences: int = 4, thickness: float = THICKNESS_M) -> Simulation:
     """Join the shard files of one run into ``out`` (and the recording ``rrd``)."""
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
@@ -74,7 +84,7 @@ def run_merge(shards: Sequence[str | Path], out: str | Path, rrd: str | Path | N
         seconds = time.perf_counter() - started
         params = MSMParams(**json.loads(attrs["msm_params"]))
         _record(tmp_rrd, arrays, params, float(attrs["step_n"]), rrd_sequences)
-    return Simulation(arrays, seconds)
+    return Simulation(arrays, seconds, thickness=thickness)
 
 
 def _fitted(path: str | Path, params: MSMParams, protocol: Protocol
