@@ -27,7 +27,13 @@ Root attribute ``calibration`` repeats all of it as JSON; its ``clock`` says whi
 applied and ``why`` (and has a ``note`` when ``--clock auto`` fell back from an unusable trigger
 to the data).
 
-Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``.
+Force bits: ``outside_log`` (the frame lies outside the force log), ``over_range`` (beyond
+the sensor's rated load on some axis, from the calibration), ``saturated`` (made of gauge
+voltages on the amplifier's rail: the force there is clipped, not measured). Extract leaves
+out every press with ``over_range`` or ``saturated`` between onset and release.
+
+Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``; 1.2 the
+``saturated`` force bit (a 1.1 file simply never sets it).
 """
 
 from pathlib import Path
@@ -39,7 +45,7 @@ from core.errors import BadInput
 from data_schema.hdf5 import Dataset, H5Schema, h5_reading, validate_h5
 
 QUALITY_BITS = {"filled": 1, "missing": 2, "poor_fit": 4}
-FORCE_BITS = {"outside_log": 1, "over_range": 2}
+FORCE_BITS = {"outside_log": 1, "over_range": 2, "saturated": 4}
 
 CLOCK_ATTRS = ("clock_method", "clock_offset_s", "clock_offset_sd_s", "clock_drift_ppm",
                "clock_drift_sd_ppm", "clock_rms_s", "clock_n")
@@ -53,7 +59,7 @@ TORQUE_NM = 100.0
 
 SYNCED = H5Schema(
     name="phantom.synced",
-    version="1.1",
+    version="1.2",
     root_attrs=("provenance", "source", "calibration", "quality_bits", "force_bits",
                 "units_length", "units_force", "units_time", "rate_hz"),
     doc=__doc__ or "",

@@ -3,6 +3,14 @@
 Takes each session's presses in the phantom frame (:mod:`extract.synced_presses`), reads the
 states off each loading phase (:mod:`extract.static_states`), numbers sequences in time order
 across the sessions and builds the single- and multi-step examples.
+
+A press whose force sync flagged between onset and release (gauge voltages on the amplifier's
+rail, or beyond the sensor's rated load) is left out whole, not from its first flagged frame:
+a clipped force is wrong on the way up to the rail as well (the filter spreads the clip, and
+the press's later levels would be read off a flat top), and a press without its top levels is
+a different press. Its states are counted (``excluded["saturated_or_over_range"]``) and so are
+the presses (:attr:`Extracted.untrusted_presses`). The level spacing is checked against the
+sessions first (:func:`check_step`): above the force noise, below the largest peak.
 """
 
 from __future__ import annotations
@@ -14,6 +22,7 @@ import numpy as np
 
 from core.errors import BadInput
 from core.progress import progress
+from core.protocol import STEP_N
 from extract.static_states import ExtractParams, Press, PressStates, example_pairs, press_states
 from extract.synced_presses import Session
 
@@ -27,6 +36,7 @@ class Extracted:
     excluded: dict[str, int] = field(default_factory=dict)
     # per session, its presses and their states (empty for an excluded press): for the view
     sessions: list[tuple[list[Press], list[PressStates]]] = field(default_factory=list)
+    untrusted_presses: int = 0     # presses left out: force saturated or beyond rated range
 
 
 def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
@@ -36,11 +46,13 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
     Location ids are the files' own, offset per file unless ``shared_locations`` (the user
     says the same id is the same place in every session).
     """
+    check_step(sessions, params.step_n)
     cols: dict[str, list] = {k: [] for k in ("points", "valid", "force", "step", "speed",
                                             "sequence", "location", "session")}
-    names, transforms, excluded = [], [], {"no_loading_phase": 0, "tip_missing": 0,
-                                           "too_fast": 0}
-    seq = loc_offset = 0
+    names, transforms = [], []
+    excluded = {"no_loading_phase": 0, "tip_missing": 0, "too_fast": 0,
+                "saturated_or_over_range": 0}
+    seq = loc_offset = untrusted = 0
     views = []
     for s_id, session in enumerate(sessions):
         names.append(session.name)
@@ -51,6 +63,10 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
             for press, loc in bar:
                 if press.peak <= press.onset:
                     excluded["no_loading_phase"] += 1
+                    st = press_states(press, params, levels=False)
+                elif press.untrusted_force:
+                    untrusted += 1
+                    excluded["saturated_or_over_range"] += len(press_states(press, params).step)
                     st = press_states(press, params, levels=False)
                 else:
                     st = press_states(press, params)
@@ -63,7 +79,9 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
         if not shared_locations:
             loc_offset += max(session.locations) + 1
     if not cols["points"]:
-        raise BadInput(sessions[0].path, "no static state in any press")
+        why = (f": all {untrusted} presses have a saturated or over-range force (flagged by "
+               "sync)" if untrusted == seq else "")
+        raise BadInput(sessions[0].path, f"no static state in any press{why}")
     arrays = {f"states/{k}": np.concatenate(v) for k, v in cols.items()}
     arrays["states/tip"] = arrays["states/points"][:, -1]
     arrays["sessions/transform"] = np.stack(transforms)
@@ -71,7 +89,37 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
                                   np.random.default_rng(seed))
     arrays.update({"single/start": single[:, 0], "single/end": single[:, 1],
                    "multi/start": multi[:, 0], "multi/end": multi[:, 1]})
-    return Extracted(arrays, names, excluded, views)
+    return Extracted(arrays, names, excluded, views, untrusted)
+
+
+RESOLUTION_N = 1 / 320     # an ATI Nano17 SI-12-0.12's force resolution (N)
+NOISE_WIDTHS = 3.0         # levels closer than this many noise sd are not distinct readings
+
+
+def step_floor_n(sessions: Sequence[Session]) -> float:
+    """The finest meaningful level spacing (N): :data:`NOISE_WIDTHS` times the largest force
+    noise sync measured, and never below the Nano17's resolution."""
+    return max(RESOLUTION_N, NOISE_WIDTHS * max(s.noise_n for s in sessions))
+
+
+def check_step(sessions: Sequence[Session], step_n: float) -> None:
+    """Refuse a level spacing that is not finite and positive, finer than the force noise
+    (:func:`step_floor_n`: the levels would be noise, and their count unbounded), or coarser
+    than the largest peak force (no level but the rest)."""
+    if not (np.isfinite(step_n) and step_n > 0):
+        raise BadInput(None, f"--step {step_n:g} N: must be a finite force level spacing > 0")
+    floor = step_floor_n(sessions)
+    if step_n < floor:
+        noise = max(s.noise_n for s in sessions)
+        raise BadInput(None, f"--step {step_n:g} N: below the force noise floor {floor:.4g} N "
+                             f"({NOISE_WIDTHS:g} x the {noise:.4g} N noise sync measured, and at "
+                             f"least 1/320 N, a Nano17's resolution): its levels would be "
+                             f"noise (default {STEP_N:g} N)")
+    peak = max((float(np.nanmax(p.force)) for s in sessions for p in s.presses
+                if np.isfinite(p.force).any()), default=0.0)
+    if step_n > peak:
+        raise BadInput(None, f"--step {step_n:g} N: above the largest peak force of the "
+                             f"presses ({peak:.3g} N): no level but the rest would be read")
 
 
 def _append(cols: dict[str, list], st: PressStates, seq: int, loc: int, session: int) -> None:

@@ -45,6 +45,7 @@ class Press:
     force: np.ndarray          # (T,) magnitude, N
     onset: int                 # first loaded frame
     peak: int                  # frame of the peak force (end of loading)
+    untrusted_force: bool = False   # sync flagged the force (saturated or over range)
 
 
 @dataclass

@@ -6,6 +6,7 @@ come from the marker grid and the origin from its centre (:mod:`extract.phantom_
 
 from __future__ import annotations
 
+import json
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,9 +16,11 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text, h5_reading, read_schema_id
-from data_schema.synced import SYNCED, validate_synced
+from data_schema.synced import FORCE_BITS, SYNCED, validate_synced
 from extract.phantom_frame import apply_transform, to_phantom_frame
 from extract.static_states import Press
+
+UNTRUSTED = FORCE_BITS["saturated"] | FORCE_BITS["over_range"]
 
 
 @dataclass
@@ -30,6 +33,7 @@ class Session:
     presses: list[Press]
     locations: list[int]                   # per press, the file's own location id
     n_points: int
+    noise_n: float = 0.0                   # sd of the force at rest sync measured (N)
 
 
 def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
@@ -50,15 +54,29 @@ def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
         transform = to_phantom_frame(rest, cal["surface_point"][()], cal["surface_normal"][()],
                                      size_m)
         name = attr_text(f.attrs.get("name", Path(path).stem))
+        noise = _force_noise(attr_text(f.attrs["calibration"]))
     for p in raw:
         p.points = apply_transform(transform, p.points)
-    return Session(Path(path), name, transform, raw, locations, raw[0].points.shape[1])
+    return Session(Path(path), name, transform, raw, locations, raw[0].points.shape[1], noise)
+
+
+def _force_noise(calibration: str) -> float:
+    """The force noise (N) sync measured at the log's unloaded start; 0 when not recorded."""
+    try:
+        value = float(json.loads(calibration)["force"]["noise_force_n"])
+    except (ValueError, KeyError, TypeError):
+        return 0.0
+    return value if np.isfinite(value) and value >= 0 else 0.0
 
 
 def _press(g: h5py.Group) -> Press:
+    """One press; its force is untrusted when sync flagged a frame from onset to release as
+    saturated or beyond the rated range (bits of every 1.x file; 1.1 never sets saturated)."""
+    onset, release = int(g.attrs["onset_index"]), int(g.attrs["release_index"])
+    flags = g["force_quality"][onset:release]
     return Press(time_s=g["time_ns"][()].astype(np.int64) * 1e-9, points=g["points"][()],
-                 force=g["force_magnitude"][()], onset=int(g.attrs["onset_index"]),
-                 peak=int(g.attrs["peak_index"]))
+                 force=g["force_magnitude"][()], onset=onset, peak=int(g.attrs["peak_index"]),
+                 untrusted_force=bool((flags & UNTRUSTED).any()))
 
 
 def _rest_markers(presses: list[Press]) -> np.ndarray:

@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from core.protocol import FOOTPRINT_M, STEP_N
-from pipeline.options import resolve_rrd, rrd_option, seed_option
+from core.text import count
+from pipeline.options import finite_float, resolve_rrd, rrd_option, seed_option
+
+if TYPE_CHECKING:
+    from extract.extract import Extracted
 
 
 def _size(text: str) -> tuple[float, float]:
@@ -26,8 +31,10 @@ def _size(text: str) -> tuple[float, float]:
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="States file to write (schema phantom.states 2.0).")
-@click.option("--step", type=click.FloatRange(min=0, min_open=True), default=STEP_N,
-              show_default=True, help="Force level spacing, N.")
+@click.option("--step", type=finite_float(min=0, min_open=True, unit="N"), default=STEP_N,
+              show_default=True,
+              help="Force level spacing, N: at least 3 x the force noise sync measured (and "
+                   "1/320 N, a Nano17's resolution), at most the largest peak force.")
 @click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
 @click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True), default=20.0,
@@ -51,7 +58,9 @@ def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float |
     --phantom-size); builds single-step (t -> t+1) and multi-step examples (15 random pairs at
     least two levels apart per press, seeded). Writes --out (HDF5 phantom.states 2.0) and a rerun
     recording of the levels on each force curve and the states in 3D (--rrd, default beside
-    --out). Excluded presses and dropped states are counted in the file and printed.
+    --out). Presses whose force sync flagged as saturated (gauge on the amplifier's rail) or
+    beyond the sensor's rated load are left out whole. Excluded presses and dropped states
+    are counted in the file and printed.
     """
     from extract.extract_stage import run_extract
     from extract.static_states import ExtractParams
@@ -62,8 +71,19 @@ def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float |
     ex = run_extract(synced, out, rrd_path, params, seed, size, shared_locations)
     a = ex.arrays
     presses = len(set(a["states/sequence"].tolist()))
-    left = ", ".join(f"{k} {v}" for k, v in ex.excluded.items() if v) or "nothing"
+    left = _left_out(ex)
     click.echo(f"{out}: {len(a['states/step'])} states from {presses} presses of "
                f"{len(synced)} session(s); {len(a['single/start'])} single-step, "
                f"{len(a['multi/start'])} multi-step examples; left out: {left}"
                + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _left_out(ex: Extracted) -> str:
+    """What extraction left out, in words: presses with an untrusted force first."""
+    parts = []
+    if ex.untrusted_presses:
+        parts.append(f"{count(ex.untrusted_presses, 'press')} saturated/over-range "
+                     f"({ex.excluded['saturated_or_over_range']} states)")
+    parts += [f"{k} {v}" for k, v in ex.excluded.items()
+              if v and k != "saturated_or_over_range"]
+    return ", ".join(parts) or "nothing"

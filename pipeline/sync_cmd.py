@@ -4,10 +4,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from core.text import count
 from pipeline.options import resolve_rrd, rrd_option
+
+if TYPE_CHECKING:
+    from sync.sync import SyncResult
 
 
 @click.command()
@@ -37,7 +42,12 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     (offset and drift, from the trigger or from the data; auto falls back to the data when the
     trigger channel is dead), resamples the force onto the mocap frames with an anti-aliasing
     filter, fills short marker gaps, and splits the session into presses with location ids
-    (presses cut off by the end of a recording are left out and counted). Writes --out (HDF5:
+    (presses cut off by the end of a recording are left out and counted). The data clock
+    searches every offset up to the longer recording's length and is checked (offset
+    uncertainty, drift within 200 ppm, force rising with the tip's depth in 80 % of presses):
+    a lock that fails is refused. Frames made of gauge voltages on the amplifier's rail (the
+    .cal's OutputRange) or beyond the sensor's rated load are flagged and counted; extract
+    leaves their presses out. Writes --out (HDF5:
     per press the time, 25 phantom markers + tip, force vector and magnitude, tip depth and
     quality flags; the calibration results and their uncertainty; provenance) and a rerun
     recording of the alignment and the tip (--rrd, default beside --out). Nothing is written
@@ -57,4 +67,22 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     click.echo(f"{out}: {len(r.presses)} presses{cut} at {locations} locations; clock ({c.method}) "
                f"offset {c.offset_s * 1e3:.3f} +- {c.offset_sd_s * 1e3:.3f} ms, drift "
                f"{c.drift_ppm:.2f} +- {c.drift_sd_ppm:.2f} ppm; tip pivot RMS "
-               f"{r.pivot.rms * 1e3:.3f} mm" + (f"; recording {rrd_path}" if rrd_path else ""))
+               f"{r.pivot.rms * 1e3:.3f} mm{_force_flags(r)}"
+               + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _force_flags(r: SyncResult) -> str:
+    """The closing message's words on presses whose force cannot be trusted (flagged, and
+    left out by extract)."""
+    from sync.sync import flagged_presses
+
+    words = []
+    rail, rail_frames = flagged_presses(r.presses, "saturated")
+    if rail:
+        words.append(f"{count(rail, 'press')} with a gauge on the amplifier's rail "
+                     f"({r.rail_samples:,} log samples, {rail_frames:,} frames)")
+    over, over_frames = flagged_presses(r.presses, "over_range")
+    if over:
+        words.append(f"{count(over, 'press')} with a force beyond the sensor's rated load "
+                     f"({over_frames:,} frames)")
+    return "".join(f"; {w}: flagged, left out by extract" for w in words)

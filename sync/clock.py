@@ -12,7 +12,11 @@ Two estimators, both ending in a straight-line fit of local offsets ``t_f - t_m`
   magnitude (a profile least-squares cross-correlation that is insensitive to the nonlinear
   force-depth law), scanned coarse to fine and refined to sub-sample by a parabola through the
   cost minimum; the whole-session lag that seeds it comes from an FFT cross-correlation of
-  the contact state seen by each stream.
+  the contact state seen by each stream, over every lag at which the recordings overlap.
+
+A data lock is then checked (:class:`Lock`): at least two presses, a plausible drift, a known
+offset, and a force that rises with the tip's depth; :mod:`sync.clock_policy` refuses one that
+fails.
 """
 
 from __future__ import annotations
@@ -24,6 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import BadInput
+
+MAX_DRIFT_PPM = 200.0      # a crystal oscillator drifts tens of ppm; hundreds is no lock
+MAX_OFFSET_SD_S = 5e-3     # a data lock must pin the offset to a few mocap frames
+MIN_RISE = 0.5             # rank correlation of force with depth over a press's loaded frames
+MIN_RISING_SHARE = 0.8     # share of the presses in which the force must rise with the depth
+MIN_LOCK_PRESSES = 2       # one press matches any press of a similar shape: the intervals pin it
+CONTENDER = 0.9            # a lag whose contact matches this nearly as well must fail its checks
 
 
 @dataclass
@@ -118,7 +129,7 @@ def match_trigger(
     events_mocap_s: np.ndarray,
     source: str | Path | None = None,
     prior: ClockFit | None = None,
-    max_drift_ppm: float = 200.0,
+    max_drift_ppm: float = MAX_DRIFT_PPM,
     min_pulses: int = 3,
     timing_sd_s: float = 0.0,
 ) -> ClockFit:
@@ -202,15 +213,19 @@ def _cluster(values: np.ndarray, gap: float) -> list[np.ndarray]:
 # --- data-driven ----------------------------------------------------------------------------
 
 
-def xcorr_lag(
+def xcorr_curve(
     t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
-) -> tuple[float, float]:
-    """Lag (logger minus mocap time, s) that best matches a mocap signal to a logger signal.
+    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, rate_hz: float = 200.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of a mocap signal with a logger signal at every lag
+    (logger minus mocap time, s) at which the two recordings overlap (and within
+    ``max_lag_s``; by default no other bound): the lags and the correlation, -inf where not
+    admissible.
 
-    FFT cross-correlation on common grids at ``rate_hz`` over lags within ``max_lag_s``,
-    refined by a parabola through the peak. Returns the lag and the normalised correlation
-    there. NaN samples count as the signal's mean.
+    FFT cross-correlation at ``rate_hz``, each stream on a grid from its own first stamp (so
+    stamps from a logger's boot or from the epoch cost nothing: the lag adds the difference
+    of the two start times); NaN samples count as the signal's mean. Every lag at which the
+    recordings share a sample is scored, whatever their absolute stamps.
     """
     t0 = float(np.min(t_mocap_s))
     n_m = int(np.ceil((np.max(t_mocap_s) - t0) * rate_hz)) + 1
@@ -225,42 +240,95 @@ def xcorr_lag(
     xc = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * np.fft.rfft(b, size), size)
     shifts = np.arange(size)
     shifts = np.where(shifts < n_f, shifts, shifts - size)      # lag k: b[i + k] ~ a[i]
+    overlap = (shifts > -n_m) & (shifts < n_f)
     lag_s = lo - t0 + shifts / rate_hz
-    xc = np.where(np.abs(lag_s) <= max_lag_s, xc, -np.inf)
-    k = int(np.argmax(xc))
-    if not np.isfinite(xc[k]):
-        raise ValueError("no admissible lag")
-    kp, km = (k + 1) % size, (k - 1) % size
-    frac = _parabola_vertex(xc[km], xc[k], xc[kp]) if np.isfinite(xc[km] + xc[kp]) else 0.0
     norm = float(np.sqrt((a @ a) * (b @ b)))
-    return float(lag_s[k] + frac / rate_hz), float(xc[k] / norm) if norm > 0 else 0.0
+    xc = xc / norm if norm > 0 else np.zeros(size)
+    xc = np.where(overlap & (np.abs(lag_s) <= max_lag_s), xc, -np.inf)
+    order = np.argsort(lag_s)
+    return lag_s[order], xc[order]
 
 
-def contact_lag(
+def xcorr_lag(
+    t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
+    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, rate_hz: float = 200.0,
+) -> tuple[float, float]:
+    """Lag (logger minus mocap time, s) that best matches a mocap signal to a logger signal
+    (:func:`xcorr_curve`), refined by a parabola through the peak, and the normalised
+    correlation there."""
+    lags, xc = xcorr_curve(t_mocap_s, signal_m, signal_f_at, t_logger_span, max_lag_s, rate_hz)
+    peaks = curve_peaks(lags, xc, 1, 0.0)
+    if not peaks:
+        raise ValueError("no admissible lag")
+    return peaks[0]
+
+
+def curve_peaks(lags: np.ndarray, xc: np.ndarray, count: int, min_gap_s: float
+                ) -> list[tuple[float, float]]:
+    """The ``count`` highest local maxima of a correlation curve at least ``min_gap_s`` apart,
+    best first, each as (parabola-refined lag, correlation)."""
+    inner = np.isfinite(xc)
+    if not inner.any():
+        return []
+    left = np.concatenate([[-np.inf], xc[:-1]])
+    right = np.concatenate([xc[1:], [-np.inf]])
+    cand = np.flatnonzero(inner & (xc >= left) & (xc >= right))
+    cand = cand[np.argsort(-xc[cand], kind="stable")]
+    step = float(lags[1] - lags[0]) if len(lags) > 1 else 0.0
+    out: list[tuple[float, float]] = []
+    for k in cand:
+        if any(abs(lags[k] - lag) < min_gap_s for lag, _ in out):
+            continue
+        ok = 0 < k < len(xc) - 1 and np.isfinite(xc[k - 1] + xc[k + 1])
+        frac = _parabola_vertex(xc[k - 1], xc[k], xc[k + 1]) if ok else 0.0
+        out.append((float(lags[k] + frac * step), float(xc[k])))
+        if len(out) == count:
+            break
+    return out
+
+
+def contact_lags(
     t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float, force_level: float = 0.25,
-    levels: int = 24,
-) -> float:
-    """Whole-session lag (s) by matching contact: tip deeper than a level against force above
-    ``force_level``.
+    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, force_level: float = 0.25,
+    levels: int = 24, count: int = 4, min_gap_s: float = 0.5,
+) -> list[tuple[float, float]]:
+    """Whole-session lags (s) and their normalised correlations, best first, by matching
+    contact: tip deeper than a level
+    against force above ``force_level``; up to ``count`` peaks of the best level's
+    correlation, ``min_gap_s`` apart (a lag a press cycle away can fit nearly as well).
 
     Raw depth is a poor partner for the force (the hand's moves between presses dominate it,
     and a lag of one press cycle can fit as well); the contact state is the same on/off pattern
     in both streams. The depth at which contact starts depends on the marker and tip geometry,
-    so levels across the upper depth range are tried and the best-matching one kept.
+    so levels across the upper depth range are tried and the best-matching one kept. Every
+    lag at which the recordings overlap is searched (within ``max_lag_s``, unbounded by
+    default).
     """
     finite = depth[np.isfinite(depth)]
     if finite.size == 0:
         raise ValueError("no depth")
-    best = (-np.inf, 0.0)
+    best: tuple[float, list[tuple[float, float]]] = (-np.inf, [])
     for level in np.unique(np.percentile(finite, np.linspace(30, 99, levels))):
         inside = np.where(np.isfinite(depth), (depth > level).astype(float), np.nan)
-        lag, score = xcorr_lag(t_mocap_s, inside,
+        lags, xc = xcorr_curve(t_mocap_s, inside,
                                lambda t: (force_at(t) > force_level).astype(float),
                                t_logger_span, max_lag_s)
-        if score > best[0]:
-            best = (score, lag)
+        peaks = curve_peaks(lags, xc, count, min_gap_s)
+        if peaks and peaks[0][1] > best[0]:
+            best = (peaks[0][1], peaks)
+    if not best[1]:
+        raise ValueError("no admissible lag")
     return best[1]
+
+
+def contact_lag(
+    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
+    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, force_level: float = 0.25,
+    levels: int = 24,
+) -> float:
+    """The best of :func:`contact_lags`."""
+    return contact_lags(t_mocap_s, depth, force_at, t_logger_span, max_lag_s, force_level,
+                        levels, count=1)[0][0]
 
 
 def press_lag(
@@ -333,6 +401,68 @@ def clock_from_data(
         raise BadInput(source, "clock: no press has enough tracked tip frames to align the "
                                "force to the motion")
     return fit_offsets(np.array(times), np.array(lags), "data", np.array(sds))
+
+
+# --- is the data lock to be trusted? ------------------------------------------------------
+
+@dataclass
+class Lock:
+    """A data-driven clock and the figures that say whether it can be trusted."""
+
+    fit: ClockFit
+    rising: int                # presses in which the force rises with the tip's depth
+    checked: int               # presses with enough tracked frames to check
+    correlation: float         # force against depth over the whole session
+
+    def problems(self, min_correlation: float) -> list[str]:
+        """What is wrong with this lock, in words with the figures (empty: trusted).
+
+        A wrong lag shows in every figure: presses matched to the force of another press give
+        local lags that disagree (a large offset uncertainty, a drift of hundreds of ppm, a
+        real crystal drifts tens), and a force that does not rise with the depth. A lock on
+        one press cannot be told from a lock on a similar press: only the intervals between
+        presses pin the offset.
+        """
+        f, out = self.fit, []
+        if f.n < MIN_LOCK_PRESSES:
+            out.append(f"it rests on {f.n} press (need {MIN_LOCK_PRESSES}: one press matches any "
+                       "press of a similar shape)")
+        if abs(f.drift_ppm) > MAX_DRIFT_PPM or (f.n > 1 and f.drift_sd_ppm > MAX_DRIFT_PPM):
+            out.append(f"drift {f.drift_ppm:.0f} +- {f.drift_sd_ppm:.0f} ppm (a crystal drifts "
+                       f"tens of ppm; limit {MAX_DRIFT_PPM:g})")
+        if not f.offset_sd_s <= MAX_OFFSET_SD_S:
+            out.append(f"offset uncertain by {f.offset_sd_s * 1e3:.1f} ms (limit "
+                       f"{MAX_OFFSET_SD_S * 1e3:g} ms)")
+        if self.checked == 0 or self.rising < MIN_RISING_SHARE * self.checked:
+            out.append(f"force rises with the tip's depth in {self.rising} of {self.checked} "
+                       f"presses (need {MIN_RISING_SHARE:.0%})")
+        if not self.correlation >= min_correlation:
+            out.append(f"force-depth correlation {self.correlation:.2f} (need "
+                       f"{min_correlation:g})")
+        return out
+
+
+def rank_correlation(x: np.ndarray, y: np.ndarray) -> float:
+    """Spearman's rank correlation of two series (ties broken by order; NaN pairs left out;
+    NaN with fewer than 3 pairs or a constant series)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 3:
+        return float("nan")
+    rx = np.argsort(np.argsort(x[ok], kind="stable")).astype(float)
+    ry = np.argsort(np.argsort(y[ok], kind="stable")).astype(float)
+    if rx.std() == 0 or ry.std() == 0:
+        return float("nan")
+    return float(np.corrcoef(rx, ry)[0, 1])
+
+
+def rising_presses(windows: Sequence[tuple[np.ndarray, np.ndarray]], min_frames: int = 20
+                   ) -> tuple[int, int]:
+    """Of the (force, depth) windows of loaded frames with ``min_frames`` tracked, how many
+    have the force rising with the depth (rank correlation at least :data:`MIN_RISE`), and
+    how many were checked."""
+    rho = [rank_correlation(f, d) for f, d in windows
+           if (np.isfinite(f) & np.isfinite(d)).sum() >= min_frames]
+    return sum(1 for r in rho if r >= MIN_RISE), len(rho)
 
 
 def _parabola_vertex(ym: float, y0: float, yp: float) -> float:

@@ -4,8 +4,11 @@ Force that came through the mocap system's analog board (a C3D or QTM analog exp
 ``force.meta["clock"] == "mocap"``) shares the mocap's clock: with ``--clock auto`` there is no
 offset or drift to estimate (method ``shared``). Otherwise trigger pulses when the session
 recorded them (and the user did not ask for the data), else the tip's motion against the
-force (:mod:`sync.clock` holds both estimators). :func:`clock_reason` says which policy
-applied and why, for the calibration record. With
+force (:mod:`sync.clock` holds both estimators). The data clock searches every offset at which
+the two recordings overlap, whatever their absolute stamps (a logger stamped from its boot or
+from the epoch), and is trusted only when its lock passes its checks and no other lag that
+matches nearly as well passes them too (:func:`_data_clock`).
+:func:`clock_reason` says which policy applied and why, for the calibration record. With
 ``--clock auto`` a dead or unplugged trigger line falls back to the data and says why; a
 trigger train that fits several offsets equally well is disambiguated by the data clock.
 """
@@ -19,17 +22,24 @@ import numpy as np
 from core.errors import BadInput
 from core.series import SHARED_CLOCK, RawSession
 from sync.clock import (
+    CONTENDER,
+    MIN_LOCK_PRESSES,
     ClockFit,
+    Lock,
     clock_from_data,
-    contact_lag,
+    contact_lags,
     match_trigger,
     rising_edges,
+    rising_presses,
     stamp_resolution_s,
 )
 from sync.presses import segment_presses
 from sync.sync_params import SyncParams
 
 MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
+AMBIGUOUS_S = 0.1                # two data locks this far apart are two different offsets
+PRIOR_SHARE = 0.1                # a data prior picks a trigger match if its sd is this share
+#                                  of the pulse spacing (the right candidate then by 5 sd)
 SHARED = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "shared")   # one clock: exact, nothing estimated
 
 Magnitude = Callable[[np.ndarray], np.ndarray]   # logger time (s) -> force magnitude (N)
@@ -65,9 +75,38 @@ def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nd
     except BadInput as e:
         if "ambiguous" not in e.what:
             raise
-    prior = _data_clock(raw, p, t_m, depth, t_f, magnitude_at)
+    prior = _trigger_prior(raw, p, t_m, depth, t_f, magnitude_at, edges)
     return match_trigger(edges, events, raw.force.source, prior=prior, timing_sd_s=sd,
                          min_pulses=MIN_PULSES), None
+
+
+def _trigger_prior(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
+                   t_f: np.ndarray, magnitude_at: Magnitude, edges: np.ndarray) -> ClockFit:
+    """The data lock that picks among a periodic trigger's candidate offsets (a period
+    apart).
+
+    Not the full checks of :func:`_data_clock`: the trigger sets the offset, the data only
+    has to say which period, so the lock is accepted when it rests on
+    :data:`~sync.clock.MIN_LOCK_PRESSES` presses and its offset uncertainty is below
+    :data:`PRIOR_SHARE` of the pulse spacing. Else bad input worded for a trigger session.
+    """
+    spacing = float(np.min(np.diff(np.sort(edges))))
+    what = (f"trigger: pulse train is periodic (pulses {spacing:.3f} s apart), the match is "
+            "ambiguous by whole periods")
+    if np.isfinite(depth).sum() < 100:
+        raise BadInput(raw.force.source, f"{what}, and the tip is tracked in too few frames "
+                                         "to pick one; record a trigger with irregular "
+                                         "intervals")
+    lags, _ = _contact_lags(raw, p, t_m, depth, t_f, magnitude_at)
+    fit, _ = _checked_lock(raw, p, t_m, depth, magnitude_at, lags[0][0])
+    if fit is None or fit.n < MIN_LOCK_PRESSES or \
+            not fit.offset_sd_s <= PRIOR_SHARE * spacing:
+        raise BadInput(raw.force.source, f"{what}, and the tip motion cannot pick one "
+                                         f"({_figures(fit)}need {MIN_LOCK_PRESSES} presses and "
+                                         f"an offset uncertainty below "
+                                         f"{PRIOR_SHARE * spacing * 1e3:.0f} ms); record a "
+                                         "trigger with irregular intervals")
+    return fit
 
 
 def shares_mocap_clock(raw: RawSession) -> bool:
@@ -114,23 +153,88 @@ def _trigger(raw: RawSession) -> tuple[np.ndarray | None, np.ndarray | None]:
 
 def _data_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
                 t_f: np.ndarray, magnitude_at: Magnitude) -> ClockFit:
-    src = raw.markers.source
+    """The data lock, checked (:meth:`sync.clock.Lock.problems`) and unique.
+
+    The best whole-session contact lag seeds the per-press lock, which must pass its checks;
+    every other lag whose contact pattern matches nearly as well (:data:`CONTENDER`, as a
+    strictly periodic protocol over part of a session does) must fail them, else the lock is
+    ambiguous. Either failure is bad input naming the force log, with the figures.
+    """
+    src = raw.force.source
     if np.isfinite(depth).sum() < 100:
-        raise BadInput(src, "clock: the tip is tracked in too few frames to align the force")
+        raise BadInput(raw.markers.source, "clock: the tip is tracked in too few frames to "
+                                           "align the force")
+    lags, within = _contact_lags(raw, p, t_m, depth, t_f, magnitude_at)
+    (lag0, score), rivals = lags[0], lags[1:]
+    fit, problems = _checked_lock(raw, p, t_m, depth, magnitude_at, lag0)
+    if fit is None or problems:
+        raise BadInput(src, f"clock: the force cannot be locked to the tip motion at any "
+                            f"offset {within} ({_figures(fit)}{'; '.join(problems)}); the "
+                            "streams may overlap too little, or the force log is from another "
+                            "session: record a trigger")
+    for lag, rival_score in rivals:
+        if rival_score < CONTENDER * score:
+            continue
+        other, wrong = _checked_lock(raw, p, t_m, depth, magnitude_at, lag)
+        if other is not None and not wrong and other.n >= fit.n \
+                and abs(other.offset_s - fit.offset_s) > AMBIGUOUS_S:
+            raise BadInput(src, f"clock: the force locks to the tip motion equally well at "
+                                f"offsets {fit.offset_s * 1e3:.3f} and "
+                                f"{other.offset_s * 1e3:.3f} ms ({fit.n} presses each): the "
+                                "presses are too alike in timing and shape to tell; record a "
+                                "trigger")
+    return fit
+
+
+def _figures(fit: ClockFit | None) -> str:
+    """The failed lock's offset, for its refusal."""
+    if fit is None:
+        return ""
+    presses = f"{fit.n} press" + ("es" if fit.n != 1 else "")
+    return (f"best offset {fit.offset_s * 1e3:.3f} +- {fit.offset_sd_s * 1e3:.3f} ms over "
+            f"{presses}: ")
+
+
+def _contact_lags(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
+                  t_f: np.ndarray, magnitude_at: Magnitude) -> tuple[list[tuple[float, float]],
+                                                                     str]:
+    """The whole-session contact lags (:func:`sync.clock.contact_lags`) over the searched
+    offsets, and those offsets in words; refused when no offset makes the streams overlap."""
+    reach = search_reach_s(p)
+    within = (f"within +-{reach:g} s" if np.isfinite(reach)
+              else "at which the recordings overlap")
     try:
-        lag0 = contact_lag(t_m, depth, magnitude_at, (t_f[0], t_f[-1]), p.max_offset_s)
+        return contact_lags(t_m, depth, magnitude_at, (t_f[0], t_f[-1]), reach), within
     except ValueError:
-        raise BadInput(src, f"clock: force log and mocap recording do not overlap in time "
-                            f"for any clock offset within +-{p.max_offset_s:g} s") from None
+        raise BadInput(raw.force.source, f"clock: force log and mocap recording do not "
+                                         f"overlap in time for any clock offset {within}"
+                       ) from None
+
+
+def search_reach_s(p: SyncParams) -> float:
+    """Largest clock offset (logger minus mocap stamps, s) the data lock searches:
+    ``max_offset_s`` when set, else no bound (inf): every lag at which the two recordings
+    share time, whatever their absolute stamps (a logger stamped from its boot or from the
+    epoch against a mocap clock from 0)."""
+    return float(p.max_offset_s) if p.max_offset_s is not None else float("inf")
+
+
+def _checked_lock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
+                  magnitude_at: Magnitude, lag0: float) -> tuple[ClockFit | None, list[str]]:
+    """The per-press lock from the whole-session lag ``lag0`` and what is wrong with it."""
+    rate = raw.markers.rate_hz
     mag = magnitude_at(t_m + lag0)
-    loaded, _ = segment_presses(mag, raw.markers.rate_hz, p.detect_n, max(p.contact_n, 0.1))
+    loaded, _ = segment_presses(mag, rate, p.detect_n, max(p.contact_n, 0.1))
     windows = [(t_m[pr.onset:pr.release], depth[pr.onset:pr.release]) for pr in loaded]
-    fit = clock_from_data(windows, magnitude_at, lag0, src)
+    try:
+        fit = clock_from_data(windows, magnitude_at, lag0, raw.markers.source)
+    except BadInput as e:
+        return None, [e.what]
     f = magnitude_at(fit.to_logger(t_m))
     ok = np.isfinite(f) & np.isfinite(depth)
-    r = np.corrcoef(f[ok], depth[ok])[0, 1] if ok.sum() > 10 else 0.0
-    if not r >= p.min_correlation:
-        raise BadInput(src, f"clock: the force does not follow the tip motion at any clock "
-                            f"offset within +-{p.max_offset_s:g} s (best correlation {r:.2f}); "
-                            "the streams may not overlap in time")
-    return fit
+    r = float(np.corrcoef(f[ok], depth[ok])[0, 1]) if ok.sum() > 10 else 0.0
+    presses, _ = segment_presses(np.where(np.isfinite(f), f, np.nan), rate, p.detect_n,
+                                 max(p.contact_n, 0.1))
+    rising, checked = rising_presses([(f[pr.onset:pr.release], depth[pr.onset:pr.release])
+                                      for pr in presses])
+    return fit, Lock(fit, rising, checked, r).problems(p.min_correlation)

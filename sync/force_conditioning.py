@@ -3,7 +3,10 @@
 The log is tared from its unloaded start and calibrated with the 6x6 matrix (gauge voltages),
 checked to have started unloaded and to be uniformly sampled, then re-tared from the rest level
 next to every press (bias creep, the tool's weight). Samples beyond the sensor's range are
-flagged after resampling (:func:`over_range`).
+flagged after resampling (:func:`over_range`), and so are the frames whose force was read
+from gauge voltages on the amplifier's rail (:func:`on_rail`, :func:`near_samples`): a
+clipped voltage is a wrong force that looks like a right one (a flat top a little below the
+true peak).
 """
 
 from __future__ import annotations
@@ -14,7 +17,14 @@ import numpy as np
 
 from core.errors import BadInput
 from core.series import RawSession
-from sync.force import RestBaseline, Tare, apply_calibration, rest_baseline, unloaded_start
+from sync.force import (
+    RestBaseline,
+    Tare,
+    apply_calibration,
+    noise_sigma,
+    rest_baseline,
+    unloaded_start,
+)
 from sync.sync_params import SyncParams
 
 
@@ -112,3 +122,92 @@ def over_range(raw: RawSession, sampled: np.ndarray) -> np.ndarray:
     limit = np.asarray(raw.calibration.max_load, float)
     with np.errstate(invalid="ignore"):
         return (np.abs(sampled) > limit).any(axis=1)
+
+
+RAIL_TOLERANCE = 0.005      # a gauge within this share of the output range of a rail is on it
+FLAT_RUN = 8                # identical samples at a channel's extreme: a flat top
+FLAT_SIGMAS = 20.0          # ... that far from the channel's median (not a quiet channel)
+FLAT_MIN_STEPS = 1.0        # ... on a channel whose noise is this many quantisation steps wide
+
+
+def output_rails(raw: RawSession) -> tuple[float, float] | None:
+    """The amplifier's output range (V) of a gauge log, from the ATI calibration's
+    ``OutputRange`` and ``OutputBipolar`` (a bipolar 20 V range is -10..+10 V); None when the
+    force is no gauge log or the calibration does not say."""
+    if raw.force.kind != "gauge" or raw.calibration is None:
+        return None
+    cal = raw.calibration.meta.get("calibration", {})
+    try:
+        span = float(cal["OutputRange"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (np.isfinite(span) and span > 0):
+        return None
+    bipolar = str(cal.get("OutputBipolar", "True")).strip().lower() != "false"
+    return (-span / 2, span / 2) if bipolar else (0.0, span)
+
+
+def on_rail(raw: RawSession) -> np.ndarray:
+    """Log samples (L,) where any gauge channel sits on the amplifier's rail.
+
+    On a rail: within :data:`RAIL_TOLERANCE` of the output range of either end of it
+    (:func:`output_rails`), or in a flat top: a run of :data:`FLAT_RUN` identical values at a
+    channel's own highest or lowest value, far (:data:`FLAT_SIGMAS` noise widths) from its
+    median (an amplifier or converter that clips below the range the .cal states, or a .cal
+    that does not state it; a noisy gauge never repeats its extreme). The flat-top rule
+    needs a channel whose noise width (:func:`sync.force.noise_sigma`) is at least
+    :data:`FLAT_MIN_STEPS` quantisation step (:func:`quantisation_step`), i.e. whose noise
+    moves most consecutive samples (the width is then 1.05 steps or more; it is the 0.29-step
+    rounding floor when most are equal). Where the noise is below that (a quiet 16-bit DAQ,
+    a CSV written with few decimals) the slow peak of the strongest press is a run of one
+    value too, and a clip at an unknown level cannot be told from it. A wrench log (already
+    in N) has no rail: its limit is the rated range (:func:`over_range`).
+    """
+    v = np.asarray(raw.force.values, float)
+    if raw.force.kind != "gauge":
+        return np.zeros(len(v), bool)
+    flagged = np.zeros(len(v), bool)
+    rails = output_rails(raw)
+    if rails is not None:
+        lo, hi = rails
+        tol = RAIL_TOLERANCE * (hi - lo)
+        flagged |= ((v <= lo + tol) | (v >= hi - tol)).any(axis=1)
+    sigma = noise_sigma(v)
+    for c, s in zip(v.T, sigma, strict=True):
+        if not s >= FLAT_MIN_STEPS * quantisation_step(c):
+            continue
+        med = np.median(c)
+        for extreme in (np.max(c), np.min(c)):
+            if abs(extreme - med) > FLAT_SIGMAS * s:
+                flagged |= _runs_at_least(c == extreme, FLAT_RUN)
+    return flagged
+
+
+def quantisation_step(values: np.ndarray) -> float:
+    """The smallest nonzero difference between a channel's distinct values: its converter's
+    step, or the last decimal its CSV was written with (0 for a constant channel)."""
+    d = np.diff(np.unique(np.asarray(values, float)))
+    return float(d.min()) if d.size else 0.0
+
+
+def _runs_at_least(mask: np.ndarray, length: int) -> np.ndarray:
+    """``mask`` kept only in its True runs of at least ``length`` samples."""
+    out = np.zeros(len(mask), bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a >= length:
+            out[a:b] = True
+    return out
+
+
+def near_samples(t_samples_s: np.ndarray, flagged: np.ndarray, t_query_s: np.ndarray,
+                 reach_s: float) -> np.ndarray:
+    """Queries (logger times) within ``reach_s`` of a flagged sample: a resampled value is
+    made of the log samples within the filter's half length of it."""
+    hit = np.asarray(t_samples_s, float)[np.asarray(flagged, bool)]
+    q = np.asarray(t_query_s, float)
+    if hit.size == 0:
+        return np.zeros(len(q), bool)
+    j = np.clip(np.searchsorted(hit, q), 1, max(len(hit) - 1, 1))
+    near = np.minimum(np.abs(q - hit[j - 1]), np.abs(q - hit[np.minimum(j, len(hit) - 1)]))
+    return np.where(np.isfinite(q), near <= reach_s, False)

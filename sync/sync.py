@@ -11,9 +11,11 @@ Steps, each in its own module of :mod:`sync`:
    re-tared from the rest level next to every press (:mod:`sync.force_conditioning`);
 4. the clock: one shared clock when the force came through the mocap's analog board,
    else trigger pulses when recorded, otherwise the tip depth against the force
-   (:mod:`sync.clock_policy`; the calibration record says which policy applied and why);
+   (:mod:`sync.clock_policy`; the calibration record says which policy applied and why; a
+   data lock that fails its checks is refused);
 5. the force low-passed and resampled at the mocap frame times mapped onto the logger's clock
-   (:mod:`sync.resample`);
+   (:mod:`sync.resample`); frames beyond the sensor's rated load, or made of gauge voltages on
+   the amplifier's rail, flagged in the force bits (:func:`force_bits`);
 6. presses from contact onset to release, each with its location id and repeat number, cut
    out with a margin of unloaded frames on both sides; presses cut off by the end of either
    recording are left out (and counted) (:mod:`sync.presses`).
@@ -36,11 +38,18 @@ from data_schema.synced import FORCE_BITS, QUALITY_BITS
 from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
 from sync.force import Tare
-from sync.force_conditioning import ConditionedForce, condition_force, over_range
+from sync.force_conditioning import (
+    ConditionedForce,
+    condition_force,
+    near_samples,
+    on_rail,
+    output_rails,
+    over_range,
+)
 from sync.gaps import fill_gaps
 from sync.pivot import PivotResult
 from sync.presses import PressRecord, assign_locations, cut_presses, segment_presses
-from sync.resample import antialiased_interpolant
+from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
 from sync.surface import contact_points, rest_surface, tip_depth
 from sync.sync_params import SyncParams, check_params
@@ -67,6 +76,7 @@ class SyncResult:
     rate_hz: float
     calibration: dict[str, Any]
     presses_cut_off: int = 0         # presses left out: cut off by the end of a recording
+    rail_samples: int = 0            # force log samples with a gauge on the amplifier's rail
     session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
 
 
@@ -99,9 +109,10 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     check_overlap(raw, clock, t_m, cf.time_s)
 
     sampled = force_at(clock.to_logger(t_m))
-    force_q = np.where(np.isnan(sampled).any(axis=1), FORCE_BITS["outside_log"], 0)
-    over = over_range(raw, sampled)
-    force_q = (force_q | np.where(over, FORCE_BITS["over_range"], 0)).astype(np.uint8)
+    rail = on_rail(raw)
+    force_q = force_bits(sampled, over_range(raw, sampled),
+                         near_samples(cf.time_s, rail, clock.to_logger(t_m),
+                                      _filter_reach_s(cf.time_s, rate, p.passband)))
     force, torque = sampled[:, :3], sampled[:, 3:]
     magnitude = np.linalg.norm(force, axis=1)
 
@@ -124,6 +135,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
         ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
         rec.rest = cf.rest.at(clock.to_logger(ends))
     calibration = _calibration_record(raw, track.pivot, cf, clock, p, clock_note)
+    calibration["force"].update(rail_v=output_rails(raw), rail_samples=int(rail.sum()))
     session = {"time_ns": mk.time_ns, "tip": points[:, -1], "depth": depth,
                "force_magnitude": magnitude, "cluster": cluster,
                "force_magnitude_unaligned": magnitude_at(IDENTITY.to_logger(t_m)),
@@ -133,7 +145,32 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
         clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,
         surface_point=surface_point, surface_normal=normal, location_centres=loc_centres,
         rate_hz=rate, calibration=calibration, presses_cut_off=cut_off, session=session,
+        rail_samples=int(rail.sum()),
     )
+
+
+def force_bits(sampled: np.ndarray, over: np.ndarray, saturated: np.ndarray) -> np.ndarray:
+    """Each frame's force quality bits (:data:`FORCE_BITS`): outside the log (NaN), beyond
+    the rated range, made of gauge samples on the amplifier's rail."""
+    q = np.where(np.isnan(sampled).any(axis=1), FORCE_BITS["outside_log"], 0)
+    q |= np.where(over, FORCE_BITS["over_range"], 0)
+    q |= np.where(saturated, FORCE_BITS["saturated"], 0)
+    return q.astype(np.uint8)
+
+
+def flagged_presses(presses: list[PressRecord], bit: str) -> tuple[int, int]:
+    """How many presses have force bit ``bit`` between onset and release, and on how many
+    frames in all."""
+    frames = [int(((r.force_quality[r.press.onset:r.press.release] & FORCE_BITS[bit]) > 0)
+                  .sum()) for r in presses]
+    return sum(1 for n in frames if n), sum(frames)
+
+
+def _filter_reach_s(t_log_s: np.ndarray, rate_hz: float, passband: float) -> float:
+    """Half the resampling filter's length (s): how far a log sample reaches into the
+    resampled force."""
+    fs = (len(t_log_s) - 1) / (t_log_s[-1] - t_log_s[0])
+    return (len(antialias_taps(fs, rate_hz, passband)) // 2 + 1) / fs
 
 
 def _calibration_record(raw: RawSession, pivot: PivotResult, cf: ConditionedForce,

@@ -196,11 +196,16 @@ def test_log_starting_under_a_steady_load(tmp_path: Path) -> None:
     _bad(tmp_path, s, "force.csv:sample 0: force log did not start unloaded")
 
 
-def test_streams_that_do_not_overlap(tmp_path: Path) -> None:
+def test_a_logger_an_hour_ahead_is_found_and_a_bounded_search_refuses_it() -> None:
+    """Independent clocks: a logger stamped an hour later still overlaps the mocap at the
+    right lag, which the unbounded search finds; a search bounded to 30 s cannot."""
     s = _session()
-    s.force.time_ns = s.force.time_ns + 3_600_000_000_000         # logger an hour later
+    s.force.time_ns = s.force.time_ns + 3_600_000_000_000
     s.trigger_event = None
-    _bad(tmp_path, s, "do not overlap", "--clock", "data")
+    with pytest.raises(BadInput, match="do not overlap in time for any clock offset within"):
+        sync_session(s, SyncParams(clock="data", max_offset_s=30.0))
+    fit = sync_session(s, SyncParams(clock="data")).clock
+    assert abs(fit.offset_s - (3600 + OFFSET)) < 4 * fit.offset_sd_s + 1e-4
 
 
 def test_pivot_without_rotation(tmp_path: Path) -> None:
