@@ -29,7 +29,7 @@ from train.si_model import SIModel, to_onnx
 
 # a training envelope: presses of 1 to 5 mm from within 8 mm of the surface, tips down to -4 mm
 ENVELOPE = Envelope(press_min=1e-3, press_max=5e-3, tip_lowest=-4e-3, gap_max=8e-3,
-                    force_min=-100.0, force_max=100.0)
+                    force_min=-100.0, force_max=100.0, top=0.5e-3)
 NORM = Normaliser(centre=(0.05, 0.05, 0.0), scale=0.03, disp_scale=0.002, force_scale=1.0,
                   extent=0.08, envelope=ENVELOPE)
 PRESS = np.array([0.05, 0.05, 0.001, 0.05, 0.05, -0.003], np.float32)
@@ -193,6 +193,9 @@ def test_presses_beyond_the_training_envelope_are_flagged(backend: str) -> None:
         p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, 0.000999])                    # 1 um
     assert "the tip start 20 mm above the surface" in _flags(
         p, pts, [0.0, 0.0, 0.02, 0.0, 0.0, 0.017])
+    up = np.array([0, 0, 0.01], np.float32)                # the frame 10 mm off the surface
+    assert "points up to 9.5 mm above the highest learned" in _flags(
+        p, pts + up, [0.05, 0.05, 0.011, 0.05, 0.05, 0.007])
     p.norm = replace(NORM, envelope=replace(ENVELOPE, force_min=0.0, force_max=1e-6))
     assert "change of force" in _flags(p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, -0.003])
     p.norm = replace(NORM, envelope=replace(ENVELOPE, force_min=0.5, force_max=2.5))
@@ -219,8 +222,8 @@ def test_the_envelope_is_what_the_training_examples_span() -> None:
                      [0, 0, 0.001, 0, 0, 0.001]])
     pts[:, 4] = cond[:, :3]
     env = Envelope.fit(cond, np.array([1.5, 2.0, -0.5]),
-                       highest_tip(pts, np.ones((3, 5), bool), cond[:, :3]))
-    assert env == pytest.approx(Envelope(3e-3, 4e-3, -2e-3, 2e-3, -0.5, 2.0))
+                       highest_tip(pts, np.ones((3, 5), bool), cond[:, :3]), 0.0)
+    assert env == pytest.approx(Envelope(3e-3, 4e-3, -2e-3, 2e-3, -0.5, 2.0, 0.0))
 
 
 def _state(norm: Normaliser) -> dict:
@@ -315,6 +318,7 @@ def test_a_run_keeps_the_envelope_of_every_training_example(dent_run: Path,
     assert env.tip_lowest == pytest.approx(-5e-3, rel=1e-5)
     assert env.press_max == pytest.approx(5e-3, rel=1e-5)
     assert env.force_min == pytest.approx(0.5) and env.force_max == pytest.approx(2.5)
+    assert env.top == pytest.approx(0.0, abs=1e-9)          # the rest surface, z = 0
     d = tmp_path / "few"
     d.mkdir()
     data, splits = d / "states.h5", d / "splits.json"

@@ -94,7 +94,7 @@ def _check_norm(path: str | Path, norm: Normaliser) -> None:
     if norm.envelope is not None:           # the training envelope (signed: sizes only)
         values |= {f"envelope.{name}": (abs(value), PLAUSIBLE_N if "force" in name else
                                         PLAUSIBLE_M, "N" if "force" in name else "m")
-                   for name, value in asdict(norm.envelope).items()}
+                   for name, value in asdict(norm.envelope).items() if value is not None}
     for name, (value, limit, unit) in values.items():
         scale = name != "centre" and not name.startswith("envelope")
         if not math.isfinite(value) or (scale and value <= 0):

@@ -166,11 +166,12 @@ def fit_normaliser(states: States, pairs: torch.Tensor, seed: int, most: int = 2
 def training_envelope(states: States, pairs: torch.Tensor, sample: Batch) -> Envelope:
     """What the training examples span: press lengths, tip depths and forces of every one
     (the no-motion gate's shortest press must leave each of them whole), the tip's height
-    above the surface of ``sample``'s."""
+    above the surface of ``sample``'s, and the highest point of every start state."""
     s, e = pairs[:, 0], pairs[:, 1]
     cond = torch.cat([states.tip[s], states.tip[e]], dim=1).numpy()
     gap = highest_tip(sample.points.numpy(), sample.mask.numpy(), sample.cond[:, :3].numpy())
-    return Envelope.fit(cond, (states.force[e] - states.force[s]).numpy(), gap)
+    top = float(states.points[s][..., 2][states.valid[s]].max())
+    return Envelope.fit(cond, (states.force[e] - states.force[s]).numpy(), gap, top)
 
 
 def resolve_device(name: str) -> torch.device:

@@ -32,17 +32,20 @@ class Envelope:
     gap_max: float         # m: the highest tip start above the surface (:func:`tip_height`)
     force_min: float       # N: the range of the change of force
     force_max: float
+    top: float | None = None   # m: the highest training point's z (the rest surface is at 0
+    #                            in the phantom frame); None in a checkpoint from before it
 
     @classmethod
-    def fit(cls, cond: np.ndarray, dforce: np.ndarray, gap_max: float) -> Envelope:
-        """From every training example's condition (M, 6) and change of force (M,), and the
-        highest tip start above the surface (:func:`highest_tip`)."""
+    def fit(cls, cond: np.ndarray, dforce: np.ndarray, gap_max: float, top: float
+            ) -> Envelope:
+        """From every training example's condition (M, 6) and change of force (M,), the
+        highest tip start above the surface (:func:`highest_tip`) and the highest point."""
         length = np.linalg.norm(cond[:, 3:] - cond[:, :3], axis=1)
         moved = length[length > 0]
         return cls(press_min=float(moved.min()) if len(moved) else 0.0,
                    press_max=float(length.max()), tip_lowest=float(cond[:, 5].min()),
                    gap_max=gap_max, force_min=float(dforce.min()),
-                   force_max=float(dforce.max()))
+                   force_max=float(dforce.max()), top=top)
 
 
 def highest_tip(points: np.ndarray, valid: np.ndarray, tips: np.ndarray) -> float:
@@ -89,7 +92,8 @@ class Normaliser:
                    force_scale=float(max(np.sqrt(np.mean(np.square(dforce))), 1e-9)),
                    extent=float(spread.max()),
                    envelope=None if cond is None else Envelope.fit(
-                       cond, dforce, highest_tip(points, valid, cond[:, :3])))
+                       cond, dforce, highest_tip(points, valid, cond[:, :3]),
+                       float(p[:, 2].max())))
 
     def to_dict(self) -> dict:
         d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -104,7 +108,8 @@ class Normaliser:
                    disp_scale=float(d["disp_scale"]), force_scale=float(d["force_scale"]),
                    extent=float(d["extent"]),
                    envelope=None if env is None else Envelope(
-                       **{f: float(env[f]) for f in Envelope.__dataclass_fields__}))
+                       **{f: float(env[f]) for f in Envelope.__dataclass_fields__
+                          if env.get(f) is not None}))
 
     def points(self, p: torch.Tensor) -> torch.Tensor:
         """Points (..., 3) in metres -> network units."""

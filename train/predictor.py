@@ -43,7 +43,8 @@ a warning saying where: points or condition beyond 1.5 times the training extent
 checkpoint that keeps its envelope (:class:`train.normalise.Envelope`), a press longer than the
 longest learned or shorter than the shortest (below a tenth of it the gate scales the answer
 down linearly; a press of length 0 is exact, not flagged), a tip end below the lowest training
-tip end, a tip start higher above the surface than any learned
+tip end, points higher than any learned (a frame off the rest surface), a tip start higher
+above the surface than any learned
 (:func:`train.normalise.tip_height`), or a change of force beyond the training range (each
 with a margin of ``MARGIN`` of the longest press, or of the force range).
 Duplicate points are allowed (they are each other's nearest neighbours).
@@ -54,6 +55,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -86,6 +88,11 @@ class Scene:
     #                                                 head terms, once its first press has run
     plan: cKDTree | None = None   # of the points' x, y, once a tip's height is asked
     last: tuple[bytes, float] = (b"", 0.0)    # the last tip asked about, and its height
+
+    @cached_property
+    def top(self) -> float:
+        """The highest point's z, m."""
+        return float(self.points[:, 2].max())
 
     def height(self, tip: np.ndarray) -> float:
         """The tip's height above the surface (:func:`train.normalise.tip_height`), from the
@@ -250,6 +257,9 @@ class Predictor:
         if tips[1, 2] < env.tip_lowest - slack:
             out.append(f"the tip end {(env.tip_lowest - tips[1, 2]) * 1e3:.3g} mm below the "
                        "lowest learned")
+        if env.top is not None and scene.top > env.top + slack:
+            out.append(f"points up to {(scene.top - env.top) * 1e3:.3g} mm above the highest "
+                       "learned (the rest surface is at z = 0 in the phantom frame)")
         gap = scene.height(tips[0])
         if gap > env.gap_max + slack:
             out.append(f"the tip start {gap * 1e3:.3g} mm above the surface (at most "
