@@ -12,6 +12,8 @@ Every row is measured in one run on one machine, on the same test examples:
 - region of interest: ``Predictor.predict(..., region=R)`` for R from 5 mm to the whole surface
   at 1024 and 4096 points, errors against truth and the whole model, latency
   (``region_study.py``), with each size's Pareto front and the default radius;
+- at the extremes: frame offsets, press sizes, depth beyond the phantom and point orders
+  through ``train.Predictor`` (``extremes.py``), with what it flagged or refused;
 - the MSM fast path's solver tolerance against accuracy and time (``bench_msm.trade_rows``);
 - a Pareto table (latency against error) and the setting to pick for a 1 kHz haptic loop
   (force only, one press at 26 points) and for 60 Hz visuals (displacements of 1024 points).
@@ -40,6 +42,7 @@ import numpy as np
 import torch
 from bench_cgnn import median_ms
 from bench_msm import trade_rows
+from extremes import extreme_rows
 from region_study import region_rows
 from speed_accuracy_report import write_report
 
@@ -332,6 +335,9 @@ def main() -> None:
     msm_run = trained(a.out, f"msm{b.msm_grid}_k5", msm, b.msm_epochs, b, a.device, a.seed)
     print("points, MSM tolerance ...", flush=True)
     res["points"] = point_rows(msm_run, a.device, b.repeats, a.seed)
+    print("extremes ...", flush=True)
+    res["extremes"] = extreme_rows(a.out / "runs" / "twin_k5",
+                                   a.out / "runs" / f"msm{b.msm_grid}_k5", a.seed)
     print("region of interest ...", flush=True)
     res["region"] = region_rows(a.out / "region", b.region_epochs, device=a.device,
                                 seed=a.seed, repeats=b.repeats)

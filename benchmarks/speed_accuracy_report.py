@@ -67,6 +67,28 @@ def region_text(region: dict) -> str:
     return "\n".join(parts)
 
 
+EXTREME_FLAGS = [("flagged", "flagged", ".0%"), ("refused", "refused", ".0%")]
+ANSWER = [("dforce_n", "mean abs. dF [N]", ".3f"), ("disp_mm", "mean max displacement [mm]", ".3f")]
+
+
+def extremes_text(ext: dict) -> str:
+    """The extremes' tables (``benchmarks/extremes.py``): frame offsets, press sizes, depth
+    and point orderings, each with the share of calls the predictor flagged or refused."""
+    return "\n".join([
+        "Frame offsets (points and C shifted; errors against the shifted truth):\n",
+        table(ext["offset"], [("test", "shift", "s"), *ACC[::2], *EXTREME_FLAGS]),
+        "Press size (the press vector scaled about the tip's start; 0 must give exactly 0):\n",
+        table(ext["press"], [("factor", "x measured press", "g"), *ANSWER, *ACC[::2],
+                             *EXTREME_FLAGS]),
+        "Depth (the tip driven straight down from its start; the phantom is 32 mm thick):\n",
+        table(ext["depth"], [("depth_mm", "depth [mm]", "g"), *ANSWER, *EXTREME_FLAGS]),
+        "Point order (5 random orders of each example, answers put back in order):\n",
+        table(ext["ordering"], [("model", "model", "s"), ("points", "points", "d"),
+                                ("max_point_mm", "largest point change [mm]", ".2e"),
+                                ("max_force_n", "largest force change [N]", ".2e")]),
+    ])
+
+
 def pick(rows: list[dict], cost: str, budget: float, error: str, tie: float = 0.02
          ) -> dict | None:
     """The most accurate row whose ``cost`` fits ``budget``; among rows within ``tie``
@@ -119,6 +141,8 @@ def write_report(out: Path, res: dict, haptic_ms: float, visual_ms: float) -> No
           table(res["robustness"], [("model", "model", "s"), ("test", "test set", "s"), *ACC,
                                     ("force_ratio", "force error ratio", ".2f"),
                                     ("ld_ratio", "L_d ratio", ".2f")]),
+          "\n## At the extremes (twin model through `train.Predictor`)\n",
+          extremes_text(res["extremes"]) if "extremes" in res else "not measured\n",
           "\n## MSM solver tolerance\n",
           table(res["msm_tolerance"], [("solver", "solver", "s"), ("tol", "tolerance", ".0e"),
                                        ("ms", "ms / example", ".2f"),
