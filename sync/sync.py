@@ -139,7 +139,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     session = {"time_ns": mk.time_ns, "tip": points[:, -1], "depth": depth,
                "force_magnitude": magnitude, "cluster": cluster,
                "force_magnitude_unaligned": magnitude_at(IDENTITY.to_logger(t_m)),
-               "quality": quality, "points": points}
+               "quality": quality, "points": points, "force_quality": force_q}
     return SyncResult(
         name=raw.name, point_names=list(raw.phantom_markers) + [TIP], presses=records,
         clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,

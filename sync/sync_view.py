@@ -15,6 +15,8 @@ camera frames the phantom. Entities:
   ``scene/tip`` (large red ball), ``scene/shaft`` (the indenter from the tip to its markers),
   ``scene/tip_path`` (the whole path, faint, static);
 * ``quality/filled``, ``quality/missing``: points filled or missing per frame;
+  ``quality/saturated``, ``quality/over_range``: 1 where the force was read from a gauge on the
+  amplifier's rail or lies beyond the sensor's rating (extract leaves those presses out);
 * ``presses``: a TextLog line at each contact onset (press, location, repeat, peak): clicking
   one moves every view to that press.
 """
@@ -40,6 +42,7 @@ from core.recording import (
     send_series,
     time_column,
 )
+from data_schema.synced import FORCE_BITS
 from sync.gaps import FILLED, MISSING
 from sync.sync import SyncResult
 
@@ -50,7 +53,8 @@ SCATTER_MAX = 20000          # points per force-vs-depth cloud, at most
 COLORS = {"phantom": (60, 140, 230), "tip": (230, 30, 30), "cluster": (245, 140, 30),
           "filled": (255, 220, 0), "before": (150, 150, 150), "after": (40, 170, 80),
           "depth": (200, 120, 230), "path": (255, 160, 160, 90), "shaft": (200, 200, 200),
-          "missing": (150, 150, 150)}
+          "missing": (150, 150, 150), "saturated": (230, 30, 30), "over_range": (140, 0, 140)}
+FLAG_NAMES = {"saturated": "force on the amplifier's rail", "over_range": "force beyond rating"}
 RADIUS_M = 0.0015
 
 
@@ -69,7 +73,7 @@ def blueprint(centre: np.ndarray, size: float, moved_mm: float) -> rrb.Blueprint
                 plot("tip depth below the rest surface [mm]", "/depth", legend=False),
                 rrb.Spatial2DView(name="force over tip depth, before and after alignment",
                                   origin="/force_vs_depth"),
-                plot("points per frame: gap-filled, missing", "/quality"),
+                plot("per frame: points filled, missing; force on rail, over range", "/quality"),
                 row_shares=[3, 2, 4, 2],
             ),
             column_shares=[1, 1],
@@ -108,6 +112,10 @@ def log_sync(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: fl
                 "gap-filled points", COLORS["filled"])
     send_series(rec, "quality/missing", TIMELINE, t, ((q & MISSING) > 0).sum(axis=1),
                 "missing points", COLORS["missing"])
+    for bit in ("saturated", "over_range"):       # extract leaves these presses out
+        send_series(rec, f"quality/{bit}", TIMELINE, t,
+                    ((s["force_quality"] & FORCE_BITS[bit]) > 0).astype(np.int64),
+                    FLAG_NAMES[bit], COLORS[bit])
     _log_scene(rec, r, rest, scale)
     _presses(rec, r)
 

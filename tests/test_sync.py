@@ -140,7 +140,7 @@ def test_recording_shows_alignment_tip_and_gaps(sessions: dict) -> None:
     _, _, synced = sessions[0]
     ents = rrd_entities(synced.with_suffix(".rrd"))
     for e in ("/force/before", "/force/after", "/depth/tip", "/quality/filled",
-              "/quality/missing"):
+              "/quality/missing", "/quality/saturated", "/quality/over_range"):
         assert "Scalars" in ents[e] and "SeriesLines" in ents[e], e    # named, coloured
     assert "EncodedImage" in ents["/force_vs_depth"]          # a plot with axes
     for e in ("/scene/tip", "/scene/phantom", "/scene/cluster"):
