@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from core.errors import BadInput
 
@@ -443,16 +444,12 @@ class Lock:
 
 
 def rank_correlation(x: np.ndarray, y: np.ndarray) -> float:
-    """Spearman's rank correlation of two series (ties broken by order; NaN pairs left out;
-    NaN with fewer than 3 pairs or a constant series)."""
+    """Spearman's rank correlation of two series (ties take their mean rank; NaN pairs left
+    out); NaN with fewer than 3 pairs or a constant series."""
     ok = np.isfinite(x) & np.isfinite(y)
-    if ok.sum() < 3:
+    if ok.sum() < 3 or np.ptp(x[ok]) == 0 or np.ptp(y[ok]) == 0:
         return float("nan")
-    rx = np.argsort(np.argsort(x[ok], kind="stable")).astype(float)
-    ry = np.argsort(np.argsort(y[ok], kind="stable")).astype(float)
-    if rx.std() == 0 or ry.std() == 0:
-        return float("nan")
-    return float(np.corrcoef(rx, ry)[0, 1])
+    return float(spearmanr(x[ok], y[ok]).statistic)
 
 
 def rising_presses(windows: Sequence[tuple[np.ndarray, np.ndarray]], min_frames: int = 20

@@ -21,6 +21,7 @@ import numpy as np
 
 from core.errors import BadInput
 from core.series import SHARED_CLOCK, RawSession
+from core.text import count
 from sync.clock import (
     CONTENDER,
     MIN_LOCK_PRESSES,
@@ -190,9 +191,8 @@ def _figures(fit: ClockFit | None) -> str:
     """The failed lock's offset, for its refusal."""
     if fit is None:
         return ""
-    presses = f"{fit.n} press" + ("es" if fit.n != 1 else "")
     return (f"best offset {fit.offset_s * 1e3:.3f} +- {fit.offset_sd_s * 1e3:.3f} ms over "
-            f"{presses}: ")
+            f"{count(fit.n, 'press')}: ")
 
 
 def _contact_lags(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.ndarray,
