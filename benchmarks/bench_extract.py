@@ -1,8 +1,13 @@
 """Extraction of static states against the phantom twin's truth, over several seeds.
 
-For each seed: synth a default session (20 presses), ingest, sync, extract; then, against
-truth.h5:
+For each seed: synth a session (20 presses; ``--lab`` gives synth's lab knobs, e.g.
+``--lab "--markers 6x6 --marker-pitch 12 --mocap-rate 300"``), ingest, sync, extract; then,
+against truth.h5:
 
+* sync: the clock offset and the tip's RMS error (:func:`sync.sync_accuracy.sync_errors`);
+* found: the share of truth's 0.5 N states that extract found (same press, same level);
+* frame: how far the phantom frame extract built puts each marker's rest position from where
+  the twin placed it on the footprint (in-plane, mm), and the angle between their normals;
 * levels: presses whose extracted levels are exactly 0 .. floor(max true force / step_n) (the
   levels the true contact force reached; truth's own ``states`` stop at the planned peak
   ``presses/fmax``, which hand tremor can overshoot or fall short of: counted and printed);
@@ -17,13 +22,14 @@ truth.h5:
   examples) and the mean displacement over the example's points (mean +- sd over examples),
   and the force range of each set.
 
-    python benchmarks/bench_extract.py [--seeds 0 1 2 101 202] [--out-dir DIR]
+    python benchmarks/bench_extract.py [--seeds 0 1 2 101 202] [--out-dir DIR] [--lab "..."]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import tempfile
 import time
 from pathlib import Path
@@ -34,6 +40,8 @@ from click.testing import CliRunner
 
 from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
+from sync.sync_accuracy import TARGETS as SYNC_TARGETS
+from sync.sync_accuracy import sync_errors
 
 PAPER = {"states": 244, "presses": 20,
          "single": {"dF": "0.5", "max": 12.91, "mean": 2.38, "sd": 2.97},
@@ -48,10 +56,10 @@ def run(*args: object) -> None:
         raise SystemExit(f"pipeline {' '.join(map(str, args))}: {res.output}")
 
 
-def make_session(seed: int, d: Path) -> float:
-    """Synth (default size), ingest, sync and extract into ``d``; the wall time, s."""
+def make_session(seed: int, d: Path, lab: list[str]) -> float:
+    """Synth (with the ``lab`` knobs), ingest, sync and extract into ``d``; the wall time, s."""
     t0 = time.perf_counter()
-    run("synth", d / "s", "--seed", seed)
+    run("synth", d / "s", "--seed", seed, *lab)
     run("ingest", d / "s", "--out", d / "s.mcap", "--no-rrd")
     run("sync", d / "s.mcap", "--out", d / "synced.h5", "--no-rrd")
     run("extract", d / "synced.h5", "--out", d / "states.h5", "--no-rrd")
@@ -92,6 +100,9 @@ def measure(d: Path) -> dict:
         ex = {n: depth_features(pts, valid, s[f"{n}/start"][()], s[f"{n}/end"][()], force)
               for n in ("single", "multi")}
         excluded = json.loads(s.attrs["excluded"])
+        frame_mm, tilt_deg = frame_error(to_phantom, t, tuple(s.attrs["footprint_m"]))
+    found = sum(bool(np.any((seq == p) & (step == k))) for p, k in zip(t_press, t_step,
+                                                                      strict=True))
     got = {p: set(step[seq == p].tolist()) for p in top}
     right = sum(got[p] == set(range(top[p] + 1)) for p in top)
     missing = sum(len(set(range(top[p] + 1)) - got[p]) for p in top)
@@ -113,7 +124,23 @@ def measure(d: Path) -> dict:
             "extra": extra, "flagged": excluded.get("tip_missing", 0) + excluded.get("too_fast", 0),
             "truth_off": sum(truth_top[p] != top[p] for p in top),
             "ours_mm": np.array(ours) * 1e3, "raw_mm": np.array(theirs) * 1e3,
-            "force_err": np.abs(force - step_n * step), "examples": ex}
+            "force_err": np.abs(force - step_n * step), "examples": ex,
+            "found": found, "true_states": len(t_step), "frame_mm": frame_mm,
+            "tilt_deg": tilt_deg, **sync_errors(d / "synced.h5", d / "s" / "truth.h5")}
+
+
+def frame_error(to_phantom: np.ndarray, truth: h5py.File, size_m: tuple[float, float]
+                ) -> tuple[float, float]:
+    """Largest in-plane distance (mm) between each marker's rest position in our phantom
+    frame and in the twin's (its frame: the block's bottom centre, so the footprint's corner
+    is at -size / 2), and the angle (degrees) between the two frames' normals."""
+    to_lab = truth["phantom/to_lab"][()]
+    rest = truth["phantom/rest_points"][()]
+    ours = apply_transform(to_phantom, rest)[:, :2]
+    twin = apply_transform(np.linalg.inv(to_lab), rest)[:, :2] + np.array(size_m) / 2
+    normal = to_phantom[:3, :3] @ to_lab[:3, 2]
+    tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
+    return float(np.linalg.norm(ours - twin, axis=1).max() * 1e3), tilt
 
 
 def _pm(x: np.ndarray) -> str:
@@ -125,6 +152,12 @@ def report(label: str, m: dict) -> None:
     print(f"{label}: {m['states']} states from {m['presses']} presses "
           f"({m['states'] / m['presses']:.2f} per press; paper {PAPER['states']} / "
           f"{PAPER['presses']} = {PAPER['states'] / PAPER['presses']:.2f})")
+    print(f"  sync: clock offset {m['clock_offset_ms']:.3f} ms (target "
+          f"{SYNC_TARGETS['clock_offset_ms']}), tip {m['tip_rms_mm']:.3f} mm RMS (target "
+          f"{SYNC_TARGETS['tip_rms_mm']}); true states found {m['found']}/{m['true_states']} "
+          f"({m['found'] / m['true_states']:.1%}, target 90 %); frame: markers within "
+          f"{m['frame_mm']:.4f} mm of their place on the footprint, normal "
+          f"{m['tilt_deg']:.3f} deg off")
     print(f"  levels exactly those the true force reached: {m['right']}/{m['presses']} presses "
           f"(truth's states, cut at the planned peak, differ from them in {m['truth_off']}); "
           f"levels reached but absent {m['missing']} (the file's `excluded` flags "
@@ -152,6 +185,9 @@ def pooled(ms: list[dict]) -> dict:
             "right": sum(m["right"] for m in ms), "truth_off": sum(m["truth_off"] for m in ms),
             **{k: sum(m[k] for m in ms) for k in ("missing", "extra", "flagged")},
             "ours_mm": cat("ours_mm"), "raw_mm": cat("raw_mm"), "force_err": cat("force_err"),
+            **{k: max(m[k] for m in ms) for k in ("clock_offset_ms", "tip_rms_mm", "frame_mm",
+                                                  "tilt_deg")},
+            **{k: sum(m[k] for m in ms) for k in ("found", "true_states")},
             "examples": {n: {k: np.concatenate([m["examples"][n][k] for m in ms])
                              for k in ("max", "mean", "dF")} for n in ("single", "multi")}}
 
@@ -160,6 +196,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 101, 202],
                     help="twin seeds (101 and 202 were never used while the code was written)")
+    ap.add_argument("--lab", default="",
+                    help='synth options making another lab, e.g. "--markers 6x6 --size 150x80"')
     ap.add_argument("--out-dir", type=Path, default=None,
                     help="keep each seed's session under DIR/seed-N (default: a temp dir)")
     a = ap.parse_args()
@@ -169,12 +207,12 @@ def main() -> None:
         for seed in a.seeds:
             d = root / f"seed-{seed}"
             d.mkdir(parents=True, exist_ok=True)
-            wall = make_session(seed, d)
+            wall = make_session(seed, d, shlex.split(a.lab))
             ms.append(measure(d))
             report(f"seed {seed} (synth+ingest+sync+extract {wall:.1f} s)", ms[-1])
     if len(ms) > 1:
         print()
-        report(f"all {len(ms)} seeds", pooled(ms))
+        report(f"all {len(ms)} seeds (sync and frame: the worst seed)", pooled(ms))
 
 
 if __name__ == "__main__":

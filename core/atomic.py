@@ -27,8 +27,10 @@ def atomic_outputs(*paths: str | Path | None) -> Iterator[list[Path | None]]:
     """Yield temporary paths beside ``paths``; rename them all into place if the block succeeds.
 
     ``None`` entries stay ``None`` (an optional output that is switched off). On any exception
-    every temporary file is removed and no final path is touched. Naming one path twice is a
-    programming error (ValueError): the second file would silently replace the first.
+    every temporary file is removed and no final path is touched; a :class:`BadInput` about a
+    temporary file (an output refused by its own check) names the output the user asked for.
+    Naming one path twice is a programming error (ValueError): the second file would silently
+    replace the first.
     """
     finals = [None if p is None else Path(p) for p in paths]
     named = [f for f in finals if f is not None]
@@ -46,6 +48,11 @@ def atomic_outputs(*paths: str | Path | None) -> Iterator[list[Path | None]]:
         for f, t in zip(finals, tmps, strict=True):
             if f is not None:
                 os.replace(t, f)
+    except BadInput as e:
+        final = {str(t): f for t, f in zip(tmps, finals, strict=True) if t is not None}
+        if e.path in final:
+            raise BadInput(final[e.path], e.what, e.where) from None
+        raise
     finally:
         for t in tmps:
             if t is not None:

@@ -179,10 +179,12 @@ class RawSession:
     name: str
     markers: MarkerSeries                    # the trial's 3D export (phantom + indenter markers)
     force: ForceSeries                       # raw force log (gauge volts or wrench)
-    phantom_markers: list[str]               # the 25 surface markers, in session.toml order
+    phantom_markers: list[str]               # the surface markers (N >= 4), session.toml order
     indenter_markers: list[str]              # the indenter cluster (4), in session.toml order
     calibration: AtiCalibration | None = None   # required when force.kind == "gauge"
     bodies: BodySeries | None = None         # QTM 6D export of the indenter, when present
     pivot: MarkerSeries | None = None        # pivot-calibration recording, when present
     trigger_event: str | None = None         # EVENT label of mocap sync pulses, when used
+    phantom: dict | None = None              # session.toml's [phantom] layout as JSON (m);
+                                             # None: the paper's 100 mm square grid
     provenance: dict[str, Any] = field(default_factory=dict)

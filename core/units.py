@@ -3,10 +3,14 @@
 ``unit_to_si`` converts force, torque and gauge-voltage units to N, N*m and V;
 ``LENGTH_UNITS`` are the length units mocap exports state; ``TIME_UNITS`` the units a force
 log's time column may be in; ``channel_units`` turns a ``units`` setting (one unit for all
-channels, a comma-separated list or a list) into one unit per channel.
+channels, a comma-separated list or a list) into one unit per channel; ``unit_in_name`` and
+``time_unit_in_name`` read the unit a column's name states ("Force X (N)", "Tz [N-mm]",
+"time_ms").
 """
 
 from __future__ import annotations
+
+import re
 
 TIME_UNITS: dict[str, float] = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}   # ns per unit
 LENGTH_UNITS: dict[str, float] = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}          # m per unit
@@ -82,3 +86,32 @@ def channel_units(units: object, kind: str, n: int) -> list[str]:
             raise ValueError(f"unit {u!r} does not fit kind {kind!r} "
                              f"(expected {' or '.join(allowed)})")
     return given
+
+
+_BRACKETED = re.compile(r"[(\[]\s*([^()\[\]]+?)\s*[)\]]\s*$")
+_TIME_SUFFIX = re.compile(r"(?:^|[\s_\-])(s|ms|us|ns|sec|msec|usec|nsec)$", re.IGNORECASE)
+_TIME_WORDS = {"sec": "s", "msec": "ms", "usec": "us", "nsec": "ns", "µs": "us", "μs": "us"}
+
+
+def unit_in_name(name: str) -> str | None:
+    """The force, torque or voltage unit a column's name states in brackets at its end
+    ("Force X (N)", "Tz [N-mm]", "G0 (mV)"), as written; None when it states none we know."""
+    m = _BRACKETED.search(name)
+    if m is None:
+        return None
+    try:
+        unit_to_si(m.group(1))
+    except ValueError:
+        return None
+    return m.group(1)
+
+
+def time_unit_in_name(name: str) -> str | None:
+    """The time unit (s, ms, us, ns) a time column's name states: "time (ms)", "t [s]",
+    "time_ms", "Time us"; None when it states none."""
+    m = _BRACKETED.search(name) or _TIME_SUFFIX.search(name.strip())
+    if m is None:
+        return None
+    u = m.group(1).strip()
+    u = _TIME_WORDS.get(u.lower(), u)
+    return u if u in TIME_UNITS else None

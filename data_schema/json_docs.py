@@ -1,6 +1,9 @@
 """JSON documents the pipeline writes: their required keys and types, and one validator.
 
-- ``phantom.msm_params``: the spring constants ``pipeline fit-msm`` found (one object).
+- ``phantom.msm_params`` 1.1: the spring constants ``pipeline fit-msm`` found (one object),
+  and in ``msm_params`` the full MSM parameters, the grid they were fitted on included: ``n``
+  masses along x over ``size`` m, ``n_y`` along y over ``size_y`` m (1.1; a 1.0 record has
+  ``n`` and ``size`` alone: the square).
 - ``phantom.folds`` 2.0: k-fold split manifests (``pipeline split``) that other trainers read
   and users edit: the states file's name and sha256, the grouping (``sequence`` or
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
@@ -35,7 +38,7 @@ class JsonSchema:
     keys: dict[str, type | tuple[type, ...]]
 
 
-MSM_PARAMS = JsonSchema("phantom.msm_params", "1.0", {
+MSM_PARAMS = JsonSchema("phantom.msm_params", "1.1", {
     "schema": str, "schema_version": str, "k_between": float, "k_fixed": float,
     "mean_distance_m": float, "msm_params": dict, "provenance": dict,
 })

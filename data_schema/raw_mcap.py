@@ -28,7 +28,8 @@ channel). The schema record of each channel (encoding ``phantom.block``) is this
 
 Metadata records (each value is JSON text): ``session`` (schema, schema_version, name,
 phantom_markers, indenter_markers, trigger_event, and one description per stream: ``mocap``,
-``force``, ``bodies``, ``pivot`` with source, rate_hz, frames, names, units, events, meta),
+``force``, ``bodies``, ``pivot`` with source, rate_hz, frames, names, units, events, meta;
+optionally ``phantom``, session.toml's layout, :mod:`data_schema.phantom`),
 ``calibration`` (the ATI matrix etc.; required when force kind is ``gauge``) and ``provenance``
 (from ``make_provenance``: stage, code version, command, parameters, input sha256s).
 """

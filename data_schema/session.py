@@ -9,26 +9,45 @@ Example (every path relative to the folder)::
     [mocap]
     file = "trial_3d.tsv"              # QTM TSV 3D, C3D or QTM MAT (format found from content)
     bodies_file = "trial_6d.tsv"       # optional: QTM TSV 6D with the indenter rigid body
-    phantom_markers = ["P00", "P01", ...]   # the 25 surface markers
+    phantom_markers = ["P00", "P01", ...]   # the phantom's surface markers (4 or more)
     indenter_markers = ["I1", "I2", "I3", "I4"]
     indenter_body = "Indenter"         # optional: body name in the 6D file
     trigger_event = "Trigger"          # optional: EVENT label of the sync pulses in the TSV
 
     [force]
-    file = "force.csv"                 # CSV, MAT (v7 or v7.3) or Parquet; or the mocap
-                                       # system's analog channels: C3D or QTM analog TSV
-    time_column = "time"               # force logs only (analog samples are timed by the rate)
-    time_unit = "s"                    # s | ms | us | ns
+    file = "force.csv"                 # a force log: CSV/TXT in any dialect, ATI DAQ F/T or
+                                       # Net F/T CSV, QTM force-plate TSV, MAT (v7 or v7.3),
+                                       # Parquet; or the mocap system's analog channels: C3D
+                                       # or QTM analog TSV (format found from content)
+    time_column = "time"               # force logs: the time column (default: "time", else
+                                       # the layout's own time: MAT arrays/structs, Net F/T,
+                                       # QTM; analog samples are timed by the rate)
+    time_unit = "s"                    # s | ms | us | ns (default: the unit the column's
+                                       # name states, "time (ms)", "t_ms"; else s)
     kind = "gauge"                     # gauge: six volts + calibration; wrench: Fx..Tz
-    channels = ["G0", "G1", "G2", "G3", "G4", "G5"]   # analog: names or 1-based numbers
-    units = "V"                        # gauge: V; wrench: "N,N,N,N*m,N*m,N*m" style list
-                                       # (analog: the units the export states)
-    rate_hz = 1000.0                   # optional, analog only: the analog rate (checked)
+    channels = ["G0", "G1", "G2", "G3", "G4", "G5"]   # names, or 1-based numbers: analog
+                                       # channel numbers; in a log, signal numbers counted
+                                       # without the time column (unnamed MAT/CSV signals)
+    units = "V"                        # gauge: V; wrench: "N,N,N,N*m,N*m,N*m" style list;
+                                       # default: what the file states (column names, Net F/T
+                                       # preamble, QTM, C3D ANALOG:UNITS), else V / N and N*m
+    rate_hz = 1000.0                   # optional: analog: the rate (checked); a log without a
+                                       # time column (ATI DAQ F/T without Frequency): its rate
+    variable = "force_log.signals.values"   # optional, MAT: the variable or struct field
+                                       # where the file holds several logs
+    delimiter = ";"                    # optional, text: , ; tab | space, where sniffing
+    decimal = ","                      # cannot decide; decimal mark . or ,
+    scale = [500, 500, 1000, 40, 40, 20]   # optional, per channel (or one for all): volts
+    offset = [0.002, 0, 0, 0, 0, 0]    # into `units`: (value - offset) x scale (N/V, N m/V);
+                                       # a value in mV is taken to V first
     calibration = "FT12345.cal"        # ATI .cal XML; required for kind = "gauge"
     trigger_column = "trigger"         # optional sync/trigger channel (name or number)
 
     [pivot]
     file = "pivot_3d.tsv"              # optional: pivot recording for the tip offset
+
+    [phantom]                          # optional: the footprint and how the markers lie on
+    size_mm = [100.0, 100.0]           # it (data_schema/phantom.py says every key)
 """
 
 from __future__ import annotations
@@ -39,8 +58,12 @@ from pathlib import Path
 
 from core.errors import BadInput
 from core.units import TIME_UNITS, channel_units
+from data_schema.phantom import PhantomLayout, read_layout
 
 SCHEMA = "phantom.session"
+# force.delimiter's spellings -> the character (" ": any run of spaces or tabs)
+DELIMITERS = {",": ",", ";": ";", "\t": "\t", "tab": "\t", "|": "|", " ": " ",
+              "space": " ", "whitespace": " "}
 VERSION = "1.0"
 
 
@@ -64,7 +87,13 @@ class ForceConfig:
     units: list[str]
     calibration: Path | None = None
     trigger_column: str | int | None = None
-    rate_hz: float | None = None   # the analog rate session.toml states (analog sources)
+    rate_hz: float | None = None   # analog: the rate (checked); a log without time: its rate
+    variable: str | None = None    # MAT: the variable or struct path ("x.signals.values")
+    delimiter: str | None = None   # text: the delimiter where sniffing cannot decide
+    decimal: str | None = None     # text: the decimal mark ("." or ",")
+    scale: list[float] | None = None    # per channel: (value - offset) x scale, in `units`
+    offset: list[float] | None = None
+    stated: frozenset[str] = frozenset()   # the [force] keys session.toml states
 
 
 @dataclass(frozen=True)
@@ -74,6 +103,7 @@ class SessionConfig:
     mocap: MocapConfig
     force: ForceConfig
     pivot_file: Path | None = None
+    phantom: PhantomLayout = field(default_factory=PhantomLayout)
     raw: dict = field(default_factory=dict)
 
 
@@ -98,7 +128,9 @@ def read_session(folder: str | Path) -> SessionConfig:
     pivot = _table(path, raw, "pivot", required=False)
     return SessionConfig(
         folder=folder, name=_str(path, raw, "name", folder.name), mocap=mocap, force=force,
-        pivot_file=_file(path, folder, pivot, "file", "pivot") if pivot else None, raw=raw,
+        pivot_file=_file(path, folder, pivot, "file", "pivot") if pivot else None,
+        phantom=read_layout(path, _table(path, raw, "phantom", required=False),
+                            mocap.phantom_markers), raw=raw,
     )
 
 
@@ -142,7 +174,40 @@ def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
         trigger_column=None if t.get("trigger_column") is None else
         _channel(path, t["trigger_column"], "force.trigger_column"),
         rate_hz=_rate(path, t.get("rate_hz")),
+        variable=_str(path, t, "variable", table="force"),
+        delimiter=_choice(path, t, "delimiter", DELIMITERS),
+        decimal=_choice(path, t, "decimal", (".", ",")),
+        scale=_numbers6(path, t, "scale", len(channels)),
+        offset=_numbers6(path, t, "offset", len(channels)),
+        stated=frozenset(t),
     )
+
+
+def _choice(path: Path, t: dict, key: str, allowed: object) -> str | None:
+    """force.<key>: absent, or one of ``allowed``."""
+    v = t.get(key)
+    if v is None:
+        return None
+    if not isinstance(v, str) or v not in allowed:
+        raise BadInput(path, f"force.{key} must be one of "
+                             f"{', '.join(repr(a) for a in allowed)}, got {v!r}")
+    return DELIMITERS.get(v, v) if key == "delimiter" else v
+
+
+def _numbers6(path: Path, t: dict, key: str, n: int) -> list[float] | None:
+    """force.scale / force.offset: absent, one number for every channel, or one per channel."""
+    v = t.get(key)
+    if v is None:
+        return None
+    items = v if isinstance(v, list) else [v]
+    if len(items) not in (1, n) or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) and abs(x) < float("inf")
+            for x in items):
+        raise BadInput(path, f"force.{key} must be a number or {n} numbers (one per "
+                             f"channel), got {v!r}")
+    if key == "scale" and any(x == 0 for x in items):
+        raise BadInput(path, "force.scale must not be 0")
+    return [float(x) for x in items] * (n if len(items) == 1 else 1)
 
 
 def _channels(path: Path, v: object, name: str) -> list[str | int]:

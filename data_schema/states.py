@@ -1,12 +1,15 @@
-"""``states.h5`` (``phantom.states`` 2.0): static states and the examples built from them.
+"""``states.h5`` (``phantom.states`` 2.1): static states and the examples built from them.
 
 One layout serves extracted lab states and MSM simulations, so our trainer and anybody else's
 read both alike. Everything is in the *phantom frame*: the rest surface at z = 0, +z out of the
-phantom, its footprint on [0, L] x [0, W] m (the MSM's grid on [0, 0.1]^2), so a location means
-the same place in MSM and lab data.
+phantom, its footprint on [0, L] x [0, W] m (root attribute ``footprint_m`` = [L, W]; the MSM's
+grid covers the footprint it was made for, the paper's [0, 0.1]^2 by default), so a location
+means the same place in MSM and lab data.
 
-- ``states/points`` (S, N, 3): the surface points of each static state (lab: the 25 markers in
-  session.toml order, then the indenter tip; MSM: the 32 x 32 masses). ``states/valid`` (S, N)
+- ``states/points`` (S, N, 3): the surface points of each static state (lab: the phantom's
+  markers in session.toml order, any number, then the indenter tip; MSM: its masses, or the
+  lab's markers and the loaded mass with ``--layout``). Root attribute ``point_names`` (JSON
+  list, N names, the tip's "tip") names them where they are markers. ``states/valid`` (S, N)
   is False where a lab marker was missing at that instant (its row of ``points`` is NaN).
 - ``states/step`` is the level index t: the state's force level is ``t * step_n`` (root
   attribute, N: the spacing the file was made with, 0.5 N by default; a reader computes a
@@ -24,7 +27,9 @@ the same place in MSM and lab data.
   condition ``C = [tip[start], tip[end]]``, its change of force ``force[end] - force[start]``.
 
 Version 2.0 added the frame, ``valid``, ``session``, ``mass``, ``speed``, the transforms and a
-validator of meaning (:func:`validate_states`). 1.0 files are refused: regenerate them.
+validator of meaning (:func:`validate_states`); 2.1 the optional root attributes
+``point_names`` and ``footprint_m`` (a 2.0 file is the paper's 100 mm square). 1.0 files are
+refused: regenerate them.
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ PLAUSIBLE_LAB_M = 50.0     # no lab frame's origin lies this far from the phanto
 
 STATES = H5Schema(
     name="phantom.states",
-    version="2.0",
+    version="2.1",
     root_attrs=("provenance", "source", "units_length", "units_force", "step_n", "frame",
                 "session_names"),
     doc=__doc__ or "",
@@ -60,7 +65,7 @@ STATES = H5Schema(
     datasets=(
         Dataset("states/points", "f4", ("S", "N", 3), "m", finite="states/valid",
                 limit=PLAUSIBLE_M,
-                doc="surface points, phantom frame (lab: 25 markers + tip; NaN where invalid)"),
+                doc="surface points, phantom frame (lab: the markers + tip; NaN where invalid)"),
         Dataset("states/valid", "b1", ("S", "N"), doc="False where a lab marker was missing"),
         Dataset("states/tip", "f4", ("S", 3), "m", finite=True, limit=PLAUSIBLE_M,
                 doc="indenter tip (lab) or loaded mass (MSM), phantom frame"),
@@ -127,16 +132,46 @@ def _check_attrs(path: str | Path, f: h5py.File) -> None:
             and np.isfinite(step_n) and step_n > 0):
         raise BadInput(path, f"root attribute step_n is {step_n!r}, expected a positive number "
                              "of newtons")
+    if "point_names" in f.attrs:
+        names = _json_list(path, f.attrs["point_names"], "point_names")
+        points = f["states/points"].shape[1]
+        if len(names) != points or not all(isinstance(n, str) and n for n in names):
+            raise BadInput(path, f"root attribute point_names has {len(names)} entries for "
+                                 f"{points} points (expected one name each)")
+    if "footprint_m" in f.attrs:
+        size = np.asarray(f.attrs["footprint_m"])
+        if not (size.shape == (2,) and np.issubdtype(size.dtype, np.number)
+                and np.isfinite(size).all() and (size > 0).all() and (size < PLAUSIBLE_M).all()):
+            raise BadInput(path, f"root attribute footprint_m is {size!r}, expected [L, W] in m")
+
+
+def point_names(path: str | Path) -> list[str] | None:
+    """The states file's point names (None: a file that names none)."""
+    with h5_reading(path), h5py.File(path, "r") as f:
+        v = f.attrs.get("point_names")
+        return None if v is None else json.loads(attr_text(v))
+
+
+def footprint(path: str | Path) -> tuple[float, float] | None:
+    """The footprint [L, W] (m) the file's frame uses (None: a 2.0 file, the paper's square)."""
+    with h5_reading(path), h5py.File(path, "r") as f:
+        v = f.attrs.get("footprint_m")
+        return None if v is None else (float(v[0]), float(v[1]))
 
 
 def _session_names(path: str | Path, value: object) -> list:
     """The ``session_names`` attribute: a JSON list of names."""
+    return _json_list(path, value, "session_names")
+
+
+def _json_list(path: str | Path, value: object, name: str) -> list:
+    """A root attribute that holds a JSON list of names."""
     try:
         names = json.loads(attr_text(value))
     except (TypeError, ValueError):
         names = None
     if not isinstance(names, list):
-        raise BadInput(path, "root attribute session_names is not a JSON list of names")
+        raise BadInput(path, f"root attribute {name} is not a JSON list of names")
     return names
 
 

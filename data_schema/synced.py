@@ -2,18 +2,19 @@
 
 Each press ``presses/<NNN>`` (NNN = 000, 001, ... in time order) holds the mocap frames from a
 margin before contact onset to a margin after release, so the unloaded start state is there:
-``time_ns`` (mocap clock), ``points`` = the 25 phantom markers in session.toml order and the
-indenter tip as the 26th point (lab frame), the force and torque in the force sensor's own
-frame, as the ATI calibration matrix gives them, resampled onto the frame times (no rotation is
-applied: that frame is not related to the axes of ``calibration/cluster_body``, which are the
-principal axes of the marker cluster), the force magnitude, the tip's depth into the surface,
-and quality bits per point (``QUALITY_BITS``) and per force sample (``FORCE_BITS``). Group
-attributes give the location id, repeat number, the onset/peak/release frame indices within
-the press (release is one past the last loaded frame), ``points_missing_throughout``
-(indices of points with no sample from onset to release: never filled in), and the re-tare:
-``rest_force_n`` and ``rest_torque_nm`` (2, 3), the sensor's rest reading (after the tare at
-the start of the log) next to the press at onset and at release; the straight line between
-them was subtracted from the press's force and torque (bias creep, tool weight).
+``time_ns`` (mocap clock), ``points`` = the N phantom markers in session.toml order and the
+indenter tip as the last point (lab frame; ``point_names`` names them, N >= 4), the force and
+torque in the force sensor's own frame, as the ATI calibration matrix gives them, resampled
+onto the frame times (no rotation is applied: that frame is not related to the axes of
+``calibration/cluster_body``, which are the principal axes of the marker cluster), the force
+magnitude, the tip's depth into the surface, and quality bits per point (``QUALITY_BITS``) and
+per force sample (``FORCE_BITS``). Group attributes give the location id, repeat number, the
+onset/peak/release frame indices within the press (release is one past the last loaded frame),
+``points_missing_throughout`` (indices of points with no sample from onset to release: never
+filled in), and the re-tare: ``rest_force_n`` and ``rest_torque_nm`` (2, 3), the sensor's rest
+reading (after the tare at the start of the log) next to the press at onset and at release; the
+straight line between them was subtracted from the press's force and torque (bias creep, tool
+weight).
 
 The ``presses`` group's attribute ``cut_off`` counts presses left out because the end of the
 mocap recording or of the force log cut them off (onset or release unknown).
@@ -32,8 +33,12 @@ the sensor's rated load on some axis, from the calibration), ``saturated`` (made
 voltages on the amplifier's rail: the force there is clipped, not measured). Extract leaves
 out every press with ``over_range`` or ``saturated`` between onset and release.
 
+Root attribute ``phantom`` (JSON, from session.toml's ``[phantom]`` table) says how extract
+builds the phantom frame: the footprint's size, its in-plane +x axis and anchor.
+
 Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``; 1.2 the
-``saturated`` force bit (a 1.1 file simply never sets it).
+``saturated`` force bit (a 1.1 file simply never sets it); 1.3 any number of phantom markers
+and the ``phantom`` attribute (a 1.2 file has 25 markers and the paper's 100 mm square).
 """
 
 from pathlib import Path
@@ -43,6 +48,7 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import Dataset, H5Schema, h5_reading, validate_h5
+from data_schema.phantom import MIN_MARKERS
 
 QUALITY_BITS = {"filled": 1, "missing": 2, "poor_fit": 4}
 FORCE_BITS = {"outside_log": 1, "over_range": 2, "saturated": 4}
@@ -59,7 +65,7 @@ TORQUE_NM = 100.0
 
 SYNCED = H5Schema(
     name="phantom.synced",
-    version="1.2",
+    version="1.3",
     root_attrs=("provenance", "source", "calibration", "quality_bits", "force_bits",
                 "units_length", "units_force", "units_time", "rate_hz"),
     doc=__doc__ or "",
@@ -67,7 +73,7 @@ SYNCED = H5Schema(
     group_attrs={"presses": ("cut_off",), "presses/*": PRESS_ATTRS,
                  "calibration": CLOCK_ATTRS + ("tip_rms_m", "tip_rotation_spread_deg")},
     datasets=(
-        Dataset("point_names", "str", (26,), doc="25 phantom markers, then 'tip'"),
+        Dataset("point_names", "str", ("P",), doc="the N phantom markers, then 'tip'"),
         Dataset("calibration/cluster_body", "f8", ("M", 3), "m", finite=True, limit=BODY_M,
                 doc="indenter markers in the body frame (defines the frame)"),
         Dataset("calibration/tip_body", "f8", (3,), "m", finite=True, limit=BODY_M,
@@ -81,7 +87,7 @@ SYNCED = H5Schema(
         Dataset("locations/centre", "f8", ("L", 3), "m", finite=True, limit=LAB_M,
                 doc="mean tip contact point of each location"),
         Dataset("presses/*/time_ns", "i8", ("T",), "ns", doc="mocap clock"),
-        Dataset("presses/*/points", "f8", ("T", 26, 3), "m", limit=LAB_M,
+        Dataset("presses/*/points", "f8", ("T", "P", 3), "m", limit=LAB_M,
                 doc="NaN where missing"),
         Dataset("presses/*/force", "f8", ("T", 3), "N", finite=True, limit=FORCE_N,
                 doc="force sensor frame (not the cluster_body axes)"),
@@ -90,7 +96,7 @@ SYNCED = H5Schema(
         Dataset("presses/*/force_magnitude", "f8", ("T",), "N", finite=True, limit=FORCE_N),
         Dataset("presses/*/depth", "f8", ("T",), "m", limit=LAB_M,
                 doc="tip below the rest plane along its normal (positive into the phantom)"),
-        Dataset("presses/*/quality", "u1", ("T", 26), doc="bitmask, see QUALITY_BITS"),
+        Dataset("presses/*/quality", "u1", ("T", "P"), doc="bitmask, see QUALITY_BITS"),
         Dataset("presses/*/force_quality", "u1", ("T",), doc="bitmask, see FORCE_BITS"),
     ),
 )
@@ -112,7 +118,14 @@ def validate_synced(path: str | Path) -> None:
         if not len(f["presses"]):
             raise BadInput(path, "the synced file holds no press")
         plane = (f["calibration/surface_point"][()], normal)
+        points = len(f["point_names"])
+        if points < MIN_MARKERS + 1:
+            raise BadInput(path, f"point_names has {points} names: a phantom needs at least "
+                                 f"{MIN_MARKERS} markers, then the tip")
         for key, press in f["presses"].items():
+            if press["points"].shape[1] != points:
+                raise BadInput(path, f"presses/{key}/points holds {press['points'].shape[1]} "
+                                     f"points, but point_names names {points}")
             _check_press(path, f"presses/{key}", press, len(f["locations/centre"]))
             _check_depth(path, f"presses/{key}", press, plane)
 
@@ -135,7 +148,7 @@ def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int)
 
 def _check_depth(path: str | Path, name: str, press: h5py.Group,
                  plane: tuple[np.ndarray, np.ndarray]) -> None:
-    """``depth`` is the tip's (the 26th point's) depth below the rest plane, to 1 um."""
+    """``depth`` is the tip's (the last point's) depth below the rest plane, to 1 um."""
     point, normal = plane
     expect = (point - press["points"][:, -1]) @ normal
     depth = press["depth"][()]

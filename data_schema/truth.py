@@ -7,14 +7,18 @@ Clock convention (the one ``sync.clock`` uses): a true event at mocap time ``t_m
 stamped by the force logger at ``t_f = clock/offset_s + (1 + clock/drift_ppm * 1e-6) * t_m``,
 ``t_f`` being the force file's time column (s).
 
-Points are the 25 phantom markers (session.toml order) and the indenter tip as the 26th. The
-sensor frame has the indenter body frame's axes (``indenter/markers`` define that frame: origin
-at their centroid, z along the shaft from the tip to the handle); ``force/sensor`` is the force
-the phantom exerts on the tip, seen by the sensor (positive z when pressing), without the
-tool's weight; ``force/lab`` is the force the indenter exerts on the phantom.
+Points are the N phantom markers (session.toml order, ``point_names``) and the indenter tip as
+the last: N1 = N + 1 points (26 for the default twin's 25 markers); ``mocap/visible`` has the
+N phantom markers, then the 4 indenter markers (N4 = N + 4). The sensor frame has the indenter
+body frame's axes (``indenter/markers`` define that frame: origin at their centroid, z along
+the shaft from the tip to the handle); ``force/sensor`` is the force the phantom exerts on the
+tip, seen by the sensor (positive z when pressing), without the tool's weight; ``force/lab``
+is the force the indenter exerts on the phantom.
 
 ``states`` are the true static states at every 0.5 N of each press's loading phase (step 0 is
 the untouched surface at contact), exactly as the phantom model solved them.
+
+Version 1.1: any number of phantom markers (1.0 always had 25).
 """
 
 from data_schema.hdf5 import Dataset, H5Schema
@@ -25,19 +29,19 @@ CLOCK_DOC = ("a true event at mocap time t_m (s) is stamped by the force logger 
 
 TRUTH = H5Schema(
     name="phantom.truth",
-    version="1.0",
+    version="1.1",
     root_attrs=("provenance", "seed", "rate_hz", "logger_rate_hz", "clock_convention",
                 "units_length", "units_force", "units_time", "noise_model"),
     doc=__doc__ or "",
     datasets=(
-        Dataset("point_names", "str", (26,), doc="25 phantom markers, then 'tip'"),
+        Dataset("point_names", "str", ("N1",), doc="the N phantom markers, then 'tip'"),
         Dataset("mocap/time_s", "f8", ("T",), "s", doc="mocap frame times"),
-        Dataset("mocap/points", "f8", ("T", 26, 3), "m", doc="noise-free markers + tip"),
+        Dataset("mocap/points", "f8", ("T", "N1", 3), "m", doc="noise-free markers + tip"),
         Dataset("mocap/cluster", "f8", ("T", 4, 3), "m", doc="noise-free indenter markers"),
         Dataset("mocap/body_origin", "f8", ("T", 3), "m", doc="indenter body-frame origin"),
         Dataset("mocap/body_rotation", "f8", ("T", 3, 3), "1", doc="body -> lab"),
-        Dataset("mocap/visible", "b1", ("T", 29), "1",
-                doc="marker samples present in the 3D export (25 phantom, 4 indenter)"),
+        Dataset("mocap/visible", "b1", ("T", "N4"), "1",
+                doc="marker samples present in the 3D export (N phantom, then 4 indenter)"),
         Dataset("mocap/press", "i4", ("T",), "1", doc="press in contact, -1 when none"),
         Dataset("force/magnitude", "f8", ("T",), "N", doc="contact force at mocap frames"),
         Dataset("force/lab", "f8", ("T", 3), "N", doc="force on the phantom, lab frame"),
@@ -68,7 +72,7 @@ TRUTH = H5Schema(
         Dataset("indenter/marker_names", "str", (4,)),
         Dataset("phantom/to_lab", "f8", (4, 4), "m",
                 doc="homogeneous transform phantom frame (bottom centre, z up) -> lab"),
-        Dataset("phantom/rest_points", "f8", (25, 3), "m", doc="markers untouched, lab"),
+        Dataset("phantom/rest_points", "f8", ("N", 3), "m", doc="markers untouched, lab"),
         Dataset("locations/contact", "f8", ("C", 3), "m", doc="untouched contact points"),
         Dataset("locations/node", "i4", ("C", 2), "1", doc="top lattice node (i, j)"),
         Dataset("presses/location", "i4", ("P",), "1"),
@@ -80,7 +84,7 @@ TRUTH = H5Schema(
         Dataset("presses/end_frame", "i8", ("P",), "1", doc="last frame in contact"),
         Dataset("presses/times_s", "f8", ("P", 8), "s",
                 doc="move, hover, approach, contact, peak, hold end, released, retracted"),
-        Dataset("states/points", "f8", ("S", 26, 3), "m", doc="static markers + tip"),
+        Dataset("states/points", "f8", ("S", "N1", 3), "m", doc="static markers + tip"),
         Dataset("states/force", "f8", ("S",), "N", doc="0.5 N * step"),
         Dataset("states/force_vector", "f8", ("S", 3), "N", doc="on the phantom, lab"),
         Dataset("states/step", "i4", ("S",), "1"),

@@ -47,6 +47,7 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
     says the same id is the same place in every session).
     """
     check_step(sessions, params.step_n)
+    check_same_phantom(sessions)
     cols: dict[str, list] = {k: [] for k in ("points", "valid", "force", "step", "speed",
                                             "sequence", "location", "session")}
     names, transforms = [], []
@@ -90,6 +91,24 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
     arrays.update({"single/start": single[:, 0], "single/end": single[:, 1],
                    "multi/start": multi[:, 0], "multi/end": multi[:, 1]})
     return Extracted(arrays, names, excluded, views, untrusted)
+
+
+def check_same_phantom(sessions: Sequence[Session]) -> None:
+    """One states file holds one phantom: every session with the same markers in the same
+    order and the same footprint (a point is a marker, the frame the footprint's)."""
+    first = sessions[0]
+    for s in sessions[1:]:
+        if s.point_names != first.point_names:
+            raise BadInput(s.path, f"its {len(s.point_names) - 1} phantom markers are not those "
+                                   f"of {first.path.name} ({len(first.point_names) - 1}, in the "
+                                   "same order): one states file holds one phantom")
+        if not np.allclose(s.layout.size_m, first.layout.size_m, rtol=0, atol=1e-9):
+            raise BadInput(s.path, f"its footprint {_mm(s.layout.size_m)} is not that of "
+                                   f"{first.path.name} ({_mm(first.layout.size_m)})")
+
+
+def _mm(size_m: tuple[float, float]) -> str:
+    return "x".join(f"{v * 1e3:g}" for v in size_m) + " mm"
 
 
 RESOLUTION_N = 1 / 320     # an ATI Nano17 SI-12-0.12's force resolution (N)

@@ -14,8 +14,9 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from core.atomic import atomic_outputs
-from core.protocol import FOOTPRINT_M
 from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES, validate_states
@@ -27,24 +28,28 @@ from extract.synced_presses import read_synced
 
 def run_extract(synced: Sequence[str | Path], out: str | Path, rrd: str | Path | None = None,
                 params: ExtractParams | None = None, seed: int = 0,
-                size_m: tuple[float, float] = FOOTPRINT_M, shared_locations: bool = False
+                size_m: tuple[float, float] | None = None, shared_locations: bool = False
                 ) -> Extracted:
-    """Extract the states of ``synced`` into ``out`` (and the recording ``rrd``)."""
+    """Extract the states of ``synced`` into ``out`` (and the recording ``rrd``); ``size_m``
+    overrides the footprint the synced files' layout states."""
     params = params or ExtractParams()
     sessions = [read_synced(path, size_m) for path in synced]
     ex = extract(sessions, params, seed, shared_locations)
-    prov = make_provenance("extract", {**asdict(params), "seed": seed}, synced,
-                           STATES.name, STATES.version)
+    first = sessions[0]
+    prov = make_provenance("extract", {**asdict(params), "seed": seed, "size_m": size_m},
+                           synced, STATES.name, STATES.version)
+    attrs = {**_attrs(ex, params, prov), "point_names": json.dumps(first.point_names),
+             "footprint_m": np.asarray(first.layout.size_m, dtype=float)}
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
-        write_h5(tmp_out, STATES, ex.arrays, _attrs(ex, params, prov))
+        write_h5(tmp_out, STATES, ex.arrays, attrs)
         validate_states(tmp_out)
         if tmp_rrd is not None:
-            write_extract_recording(tmp_rrd, ex.sessions, size_m)
+            write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m)
     return ex
 
 
 def _attrs(ex: Extracted, params: ExtractParams, provenance: dict) -> dict[str, Any]:
-    """The root attributes of a lab states file."""
+    """The root attributes every lab states file has."""
     return {"provenance": json.dumps(provenance), "source": "lab", "units_length": "m",
             "units_force": "N", "step_n": params.step_n, "frame": "phantom",
             "session_names": json.dumps(ex.session_names),

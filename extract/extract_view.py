@@ -3,7 +3,7 @@ they look like in the phantom frame?
 
 Timeline ``session_time`` (the mocap clock; several sessions follow one another, 1 s apart).
 Entities: ``force/measured`` the force magnitude of every press (N), ``force/levels`` a point
-at each extracted state (at the instant it was read, at its force); ``phantom/state`` the 25
+at each extracted state (at the instant it was read, at its force); ``phantom/state`` the
 markers of the latest state (coloured by depth below the rest surface, mm), ``phantom/tip`` the
 tip, ``phantom/rest`` the press's untouched surface (grey), ``phantom/footprint`` the phantom's
 outline at z = 0; ``presses`` a text line per press.

@@ -2,56 +2,105 @@
 
 Lab and MSM states share one frame (rest surface at z = 0, +z out of the phantom, footprint
 on [0, L] x [0, W]) so that a location means the same place in both. The rest plane itself
-is sync's (:func:`sync.surface.rest_plane`, stored in the synced file's calibration).
+is sync's (:func:`sync.surface.rest_plane`, stored in the synced file's calibration); the
+in-plane axis and the origin come from the phantom's layout (session.toml's ``[phantom]``,
+:mod:`data_schema.phantom`, stored in the synced file's ``phantom`` attribute).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from core.errors import BadInput
+from data_schema.phantom import PhantomLayout
+
+ROW_OFF_M = 2e-3         # a grid's marker lies at most this far off its row's line
+ROW_ANGLE_DEG = 10.0     # and every row runs within this of their mean direction
 
 
-def grid_x_axis(rest: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """In-plane unit x axis of the marker grid: along each row, from its first to its last
-    marker, averaged over rows (markers listed row-major, rows along +x, as in session.toml).
+def x_axis(rest: np.ndarray, names: list[str], normal: np.ndarray,
+           layout: PhantomLayout) -> np.ndarray:
+    """In-plane unit x axis: from ``layout.x_axis``'s first marker to its second, or along the
+    rows of the marker grid (``layout.rows`` rows, or a square grid), from each row's first to
+    its last marker, averaged over rows (markers listed row-major, rows along +x).
 
-    A layout that is not a square grid takes the first to the last marker. Fixed by the
-    markers' order, never by an SVD's sign.
+    Fixed by the markers' names and order, never by an SVD's sign.
     """
-    m = len(rest)
-    g = int(round(np.sqrt(m)))
-    if g * g == m and g > 1:
-        grid = rest.reshape(g, g, 3)
-        along = grid[:, -1] - grid[:, 0]
+    if layout.x_axis is not None:
+        a, b = (names.index(m) for m in layout.x_axis)
+        along, what = (rest[b] - rest[a])[None], f"x_axis {layout.x_axis[0]} -> {layout.x_axis[1]}"
     else:
-        along = (rest[-1] - rest[0])[None]
+        rows = layout.rows or math.isqrt(len(rest))
+        if rows < 2 or len(rest) % rows or (layout.rows is None and rows * rows != len(rest)):
+            raise BadInput(None, f"{len(rest)} phantom markers form no square grid and the "
+                                 "layout names no x_axis or rows: no in-plane axis")
+        grid = rest.reshape(rows, -1, 3)
+        _check_rows(grid, normal)
+        along, what = grid[:, -1] - grid[:, 0], "the marker grid's rows"
     along = along[np.isfinite(along).all(axis=1)]
     if along.size == 0:
-        raise BadInput(None, "no row of the marker grid was seen whole: no in-plane axis")
+        raise BadInput(None, f"{what}: never seen at rest, no in-plane axis")
     x = along.mean(axis=0)
     x = x - (x @ normal) * normal
     norm = np.linalg.norm(x)
     if norm < 1e-9:
-        raise BadInput(None, "the marker grid's rows run along the surface normal")
+        raise BadInput(None, f"{what} run along the surface normal: no in-plane axis")
     return x / norm
 
 
-def to_phantom_frame(rest: np.ndarray, surface_point: np.ndarray, normal: np.ndarray,
-                     size_m: tuple[float, float]) -> np.ndarray:
+def _check_rows(grid: np.ndarray, normal: np.ndarray) -> None:
+    """Refuse markers that are not the rows the layout says: each row's markers on one line
+    (within :data:`ROW_OFF_M`) and every row along one direction (within
+    :data:`ROW_ANGLE_DEG`); a 4 x 9 grid read as 6 x 6, or a scattered layout read as a grid,
+    would turn the whole frame."""
+    dirs = []
+    for r, row in enumerate(grid):
+        row = row[np.isfinite(row).all(axis=1)]
+        if len(row) < 2:
+            continue
+        d = row[-1] - row[0]
+        d = d - (d @ normal) * normal
+        d /= max(np.linalg.norm(d), 1e-12)
+        rel = row - row[0]
+        off = np.linalg.norm(rel - np.outer(rel @ d, d) - np.outer(rel @ normal, normal), axis=1)
+        if off.max() > ROW_OFF_M:
+            raise BadInput(None, f"row {r} of the marker grid ({len(grid)} rows, listed "
+                                 f"row-major) is not a line: a marker lies {off.max() * 1e3:.1f} "
+                                 "mm off it; say the layout in session.toml ([phantom] rows = R, "
+                                 "or x_axis = two markers)")
+        dirs.append(d)
+    if len(dirs) > 1:
+        mean = np.mean(dirs, axis=0)
+        mean /= np.linalg.norm(mean)
+        worst = float(np.degrees(np.arccos(np.clip(min(d @ mean for d in dirs), -1, 1))))
+        if worst > ROW_ANGLE_DEG:
+            raise BadInput(None, f"the marker grid's rows run {worst:.0f} degrees apart: not the "
+                                 f"{len(grid)} rows of a grid; say the layout in session.toml "
+                                 "([phantom] rows = R, or x_axis = two markers)")
+
+
+def to_phantom_frame(rest: np.ndarray, names: list[str], surface_point: np.ndarray,
+                     normal: np.ndarray, layout: PhantomLayout) -> np.ndarray:
     """4x4 transform lab -> phantom frame: the rest plane at z = 0 with +z along ``normal``
-    (out of the phantom), x along the marker rows, and the marker grid's centre at the
-    footprint's centre (size_m / 2): the markers are laid out centred on the phantom."""
+    (out of the phantom), x from the layout (:func:`x_axis`), and the origin where the layout
+    puts it: its anchor marker at ``anchor_m``, or the markers' centroid at the footprint's
+    centre (markers laid out centred on the phantom)."""
     z = normal / np.linalg.norm(normal)
-    x = grid_x_axis(rest, z)
-    y = np.cross(z, x)
-    rot = np.stack([x, y, z])                                      # rows: lab -> phantom
-    seen = rest[np.isfinite(rest).all(axis=1)]
-    centre = seen.mean(axis=0)
+    x = x_axis(rest, names, z, layout)
+    rot = np.stack([x, np.cross(z, x), z])                         # rows: lab -> phantom
+    if layout.anchor is not None:
+        centre, at = rest[names.index(layout.anchor)], layout.anchor_m
+        if not np.isfinite(centre).all():
+            raise BadInput(None, f"anchor marker {layout.anchor} is never seen at rest")
+    else:
+        centre = rest[np.isfinite(rest).all(axis=1)].mean(axis=0)
+        at = (layout.size_m[0] / 2, layout.size_m[1] / 2)
     centre = centre - ((centre - surface_point) @ z) * z           # onto the rest plane
     out = np.eye(4)
     out[:3, :3] = rot
-    out[:3, 3] = np.array([size_m[0] / 2, size_m[1] / 2, 0.0]) - rot @ centre
+    out[:3, 3] = np.array([at[0], at[1], 0.0]) - rot @ centre
     return out
 
 

@@ -1,14 +1,15 @@
 """A synced file's presses, read for extraction and moved into the phantom frame.
 
-The rest plane is sync's (``calibration/surface_point``, ``surface_normal``); the in-plane axes
-come from the marker grid and the origin from its centre (:mod:`extract.phantom_frame`).
+The rest plane is sync's (``calibration/surface_point``, ``surface_normal``); the in-plane axis
+and the origin come from the phantom's layout, the file's ``phantom`` attribute
+(:mod:`extract.phantom_frame`); a file from before layouts has the paper's 100 mm square grid.
 """
 
 from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -16,6 +17,7 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text, h5_reading, read_schema_id
+from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS, SYNCED, validate_synced
 from extract.phantom_frame import apply_transform, to_phantom_frame
 from extract.static_states import Press
@@ -32,12 +34,14 @@ class Session:
     transform: np.ndarray                  # (4, 4) lab -> phantom
     presses: list[Press]
     locations: list[int]                   # per press, the file's own location id
-    n_points: int
+    point_names: list[str]                 # the phantom markers, then "tip"
+    layout: PhantomLayout                  # the footprint and what fixed the frame
     noise_n: float = 0.0                   # sd of the force at rest sync measured (N)
 
 
-def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
-    """A synced file's presses in the phantom frame."""
+def read_synced(path: str | Path, size_m: tuple[float, float] | None = None) -> Session:
+    """A synced file's presses in the phantom frame; ``size_m`` overrides the footprint its
+    layout states."""
     sid = read_schema_id(path)
     if sid is None or sid[0] != SYNCED.name:
         raise BadInput(path, f"not a synced file (schema {sid[0] if sid else 'none'!r})")
@@ -50,14 +54,25 @@ def read_synced(path: str | Path, size_m: tuple[float, float]) -> Session:
         keys = sorted(f["presses"].keys())
         raw = [_press(f["presses"][k]) for k in keys]
         locations = [int(f["presses"][k].attrs["location"]) for k in keys]
-        rest = _rest_markers(raw)
-        transform = to_phantom_frame(rest, cal["surface_point"][()], cal["surface_normal"][()],
-                                     size_m)
+        names = [attr_text(v) for v in f["point_names"][()]]
+        layout = _layout(f.attrs.get("phantom"), size_m)
+        try:
+            transform = to_phantom_frame(_rest_markers(raw), names[:-1], cal["surface_point"][()],
+                                         cal["surface_normal"][()], layout)
+        except BadInput as e:
+            raise BadInput(path, e.what) from None
         name = attr_text(f.attrs.get("name", Path(path).stem))
         noise = _force_noise(attr_text(f.attrs["calibration"]))
     for p in raw:
         p.points = apply_transform(transform, p.points)
-    return Session(Path(path), name, transform, raw, locations, raw[0].points.shape[1], noise)
+    return Session(Path(path), name, transform, raw, locations, names, layout, noise)
+
+
+def _layout(attr: object, size_m: tuple[float, float] | None) -> PhantomLayout:
+    """The file's phantom layout (absent: the paper's square grid), its size overridden by
+    ``size_m`` when given."""
+    layout = PhantomLayout.from_json(None if attr is None else json.loads(attr_text(attr)))
+    return layout if size_m is None else replace(layout, size_m=tuple(size_m))
 
 
 def _force_noise(calibration: str) -> float:

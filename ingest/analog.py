@@ -24,7 +24,7 @@ import numpy as np
 
 from core.errors import BadInput
 from core.series import SHARED_CLOCK, ForceSeries
-from core.units import unit_to_si
+from ingest.channel_scale import to_si
 
 _RATE_TOLERANCE = 1e-6           # relative: an analog rate this close to k x the point rate is k
 
@@ -133,40 +133,42 @@ def resolve_channels(export: AnalogExport, wanted: Sequence[str | int],
     return out
 
 
+def file_units(export: AnalogExport) -> list[str]:
+    """The units the export states per channel ("" where it states none: a C3D without
+    ANALOG:UNITS, a QTM analog TSV without CHANNEL_UNITS, whose V is only QTM's default)."""
+    if export.meta.get("units_stated") is False:
+        return [""] * len(export.units)
+    return list(export.units)
+
+
 def analog_force(export: AnalogExport, channels: Sequence[str | int], kind: str,
-                 rate_hz: float | None = None,
-                 trigger: str | int | None = None) -> ForceSeries:
+                 rate_hz: float | None = None, trigger: str | int | None = None,
+                 units: str | list[str] | None = None, scale: Sequence[float] | None = None,
+                 offset: Sequence[float] | None = None) -> ForceSeries:
     """The six force channels (and a trigger) of an analog export as a ``ForceSeries`` in SI
-    units on the mocap's clock. ``rate_hz``, when given (session.toml), must be the file's."""
+    units on the mocap's clock. ``rate_hz``, when given (session.toml), must be the file's;
+    ``units`` (session.toml's, None where it states none) name the channels' units where the
+    export states none (else V), and ``scale``/``offset`` turn volts into N and N m
+    (:mod:`ingest.channel_scale`)."""
     if rate_hz is not None and not np.isclose(rate_hz, export.rate_hz, rtol=_RATE_TOLERANCE):
         raise BadInput(export.source, f"session.toml says the analog rate is {rate_hz:g} Hz "
                                       f"but the file says {export.rate_hz:g} Hz")
     idx = resolve_channels(export, channels)
-    factors, units = [], []
-    for i in idx:
-        unit = export.units[i] or ("V" if kind == "gauge" else "")
-        try:
-            factor, si = unit_to_si(unit)
-        except ValueError:
-            raise BadInput(export.source, f"analog channel {export.names[i]!r} is in "
-                                          f"{unit or 'no stated unit'!r}, not a force, "
-                                          "torque or voltage unit") from None
-        if (si == "V") != (kind == "gauge"):
-            raise BadInput(export.source, f"analog channel {export.names[i]!r} is in {unit}, "
-                                          f"which does not fit force.kind = {kind!r}")
-        factors.append(factor)
-        units.append(si)
+    stated = file_units(export)
+    given = [stated[i] or ("" if units is not None or scale is not None else "V")
+             for i in idx]
+    names = [export.names[i] for i in idx]
+    values, si_units, info = to_si(export.source, export.values[:, idx], names, given, kind,
+                                   units, scale, offset)
     trig = None
     if trigger is not None:
         trig = export.values[:, resolve_channels(export, [trigger], "force.trigger_column")[0]]
-    meta = {"format": export.format, "clock": SHARED_CLOCK,
+    meta = {"format": export.format, "clock": SHARED_CLOCK, **info,
             "units_in_file": [export.units[i] for i in idx],
             "analog_channels": [i + 1 for i in idx], "analog_rate_hz": export.rate_hz,
             "scales": [float(export.scales[i]) for i in idx],
             "offsets": [float(export.offsets[i]) for i in idx],
             "gen_scale": export.gen_scale}
-    return ForceSeries(source=export.source, time_ns=export.time_ns(),
-                       channels=[export.names[i] for i in idx],
-                       values=export.values[:, idx] * np.array(factors), units=units,
-                       kind=kind, rate_hz=export.rate_hz,
+    return ForceSeries(source=export.source, time_ns=export.time_ns(), channels=names,
+                       values=values, units=si_units, kind=kind, rate_hz=export.rate_hz,
                        trigger=None if trig is None else trig.copy(), meta=meta)

@@ -1,6 +1,7 @@
 """What is in a file, judged by its content (magic bytes, headers), not only by its extension.
 
-``detect_format`` names every format the pipeline reads or writes; ``read_mocap`` reads any of
+``detect_format`` names every format the pipeline reads or writes (force logs in text: plain or
+dialect CSV, ATI's DAQ F/T and Net F/T logs, QTM force-plate exports); ``read_mocap`` reads any of
 the 3D marker exports (QTM TSV 3D, C3D, QTM MAT) and ``read_analog`` the mocap system's analog
 channels (C3D, QTM analog TSV) with the reader its content calls for. The
 container test underneath is :func:`ingest.sniff.sniff`.
@@ -14,14 +15,18 @@ from core.errors import BadInput
 from core.series import MarkerSeries
 from ingest.analog import AnalogExport
 from ingest.c3d import read_c3d, read_c3d_analog
+from ingest.force_log import text_log_format
+from ingest.qtm_force_plate import looks_like_force_plate
 from ingest.qtm_mat import is_qtm_mat, read_qtm_mat
 from ingest.qtm_tsv import looks_like_qtm_tsv, parse_qtm_header, read_qtm_3d, read_qtm_analog
 from ingest.sniff import head_text, read_head, sniff
 
 FORMATS = (
-    "qtm_tsv_3d", "qtm_tsv_6d", "qtm_tsv_analog", "c3d", "qtm_mat", "force_csv", "force_mat",
-    "force_parquet", "ati_cal", "mcap", "hdf5", "json", "session_toml",
+    "qtm_tsv_3d", "qtm_tsv_6d", "qtm_tsv_analog", "qtm_tsv_force", "c3d", "qtm_mat",
+    "force_csv", "force_ati_daq", "force_ati_netft", "force_mat", "force_parquet", "ati_cal",
+    "mcap", "hdf5", "json", "session_toml",
 )
+
 def detect_format(path: str | Path) -> str:
     """The format of ``path`` (one of ``FORMATS``) from its content; unknown -> BadInput."""
     kind = sniff(path)
@@ -30,7 +35,12 @@ def detect_format(path: str | Path) -> str:
     if kind == "parquet":
         return "force_parquet"
     if kind in ("mat5", "mat73"):
-        return "qtm_mat" if is_qtm_mat(path) else "force_mat"
+        try:
+            return "qtm_mat" if is_qtm_mat(path) else "force_mat"
+        except RuntimeError as e:          # h5py on a damaged v7.3 file
+            raise BadInput(path, f"cannot read MAT file ({e})") from None
+    if kind == "mat4":
+        return "force_mat"
     head = head_text(read_head(path)) or ""
     if kind == "xml" and "<FTSensor" in head:
         return "ati_cal"
@@ -49,6 +59,8 @@ def _is_session_toml(head: str) -> bool:
 
 
 def _text_format(path: str | Path, head: str) -> str | None:
+    if looks_like_force_plate(head):
+        return "qtm_tsv_force"
     if looks_like_qtm_tsv(head):
         header = parse_qtm_header(path)
         if "MARKER_NAMES" in header:
@@ -58,25 +70,13 @@ def _text_format(path: str | Path, head: str) -> str | None:
         if "CHANNEL_NAMES" in header:
             return "qtm_tsv_analog"
         return None
-    lines = head.lstrip("\ufeff").splitlines()
-    if len(lines) < 2:
-        return None
-    sep = "\t" if "\t" in lines[0] else ","
-    names = lines[0].split(sep)
-    first = lines[1].split(sep)
-    if len(names) >= 2 and not any(_is_number(n) for n in names) and any(
-        _is_number(v) for v in first
-    ):
-        return "force_csv"
-    return None
-
-
-def _is_number(s: str) -> bool:
     try:
-        float(s)
-    except ValueError:
-        return False
-    return True
+        return text_log_format(path, bare_rows=_BARE_ROWS)
+    except BadInput:
+        return None
+
+
+_BARE_ROWS = 10     # rows of numbers without a column line that content alone calls a log
 
 
 def read_mocap(path: str | Path) -> MarkerSeries:

@@ -1,201 +1,133 @@
-"""Force-sensor logs (the Speedgoat target's Nano17 record): CSV, MAT v7 / v7.3, or Parquet.
+"""Force-sensor logs (the Speedgoat target's Nano17 record, or any rig's): every layout a lab
+is likely to hand over, read into a ``ForceSeries`` in SI units.
 
-Every format comes down to named 1-D columns: a time column, the six channels (gauge volts or a
-calibrated wrench) and optionally a trigger. MAT files hold one variable per column, or one 2-D
-matrix plus a ``columns`` / ``names`` cell array of strings. Values are checked (numbers, no
-NaN, time strictly increasing), time becomes int64 ns and channels SI units.
+The container decides the reader, each giving a :class:`~ingest.log_table.LogTable`: Parquet;
+MAT v7 / v7.3 (:mod:`ingest.mat_log`: named columns, Simulink arrays and structs); text
+(:mod:`ingest.qtm_force_plate` for a QTM force-plate export, :mod:`ingest.ati_csv` for ATI's
+DAQ F/T and Net F/T logs, else :mod:`ingest.csv_dialect` in any common dialect). Then the
+time (the named column, the layout's own, or the rate where the log has none) and the channels
+(by name, or by number: 1 is the first column that is not time) are picked and checked
+(numbers, no NaN, time strictly increasing), time becomes int64 ns and channels SI units
+(:mod:`ingest.channel_scale`).
 """
 
 from __future__ import annotations
 
-import re
-import warnings
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-import h5py
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
-import scipy.io
 
 from core.errors import BadInput
-from core.series import ForceSeries, time_to_ns
-from core.text import attr_text
-from core.units import TIME_UNITS, channel_units, unit_to_si
-from ingest.qtm_mat import MAT_ERRORS, mat73_text
-from ingest.sniff import check_last_line, sniff
+from core.series import SHARED_CLOCK, ForceSeries, frame_times_ns, time_to_ns
+from core.units import TIME_UNITS, time_unit_in_name
+from ingest.ati_csv import is_daq_ft, is_netft, read_daq_ft, read_netft
+from ingest.channel_scale import to_si
+from ingest.csv_dialect import read_text_table, sniff_dialect
+from ingest.log_table import LogTable, Where, clock_ns, numbers, require, row_where
+from ingest.mat_log import read_mat_table
+from ingest.qtm_force_plate import looks_like_force_plate, read_force_plate
+from ingest.qtm_mat import MAT_ERRORS
+from ingest.sniff import head_text, read_head, sniff
 
-_NAME_VARS = ("columns", "names", "column_names")
-_MAT_SKIP = ("#refs#", "#subsystem#")
-_READ_ERRORS = (*MAT_ERRORS, pa.ArrowException)    # any reader's failure on a damaged file
-_PANDAS_LINE = re.compile(r"in line (\d+)")
-
-Where = Callable[[int], str]      # row index -> "line 12" / "row 11"
-
-
-# ---------------------------------------------------------------------------- columns
-
-
-def force_log_columns(path: str | Path) -> list[str]:
-    """The column names a force log offers (CSV header, MAT variables, Parquet schema)."""
-    kind = _kind(path)
-    try:
-        if kind == "csv":
-            return _csv_header(path)[0]
-        if kind == "parquet":
-            return list(pq.read_schema(path).names)
-        return list(_mat_columns(path, kind, None))
-    except _READ_ERRORS as e:
-        raise BadInput(path, f"cannot read force log ({e})") from None
+_READ_ERRORS = (*MAT_ERRORS, RuntimeError, pa.ArrowException)   # a damaged file's failures
+_RATE_TOLERANCE = 0.01          # a stated rate and the time column's may differ this much
+TEXT_FORMATS = ("force_csv", "force_ati_daq", "force_ati_netft", "qtm_tsv_force")
 
 
-def _kind(path: str | Path) -> str:
+# ---------------------------------------------------------------------------- layouts
+
+
+def _container(path: str | Path) -> str:
     kind = sniff(path)
-    if kind in ("mat5", "mat73", "parquet"):
+    if kind in ("mat4", "mat5", "mat73", "parquet", "text"):
         return kind
-    if kind == "text":
-        return "csv"
     raise BadInput(path, f"not a force log (CSV, MAT or Parquet); found {kind}")
 
 
-# ---------------------------------------------------------------------------- CSV
+def text_log_format(path: str | Path, delimiter: str | None = None,
+                    decimal: str | None = None, bare_rows: int = 2) -> str:
+    """Which text log a file is (one of ``TEXT_FORMATS``); not a log -> BadInput. A file
+    without a column line must show ``bare_rows`` rows of numbers (detection by content alone
+    asks for more than a session.toml that names the file)."""
+    if looks_like_force_plate(head_text(read_head(path)) or ""):
+        return "qtm_tsv_force"
+    d = sniff_dialect(path, delimiter, decimal)
+    if d.header_line is None and d.data_rows < bare_rows:
+        raise BadInput(path, f"{d.data_rows} rows of numbers without a column line: too few "
+                             "to call it a log")
+    return "force_ati_netft" if is_netft(d) else "force_ati_daq" if is_daq_ft(d) \
+        else "force_csv"
 
 
-def _csv_header(path: str | Path) -> tuple[list[str], str]:
-    """Column names of the first line and the separator (tab when the line has one, else ,)."""
-    with open(path, encoding="utf-8-sig", errors="replace") as f:
-        first = f.readline().rstrip("\r\n")
-    sep = "\t" if "\t" in first else ","
-    names = [c.strip().strip('"') for c in first.split(sep)]
-    dups = sorted({n for n in names if names.count(n) > 1})
-    if dups:
-        raise BadInput(path, f"duplicate column name(s) in the header: {', '.join(dups)}",
-                       where="line 1")
-    return names, sep
-
-
-def _csv_columns(path: str | Path, wanted: list[str]) -> tuple[dict[str, pd.Series], Where]:
-    """The wanted columns of a CSV log. Every row must have the header's number of fields
-    (pandas' C parser checks; a trailing separator on every row is allowed)."""
-    header, sep = _csv_header(path)
-    _require(path, header, wanted)
+def read_log_table(path: str | Path, variable: str | None = None,
+                   delimiter: str | None = None, decimal: str | None = None,
+                   wanted: list[str] | None = None) -> LogTable:
+    """The columns of a force log as the file has them (see the module doc)."""
+    kind = _container(path)
     try:
-        with warnings.catch_warnings():
-            # "Length of header ... does not match length of data": an extra first-row field
-            warnings.simplefilter("error", pd.errors.ParserWarning)
-            df = pd.read_csv(path, sep=sep, header=0, index_col=False, engine="c",
-                             skipinitialspace=True, encoding="utf-8-sig")
-    except pd.errors.ParserWarning:
-        raise BadInput(path, f"row has more fields than the {len(header)} of the header",
-                       where="line 2") from None
-    except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as e:
-        line = _PANDAS_LINE.search(str(e))
-        raise BadInput(path, f"cannot parse CSV ({str(e).strip()})",
-                       where=f"line {line.group(1)}" if line else None) from None
-    if df.shape[1] != len(header):
-        raise BadInput(path, f"the header names {len(header)} columns, pandas found "
-                             f"{df.shape[1]} (quoted separators?)", where="line 1")
-    with open(path, encoding="utf-8-sig", errors="replace") as f:
-        f.readline()
-        second = f.readline().rstrip("\r\n").split(sep)
-    check_last_line(path, sep, len(header), second, len(df) + 1)
-    return {c: df.iloc[:, header.index(c)] for c in wanted}, lambda i: f"line {i + 2}"
+        if kind == "parquet":
+            table = pq.read_table(path)
+            return LogTable(format="force_parquet", where=row_where,
+                            columns={c: table.column(c).to_pandas()
+                                     for c in table.column_names})
+        if kind in ("mat4", "mat5", "mat73"):
+            return read_mat_table(path, kind, variable, wanted)
+    except _READ_ERRORS as e:
+        raise BadInput(path, f"cannot read force log ({e})") from None
+    if variable is not None:
+        raise BadInput(path, "force.variable is for MAT files; this is a text log")
+    fmt = text_log_format(path, delimiter, decimal)
+    if fmt == "qtm_tsv_force":
+        return read_force_plate(path)
+    d = sniff_dialect(path, delimiter, decimal)
+    if fmt == "force_ati_netft":
+        return read_netft(path, d)
+    if fmt == "force_ati_daq":
+        return read_daq_ft(path, d)
+    return read_text_table(path, d)
 
 
-# ---------------------------------------------------------------------------- MAT
+def force_log_columns(path: str | Path) -> list[str]:
+    """The column names a force log offers."""
+    return read_log_table(path).names
 
 
-def _mat_variables(path: str | Path, kind: str) -> dict[str, Any]:
-    """Every variable of a MAT file: numeric arrays in MATLAB's shape, cellstr as lists."""
-    if kind == "mat5":
-        raw = scipy.io.loadmat(path, squeeze_me=False)
-        out: dict[str, Any] = {}
-        for k, v in raw.items():
-            if k.startswith("__") or not isinstance(v, np.ndarray) or v.dtype.names:
-                continue                                 # MATLAB's own keys, structs
-            if v.dtype == object:                    # a cell array of strings
-                out[k] = [str(np.ravel(x)[0]) if np.size(x) else "" for x in v.ravel(order="F")]
-            elif v.dtype.kind in "US":
-                out[k] = [str(s).strip() for s in np.ravel(v)]
-            else:
-                out[k] = v
-        return out
-    out = {}
-    with h5py.File(path, "r") as f:
-        for k in f:
-            ds = f[k]
-            if k in _MAT_SKIP or not isinstance(ds, h5py.Dataset):
-                continue
-            cls = attr_text(ds.attrs.get("MATLAB_class", b"double"))
-            if cls == "cell":
-                out[k] = [mat73_text(f[r]) for r in np.asarray(ds[()]).ravel(order="F")]
-            elif cls == "char":
-                out[k] = [mat73_text(ds)]
-            elif ds.attrs.get("MATLAB_empty", 0):
-                out[k] = np.zeros((0, 0))
-            else:
-                out[k] = np.asarray(ds[()]).T           # MATLAB stores dimensions reversed
-    return out
+# ---------------------------------------------------------------------------- picking
 
 
-def _mat_columns(path: str | Path, kind: str, wanted: list[str] | None) -> dict[str, np.ndarray]:
-    """Named 1-D columns of a MAT force log (all of them when ``wanted`` is None)."""
-    variables = _mat_variables(path, kind)
-    vectors = {k: np.ravel(v) for k, v in variables.items()
-               if isinstance(v, np.ndarray) and v.ndim <= 2 and min(v.shape, default=0) == 1}
-    if wanted is not None and all(w in vectors for w in wanted):
-        return {w: vectors[w] for w in wanted}
-    names_var = next((k for k in _NAME_VARS if isinstance(variables.get(k), list)), None)
-    if names_var is None:
-        if wanted is not None:
-            _require(path, list(vectors), wanted)
-        return vectors
-    names = [s.strip() for s in variables[names_var]]
-    matrices = [v for v in variables.values() if isinstance(v, np.ndarray) and v.ndim == 2
-                and len(names) in v.shape and min(v.shape) > 1]
-    if len(matrices) != 1:
-        raise BadInput(path, f"{names_var} names {len(names)} columns but there is "
-                             f"{'no' if not matrices else 'more than one'} matrix with that "
-                             "many columns")
-    m = matrices[0]
-    m = m if m.shape[1] == len(names) else m.T
-    columns = {n: m[:, i] for i, n in enumerate(names)}
-    if wanted is not None:
-        _require(path, names, wanted)
-    return columns
+def _pick_time(path: str | Path, t: LogTable, time_column: str | None,
+               rate_hz: float | None) -> str | None:
+    """The time column's name (the named one; for the default name "time", else the layout's
+    own), or None for a log timed by its rate."""
+    if time_column is not None and time_column in t.columns:
+        return time_column
+    if time_column in (None, "time"):
+        if t.time is not None:
+            return t.time
+        if rate_hz is not None or t.rate_hz is not None:
+            return None
+    require(path, t.names, [time_column or "time"], "time column",
+            hint="; name it with force.time_column, or give force.rate_hz for a log without "
+                 "one")
+    return None
 
 
-# ---------------------------------------------------------------------------- checks
-
-
-def _require(path: str | Path, available: list[str], wanted: list[str]) -> None:
-    absent = [w for w in wanted if w not in available]
-    if absent:
-        raise BadInput(path, f"column(s) not in file: {', '.join(absent)} "
-                             f"(the file has: {', '.join(available)})")
-
-
-def _numbers(path: str | Path, name: str, values: Any, where: Where) -> np.ndarray:
-    """A column as float64 (int64 kept for exact times); text or NaN -> BadInput with the row."""
-    s = pd.Series(values) if not isinstance(values, pd.Series) else values
-    if s.dtype.kind in "iu":
-        return s.to_numpy(dtype=np.int64)
-    if s.dtype.kind not in "fb":
-        num = pd.to_numeric(s, errors="coerce")
-        bad = np.flatnonzero(num.isna().to_numpy() & s.notna().to_numpy())
-        if bad.size:
-            i = int(bad[0])
-            raise BadInput(path, f"{s.iloc[i]!r} in column {name} is not a number",
-                           where=where(i))
-        s = num
-    out = s.to_numpy(dtype=np.float64, na_value=np.nan)
-    bad = np.flatnonzero(~np.isfinite(out))
-    if bad.size:
-        i = int(bad[0])
-        raise BadInput(path, f"column {name} has no value (or an infinite one)", where=where(i))
+def _pick(path: str | Path, t: LogTable, wanted: list[str | int], time: str | None,
+          what: str) -> list[str]:
+    """Column names for channels given by name or number (1 = the first non-time column)."""
+    signals = [c for c in t.names if c != time]
+    out = []
+    for w in wanted:
+        if isinstance(w, int):
+            if not 1 <= w <= len(signals):
+                raise BadInput(path, f"{what}: channel number {w} is not in the file "
+                                     f"(channels 1 to {len(signals)}, time apart)")
+            out.append(signals[w - 1])
+        else:
+            out.append(w)
+    require(path, t.names, [w for w in out if isinstance(w, str)])
     return out
 
 
@@ -209,15 +141,13 @@ def _time_ns(path: str | Path, t: np.ndarray, unit: str, where: Where) -> np.nda
     return ns
 
 
-def _units(path: str | Path, units: str | list[str] | None, kind: str,
-           n: int) -> tuple[np.ndarray, list[str], list[str]]:
-    """Per-channel SI factors, SI unit names and the units as given."""
-    try:
-        given = channel_units(units, kind, n)
-    except ValueError as e:
-        raise BadInput(path, str(e)) from None
-    factors, si = zip(*(unit_to_si(u) for u in given), strict=True)
-    return np.array(factors), list(si), given
+def _rate_time(path: str | Path, t: LogTable, n: int, rate_hz: float | None) -> np.ndarray:
+    if rate_hz is not None and t.rate_hz is not None and \
+            abs(rate_hz - t.rate_hz) > _RATE_TOLERANCE * t.rate_hz:
+        raise BadInput(path, f"force.rate_hz is {rate_hz:g} Hz but the file states "
+                             f"{t.rate_hz:g} Hz")
+    rate = rate_hz if rate_hz is not None else t.rate_hz
+    return frame_times_ns(n, float(rate), path, "the log's rate")
 
 
 # ---------------------------------------------------------------------------- reader
@@ -225,60 +155,96 @@ def _units(path: str | Path, units: str | list[str] | None, kind: str,
 
 def read_force_log(
     path: str | Path,
-    time_column: str,
-    channels: list[str],
-    time_unit: str = "s",
+    time_column: str | None,
+    channels: list[str | int],
+    time_unit: str | None = None,
     units: str | list[str] | None = None,
     kind: str = "gauge",
-    trigger_column: str | None = None,
+    trigger_column: str | int | None = None,
+    *,
+    variable: str | None = None,
+    delimiter: str | None = None,
+    decimal: str | None = None,
+    rate_hz: float | None = None,
+    scale: list[float] | None = None,
+    offset: list[float] | None = None,
 ) -> ForceSeries:
-    """Read a force log (CSV, MAT v7/v7.3, Parquet) into a ``ForceSeries`` in SI units.
+    """Read a force log into a ``ForceSeries`` in SI units.
 
-    ``kind`` is "gauge" (volts, calibrated later with an ATI matrix) or "wrench" (Fx..Tz);
-    ``units`` is one unit for all channels or one per channel (default V, or N and N*m).
+    ``kind`` is "gauge" (volts, calibrated later with an ATI matrix) or "wrench" (Fx..Tz).
+    ``time_unit`` and ``units`` are None where session.toml states none: the file's own (a
+    name such as ``time (ms)``, ``Force X (N)``), else s and the kind's default units.
+    ``variable`` picks a MAT variable or struct field, ``delimiter``/``decimal`` a text
+    dialect, ``rate_hz`` times a log without a time column, ``scale``/``offset`` turn volts
+    into N and N m (:mod:`ingest.channel_scale`).
     """
-    if time_unit not in TIME_UNITS:
+    if time_unit is not None and time_unit not in TIME_UNITS:
         raise BadInput(path, f"time_unit must be one of {', '.join(TIME_UNITS)}, "
                              f"got {time_unit!r}")
     if not channels or len(set(channels)) != len(channels):
         raise BadInput(path, "channels must be a non-empty list of distinct column names")
-    factors, si_units, given = _units(path, units, kind, len(channels))
-    wanted = [time_column, *channels] + ([trigger_column] if trigger_column else [])
-    fmt = _kind(path)
-    try:
-        if fmt == "csv":
-            cols, where = _csv_columns(path, wanted)
-        elif fmt == "parquet":
-            schema = pq.read_schema(path).names
-            _require(path, schema, wanted)
-            table = pq.read_table(path, columns=wanted)
-            cols = {c: table.column(c).to_pandas() for c in wanted}
-            where = _row
-        else:
-            cols, where = _mat_columns(path, fmt, wanted), _row
-    except _READ_ERRORS as e:
-        raise BadInput(path, f"cannot read force log ({e})") from None
-    lengths = {c: len(v) for c, v in cols.items()}
+    if kind not in ("gauge", "wrench"):
+        raise BadInput(path, f"kind must be one of gauge, wrench, got {kind!r}")
+    t = read_log_table(path, variable, delimiter, decimal,
+                       wanted=[c for c in [time_column, *channels, trigger_column]
+                               if isinstance(c, str)])
+    time = _pick_time(path, t, time_column, rate_hz)
+    names = _pick(path, t, channels, time, "force.channels")
+    trigger = _pick(path, t, [trigger_column], time, "force.trigger_column")[0] \
+        if trigger_column is not None else None
+    used = ([time] if time else []) + names + ([trigger] if trigger else [])
+    lengths = {c: len(t.columns[c]) for c in used}
     if len(set(lengths.values())) != 1:
         raise BadInput(path, f"columns have different lengths: {lengths}")
-    n = lengths[time_column]
+    n = lengths[used[0]]
     if n < 2:
         raise BadInput(path, f"force log has {n} sample(s); need at least 2")
-    t = _numbers(path, time_column, cols[time_column], where)
-    time_ns = _time_ns(path, t, time_unit, where)
-    values = np.empty((n, len(channels)))
-    for i, c in enumerate(channels):
-        values[:, i] = _numbers(path, c, cols[c], where) * factors[i]
-    trigger = None
-    if trigger_column:
-        trigger = _numbers(path, trigger_column, cols[trigger_column], where).astype(np.float64)
+    if time is not None:
+        unit = _time_unit(path, t, time, time_unit)
+        clock = clock_ns(t.columns[time])
+        if clock is not None:                  # dates and clock times, not numbers
+            time_ns, unit = _time_ns(path, clock, "ns", t.where), "ns"
+        else:
+            time_ns = _time_ns(path, numbers(path, time, t.columns[time], t.where), unit,
+                               t.where)
+        _check_rate(path, time_ns, rate_hz)
+    else:
+        unit = None
+        time_ns = _rate_time(path, t, n, rate_hz)
+    raw = np.column_stack([numbers(path, c, t.columns[c], t.where) for c in names])
+    values, si_units, info = to_si(path, raw.astype(np.float64), names,
+                                   [t.units.get(c, "") for c in names], kind, units,
+                                   scale, offset)
+    trig = numbers(path, trigger, t.columns[trigger], t.where).astype(np.float64) \
+        if trigger else None
     rate = 1e9 / float(np.median(np.diff(time_ns)))
-    meta = {"format": {"csv": "force_csv", "parquet": "force_parquet"}.get(fmt, "force_mat"),
-            "time_column": time_column, "time_unit": time_unit, "units_in_file": given}
-    return ForceSeries(source=str(path), time_ns=time_ns, channels=list(channels),
-                       values=values, units=si_units, kind=kind, rate_hz=rate, trigger=trigger,
-                       meta=meta)
+    meta = {"format": t.format, "time_column": time, "time_unit": unit,
+            "trigger_column": trigger,
+            "timed_by": "column" if time else "rate", **info,
+            **({"clock": SHARED_CLOCK} if t.details.get("clock") == "mocap" else {}),
+            **{k: v for k, v in t.details.items() if k in ("layout", "variable", "dialect")}}
+    return ForceSeries(source=str(path), time_ns=time_ns, channels=names, values=values,
+                       units=si_units, kind=kind, rate_hz=rate, trigger=trig, meta=meta)
 
 
-def _row(i: int) -> str:
-    return f"row {i + 1}"
+def _time_unit(path: str | Path, t: LogTable, time: str, stated: str | None) -> str:
+    """The layout's own time unit; else session.toml's, which must agree with the file's (a
+    units line, the column's name) where it states one; else the file's; else s."""
+    if time == t.time and t.time_unit:
+        return t.time_unit
+    file_unit = t.units.get(time) if t.units.get(time) in TIME_UNITS else \
+        time_unit_in_name(time)
+    if stated and file_unit and stated != file_unit:
+        raise BadInput(path, f"force.time_unit is {stated!r}, but the file states {file_unit!r} "
+                             f"for its time column {time!r}")
+    return stated or file_unit or "s"
+
+
+def _check_rate(path: str | Path, time_ns: np.ndarray, rate_hz: float | None) -> None:
+    """A rate session.toml states must be the time column's."""
+    if rate_hz is None:
+        return
+    rate = 1e9 / float(np.median(np.diff(time_ns)))
+    if abs(rate - rate_hz) > _RATE_TOLERANCE * rate_hz:
+        raise BadInput(path, f"force.rate_hz is {rate_hz:g} Hz but the time column gives "
+                             f"{rate:.6g} Hz")

@@ -26,11 +26,11 @@ from core.series import (
     RawSession,
 )
 from data_schema.raw_mcap import SCHEMA, VERSION, validate_raw_mcap
-from data_schema.session import ForceConfig, SessionConfig, read_session
-from ingest.analog import analog_force, samples_per_frame
+from data_schema.session import SessionConfig, read_session
+from ingest.analog import samples_per_frame
 from ingest.ati_cal import read_ati_cal
-from ingest.detect import ANALOG_FORMATS, detect_format, read_analog, read_mocap
-from ingest.force_log import read_force_log
+from ingest.detect import detect_format, read_mocap
+from ingest.force_source import read_force
 from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
 from ingest.qtm_tsv import read_qtm_6d
@@ -79,8 +79,9 @@ def load_session(cfg: SessionConfig) -> RawSession:
     with progress(steps, label="ingest: reading") as bar:
         for step in bar:
             got[step] = _READ[step](cfg)
+            if step == "mocap":     # before the other files are read
+                _require_markers(got[step], m.phantom_markers + m.indenter_markers)
     markers = got["mocap"]
-    _require_markers(markers, m.phantom_markers + m.indenter_markers)
     _check_shared_clock(markers, got["force"])
     if m.trigger_event and m.trigger_event not in {e for e, _ in markers.events}:
         raise BadInput(m.file, f"no EVENT labelled {m.trigger_event!r} (session.toml "
@@ -91,7 +92,7 @@ def load_session(cfg: SessionConfig) -> RawSession:
         name=cfg.name, markers=markers, force=got["force"],
         phantom_markers=list(m.phantom_markers), indenter_markers=list(m.indenter_markers),
         calibration=got["calibration"], bodies=got["bodies"], pivot=got["pivot"],
-        trigger_event=m.trigger_event,
+        trigger_event=m.trigger_event, phantom=cfg.phantom.as_json(),
     )
 
 
@@ -119,20 +120,9 @@ def _read_bodies(cfg: SessionConfig) -> BodySeries | None:
 
 
 def _read_force(cfg: SessionConfig) -> ForceSeries:
-    """The force log, or the mocap system's analog channels (C3D, QTM analog TSV)."""
-    f: ForceConfig = cfg.force
-    if detect_format(f.file) in ANALOG_FORMATS:
-        return analog_force(read_analog(f.file), f.channels, f.kind, f.rate_hz,
-                            f.trigger_column)
-    numbers = [c for c in [*f.channels, f.trigger_column] if isinstance(c, int)]
-    if numbers or f.rate_hz is not None:
-        what = f"channel number {numbers[0]}" if numbers else "force.rate_hz"
-        raise BadInput(cfg.folder / "session.toml", f"{what}: channel numbers and rate_hz are "
-                                                    "for analog channels (a C3D or QTM analog "
-                                                    f"export); {f.file.name} is a force log")
-    return read_force_log(f.file, f.time_column, [str(c) for c in f.channels],
-                          time_unit=f.time_unit, units=f.units, kind=f.kind,
-                          trigger_column=f.trigger_column)
+    """The force log (any layout session.toml describes), or the mocap system's analog
+    channels (C3D, QTM analog TSV) or force plate (QTM force-plate TSV)."""
+    return read_force(cfg.force)
 
 
 def _check_shared_clock(markers: MarkerSeries, force: ForceSeries) -> None:

@@ -1,5 +1,5 @@
 """Summaries of the lab's files for ``pipeline inspect``: QTM TSV 3D, 6D and analog exports,
-C3D, QTM MAT, force logs (CSV, MAT, Parquet), ATI .cal and session.toml.
+C3D, QTM MAT, force logs (any layout :mod:`ingest.force_log` reads), ATI .cal and session.toml.
 
 Each reads the file with its ingest reader (so a file inspect accepts, ingest reads) and
 returns the summary keys that apply (:data:`ingest.inspect_stage.KEYS`); the helpers here also
@@ -12,14 +12,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from core.errors import BadInput
 from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries
 from core.text import attr_text
-from data_schema.session import SCHEMA, VERSION, read_session
+from core.units import TIME_UNITS, time_unit_in_name, unit_to_si
+from data_schema.session import SCHEMA, VERSION, ForceConfig, read_session
 from ingest.ati_cal import read_ati_cal
 from ingest.c3d import read_c3d, read_c3d_analog
-from ingest.force_log import force_log_columns, read_force_log
+from ingest.force_log import read_force_log, read_log_table
+from ingest.force_source import read_force
 from ingest.qtm_mat import read_qtm_mat
 from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d, read_qtm_analog
 
@@ -77,7 +80,9 @@ def inspect_c3d(path: Path) -> dict[str, Any]:
     """A C3D export: its markers and, when it has them, its analog channels."""
     m = read_c3d(path)
     analog = read_c3d_analog(path).summary() if m.meta.get("analog_rate") else None
-    return {**marker_summary(m, "mm"), "analog": analog, "details": _plain(m.meta)}
+    channels = [c["name"] for c in analog["channels"]] if analog else None
+    return {**marker_summary(m, "mm"), "analog": analog, "channels": channels,
+            "details": _plain(m.meta)}
 
 
 def inspect_qtm_analog(path: Path) -> dict[str, Any]:
@@ -95,22 +100,99 @@ def inspect_qtm_mat(path: Path) -> dict[str, Any]:
 
 
 def inspect_force(path: Path) -> dict[str, Any]:
-    """A force log without its session.toml: time is the column named like time (in s), a
-    column named trigger or sync is the trigger, every other column a channel."""
-    columns = [str(c) for c in force_log_columns(path)]
-    time_col = next((c for c in columns if c.lower() in TIME_NAMES), columns[0])
-    trigger = next((c for c in columns if c.lower() in TRIGGER_NAMES and c != time_col), None)
-    channels = [c for c in columns if c not in (time_col, trigger)]
+    """A force log (any layout). With a session.toml beside it that names it, read as the
+    session says (its time unit, channels, units, scale); else guessed: the layout's time (or
+    a column named like time, in the unit its name states, else s; or the rate the file
+    states), a column named trigger or sync the trigger, the other numeric columns channels."""
+    f, how = _session_force(path)
+    if f is not None:
+        return _force_summary(read_force(f), how, read_log_table(
+            path, f.variable, f.delimiter, f.decimal).names)
+    t = read_log_table(path)
+    time = t.time or next((c for c in t.names if _bare(c) in TIME_NAMES), None)
+    if time is None and t.rate_hz is None:
+        raise BadInput(path, f"no time column among {', '.join(t.names[:12])} and no stated "
+                             "rate: name it with force.time_column, or give force.rate_hz, in "
+                             "a session.toml beside it")
+    trigger = next((c for c in t.names if _bare(c) in TRIGGER_NAMES and c != time), None)
+    channels = [c for c in t.names if c not in (time, trigger) and _bare(c) not in _BOOKKEEPING
+                and _force_unit(t.units.get(c, "V")) and _numeric(t.columns[c])]
     if not channels:
-        raise BadInput(path, f"a force log needs a time column and channels, found {columns}")
-    wrench = all(c.lower()[:2] in WRENCH_NAMES for c in channels)
-    f = read_force_log(path, time_col, channels, kind="wrench" if wrench else "gauge",
-                       trigger_column=trigger)
+        raise BadInput(path, f"a force log needs channels besides time, found {t.names}")
+    wrench = all(_bare(c)[:2] in WRENCH_NAMES or _force_unit(t.units.get(c, "")) in
+                 ("N", "N*m") for c in channels)
+    unit = _integer_time_unit(t.columns[time]) if time and time != t.time and \
+        time_unit_in_name(time) is None else None
+    s = read_force_log(path, time, channels, time_unit=unit,
+                       kind="wrench" if wrench else "gauge", trigger_column=trigger)
+    how = "guessed (no session.toml beside it names this file)"
+    if unit is not None:
+        how += f"; whole-number times taken as {unit} (a force log at 50 Hz or more)"
+    return _force_summary(s, how, t.names)
+
+
+def _integer_time_unit(values: Any) -> str | None:
+    """For whole-number times that state no unit: the coarsest of s, ms, us, ns in which the
+    median step is a force log's rate (50 Hz or more), where s is not; None otherwise."""
+    t = pd.to_numeric(pd.Series(values[:1000]), errors="coerce").to_numpy(np.float64)
+    if t.size < 2 or not np.all(np.isfinite(t)) or np.any(t != np.round(t)):
+        return None
+    step = float(np.median(np.diff(t)))
+    if step <= 0 or 1 / step >= _MIN_LOG_HZ:
+        return None
+    return next((u for u, ns in TIME_UNITS.items() if 1e9 / (step * ns) >= _MIN_LOG_HZ), None)
+
+
+_MIN_LOG_HZ = 50.0
+
+
+_BOOKKEEPING = ("sample", "status", "rdt sequence", "f/t sequence")
+
+
+def _bare(name: str) -> str:
+    """A column name without its bracketed unit, lower case ("Time (ms)" -> "time")."""
+    return name.split("(")[0].split("[")[0].strip().lower()
+
+
+def _numeric(values: Any) -> bool:
+    """Whether a column's first value is a number (status words and clock text are not; a
+    bad value further down is for the reader to report, with its line)."""
+    head = pd.Series(values[:1] if isinstance(values, np.ndarray) else values.iloc[:1])
+    return bool(pd.to_numeric(head, errors="coerce").notna().all())
+
+
+def _force_unit(unit: str) -> str | None:
+    try:
+        return unit_to_si(unit)[1]
+    except ValueError:
+        return None
+
+
+def _session_force(path: Path) -> tuple[ForceConfig | None, str]:
+    """The [force] table of a session.toml beside ``path`` that names it, if any."""
+    if not (path.parent / "session.toml").is_file():
+        return None, ""
+    try:
+        cfg = read_session(path.parent)
+    except BadInput:
+        return None, ""
+    if cfg.force.file.resolve() != path.resolve():
+        return None, ""
+    return cfg.force, "as session.toml beside it says"
+
+
+def _force_summary(f: ForceSeries, how: str, columns: list[str]) -> dict[str, Any]:
+    time = f.meta.get("time_column")
     return {**_series(f), "channels": list(f.channels),
             "units": {c: u for c, u in zip(f.channels, f.units, strict=True)},
-            "details": {"time_column": time_col, "time_unit_assumed": "s", "kind": f.kind,
-                        "columns": columns,
-                        **({"trigger_column": trigger} if trigger else {})}}
+            "details": {"read": how, "kind": f.kind, "columns": columns,
+                        "time_column": time, "time_unit": f.meta.get("time_unit"),
+                        "timed_by": f.meta.get("timed_by"),
+                        **({"trigger_column": f.meta["trigger_column"]}
+                           if f.meta.get("trigger_column") else {}),
+                        **{k: f.meta[k] for k in ("layout", "variable", "dialect", "clock",
+                                                  "units_in_file", "scale", "offset")
+                           if k in f.meta}}}
 
 
 def inspect_cal(path: Path) -> dict[str, Any]:

@@ -119,7 +119,7 @@ def _session(rec: dict[str, dict[str, Any]],
         calibration=_calibration(rec["calibration"]) if "calibration" in rec else None,
         bodies=_bodies(s["bodies"], data) if s["bodies"] is not None else None,
         pivot=_markers(s["pivot"], data, "/pivot") if s["pivot"] is not None else None,
-        trigger_event=s["trigger_event"],
+        trigger_event=s["trigger_event"], phantom=s.get("phantom"),
         provenance=rec["provenance"],
     )
 
@@ -186,7 +186,7 @@ def _session_record(s: RawSession) -> dict[str, Any]:
     return {
         "schema": SCHEMA, "schema_version": VERSION, "name": s.name,
         "phantom_markers": list(s.phantom_markers), "indenter_markers": list(s.indenter_markers),
-        "trigger_event": s.trigger_event,
+        "trigger_event": s.trigger_event, "phantom": s.phantom,
         "mocap": _marker_desc(s.markers),
         "force": {"source": str(f.source), "rate_hz": float(f.rate_hz), "frames": f.frames,
                   "names": list(f.channels), "units": list(f.units), "kind": f.kind,

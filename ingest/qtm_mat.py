@@ -31,7 +31,8 @@ _SKIP = ("#refs#", "#subsystem#")
 # turns these into BadInput.
 MAT_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, TypeError, KeyError, IndexError,
                                            EOFError, NotImplementedError, zlib.error,
-                                           struct.error, scipy.io.matlab.MatReadError)
+                                           struct.error, RuntimeError,
+                                           scipy.io.matlab.MatReadError)
 _MI_COMPRESSED, _MX_STRUCT = 15, 2
 _HEAD_BYTES = 1 << 16          # of a variable, enough for its header and struct field names
 

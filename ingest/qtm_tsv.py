@@ -668,7 +668,8 @@ def read_qtm_analog(path: str | Path) -> AnalogExport:
     return AnalogExport(source=str(path), format="qtm_tsv_analog", labels=names,
                         descriptions=[""] * n, units=units, scales=gains, offsets=np.zeros(n),
                         gen_scale=1.0, rate_hz=rate, values=values,
-                        meta=_meta(head, "qtm_tsv_analog", units[0] if units else "V"))
+                        meta={**_meta(head, "qtm_tsv_analog", units[0] if units else "V"),
+                              "units_stated": "CHANNEL_UNITS" in head.keys})
 
 
 def _analog_header_problem(head: _Head, names: list[str]) -> tuple[str, str] | None:

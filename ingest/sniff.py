@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import re
+import struct
 from pathlib import Path
 
 from core.errors import BadInput
@@ -37,6 +38,24 @@ def _is_mat(head: bytes) -> bool:
     return version in (0x0100, 0x0200) and head[:1] != b"\x00"
 
 
+def _is_mat4(head: bytes) -> bool:
+    """MAT Level 4 (Simulink's To File and xPC/Speedgoat file logs of old): no text header;
+    the first variable's header is five int32 (type MOPT, rows, columns, imaginary flag, name
+    length), then its NUL-terminated name."""
+    if len(head) < 21:
+        return False
+    for order in ("<", ">"):
+        mopt, rows, cols, imag, namlen = struct.unpack(order + "5i", head[:20])
+        m, o, p, t = mopt // 1000, mopt // 100 % 10, mopt // 10 % 10, mopt % 10
+        name = head[20:20 + namlen]
+        if (0 <= mopt < 5000 and m == (0 if order == "<" else 1) and o == 0 and p <= 5
+                and t <= 2 and rows >= 0 and cols >= 0 and imag in (0, 1)
+                and 2 <= namlen <= 64 and len(name) == namlen and name.endswith(b"\x00")
+                and re.fullmatch(rb"[A-Za-z][A-Za-z0-9_]*", name[:-1])):
+            return True
+    return False
+
+
 def _is_c3d(head: bytes) -> bool:
     """C3D: byte 2 is 0x50 and the parameter section it points to names a processor type."""
     if len(head) < 512 or head[1] != 0x50 or head[0] < 2:
@@ -64,6 +83,7 @@ def sniff(path: str | Path) -> str:
     """The container of a file from its first bytes.
 
     One of ``mcap``, ``mat73`` (HDF5 with a MATLAB userblock), ``hdf5``, ``mat5`` (MAT v5/v6/v7),
+    ``mat4`` (MAT Level 4),
     ``parquet``, ``c3d``, ``xml``, ``json``, ``text``, ``empty`` or ``binary``.
     """
     head = read_head(path)
@@ -77,6 +97,8 @@ def sniff(path: str | Path) -> str:
         return "mat73" if head[512:520] == _HDF5 else "mat5"
     if any(head[o:o + 8] == _HDF5 for o in (512, 1024, 2048)):
         return "hdf5"                     # HDF5 behind a user block that is not MATLAB's
+    if _is_mat4(head):
+        return "mat4"
     if head.startswith(b"PAR1"):
         return "parquet"
     if _is_c3d(head):

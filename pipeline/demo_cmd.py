@@ -20,8 +20,8 @@ from pathlib import Path
 
 import click
 
-from pipeline.demo_plan import PAPER, PAPER_NETWORK, QUICK, RECIPE, SMOKE, Step, demo_steps
-from pipeline.options import seed_option
+from pipeline.demo_plan import PAPER, PAPER_NETWORK, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
+from pipeline.options import SIZE_MM, finite_float, seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
 
 
@@ -42,18 +42,28 @@ from pipeline.stage_cache import is_fresh, write_stamp
 @click.option("--no-tip-offsets", is_flag=True,
               help="Train the paper's network (the recipe without --tip-offsets): much faster "
                    "for a predictor pressing one mesh again, less accurate (README, Latency).")
+@click.option("--markers", default=Lab.markers, show_default=True,
+              help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
+@click.option("--marker-pitch", type=finite_float(0, min_open=True, unit="mm"),
+              default=Lab.marker_pitch_mm, show_default=True, help="A grid's pitch (mm).")
+@click.option("--size", type=SIZE_MM, default=Lab.size_mm, show_default=True,
+              help="The twin lab's phantom footprint LxW (mm).")
+@click.option("--mocap-rate", type=finite_float(0, min_open=True, unit="Hz"),
+              default=Lab.mocap_rate_hz, show_default=True, help="The twin lab's mocap rate.")
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
-         device: str, jobs: int | None, no_tip_offsets: bool, seed: int) -> None:
+         device: str, jobs: int | None, no_tip_offsets: bool, markers: str,
+         marker_pitch: float, size: tuple[float, float], mocap_rate: float, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
-    Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5),
-    session.mcap, session_synced.h5, session_states.h5 and splits.json (ingest, sync, extract,
-    split); calibration/ and calibration_*.h5 (a second recording of the same phantom, other
-    presses) and msm_params.json (fit-msm on it); msm.h5 and msm_splits.json (the fitted MSM
-    sampled at the markers' layout, split); runs/msm (pre-training), runs/exp_tl_* and
-    runs/exp_notl_* (fine-tuning per fold with transfer learning and the same from scratch);
+    Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
+    --markers, --size and --mocap-rate make it another lab's phantom), session.mcap,
+    session_synced.h5, session_states.h5 and splits.json (ingest, sync, extract, split);
+    per fold msm/foldK/ (params.json: fit-msm on that fold's training presses only; msm.h5
+    and splits.json: that MSM, sized to the footprint, sampled at the markers' layout) and
+    runs/msm_foldK (pre-training on it); runs/exp_tl_* and runs/exp_notl_* (fine-tuning per
+    fold with transfer learning and the same from scratch);
     metrics.json/.md (eval, beside the no-learning references), scarcity/ (the data-scarcity
     study), a rerun recording beside each, and a summary against the targets. Without
     --quick it follows the paper's settings (hours on a CPU; uses a GPU when there is one).
@@ -63,8 +73,9 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     settings = SMOKE if smoke else QUICK if quick else PAPER
     jobs = jobs or (1 if _on_gpu(device) else _cores())
     started = time.perf_counter()
+    lab = Lab(markers, marker_pitch, "x".join(f"{v * 1e3:g}" for v in size), mocap_rate)
     steps = demo_steps(out, seed, settings, device,
-                       PAPER_NETWORK if no_tip_offsets else RECIPE)
+                       PAPER_NETWORK if no_tip_offsets else RECIPE, lab)
     for batch in _batches(steps):
         _run_batch(ctx, batch, force, jobs)
     missed = summary(out, time.perf_counter() - started, quick=quick)
@@ -89,10 +100,10 @@ def _cores() -> int:
 
 
 def _batches(steps: list[Step]) -> list[list[Step]]:
-    """Consecutive parallel steps together; every other step alone."""
+    """Consecutive parallel steps of one batch together; every other step alone."""
     out: list[list[Step]] = []
     for step in steps:
-        if step.parallel and out and out[-1][-1].parallel:
+        if step.parallel and out and out[-1][-1].parallel and out[-1][-1].batch == step.batch:
             out[-1].append(step)
         else:
             out.append([step])
@@ -101,10 +112,11 @@ def _batches(steps: list[Step]) -> list[list[Step]]:
 
 def _run_batch(ctx: click.Context, batch: list[Step], force: bool, jobs: int) -> None:
     """Run the stale steps of a batch: in this process, or ``jobs`` subprocesses at a time."""
-    stale = []
+    stale: list[Step] = []
     for step in batch:
         line = f"\n$ pipeline {shlex.join(step.args)}"
-        if not force and is_fresh(step.args, step.inputs, step.outputs):
+        upstream_stale = not _ready(step, stale)    # it reads what a stale step rewrites
+        if not force and not upstream_stale and is_fresh(step.args, step.inputs, step.outputs):
             click.echo(f"{line}\n  (unchanged since its last run: skipped)", err=True)
         else:
             stale.append(step)
@@ -127,16 +139,26 @@ def _clean(step: Step) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
+def _ready(step: Step, pending: list[Step]) -> bool:
+    """Whether no pending step (waiting or running) writes one of ``step``'s inputs."""
+    return not any(set(step.inputs) & set(other.outputs) for other in pending)
+
+
 def _run_side_by_side(steps: list[Step], jobs: int) -> None:
-    """``pipeline -q ARGS`` of each step in subprocesses, ``jobs`` at a time, one thread each;
-    a failing step stops the demo with its own message and exit status."""
+    """``pipeline -q ARGS`` of each step in subprocesses, ``jobs`` at a time, one thread each,
+    the first step in order whose inputs are written starting as soon as a slot is free; a
+    failing step stops the demo with its own message and exit status."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     waiting, running = list(steps), []
     tic = time.perf_counter()
-    click.echo(f"\n$ ({len(steps)} runs, {jobs} at a time)", err=True)
+    click.echo(f"\n$ ({len(steps)} runs, {jobs} at a time, each as its inputs are ready)",
+               err=True)
     while waiting or running:
-        while waiting and len(running) < jobs:
-            step = waiting.pop(0)
+        pending = waiting + [r[0] for r in running]
+        ready = [s for s in waiting if _ready(s, [p for p in pending if p is not s])]
+        while ready and len(running) < jobs:
+            step = ready.pop(0)
+            waiting.remove(step)
             click.echo(f"  $ pipeline {shlex.join(step.args)}", err=True)
             _clean(step)
             log = tempfile.TemporaryFile(mode="w+")

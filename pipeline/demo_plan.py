@@ -1,22 +1,24 @@
 """What ``pipeline demo`` runs: every stage's command line, its inputs and its outputs.
 
-The protocol, as a lab would run it:
+The protocol, as a lab with only its presses would run it:
 
-1. the session: synth -> ingest -> sync -> extract -> split (5 folds of 20 presses);
-2. a calibration recording of the same phantom (other presses: 3 places x 2) -> extract ->
-   ``fit-msm``: the MSM's constants are fitted to this phantom, on presses that no fold tests;
-3. ``simulate --params --layout``: the fitted MSM sampled at the markers' layout, the tip as
-   the 26th point, loads inside the markers' footprint: the graph the network is fine-tuned on;
-4. pre-training on it, then per fold fine-tuning with transfer learning (``--init``) and the
-   same training from scratch (the baseline);
+1. the session: synth -> ingest -> sync -> extract -> split (5 folds of 20 presses); the twin's
+   lab knobs (:class:`Lab`: markers, footprint, mocap rate) make it another lab's phantom;
+2. per fold, ``fit-msm --splits --fold``: the MSM's constants fitted to this phantom on that
+   fold's training presses only (no test press is ever fitted);
+3. per fold, ``simulate --params --layout``: that fitted MSM, sized to the lab's footprint,
+   sampled at its markers (the tip the last point), loads inside the markers' footprint;
+4. per fold, pre-training on it; then fine-tuning with transfer learning (``--init``) from
+   that fold's pre-trained model, and the same training from scratch (the baseline);
 5. eval: Table 2 with the no-learning references, and the data-scarcity study (1..4 training
    presses, with and without transfer learning, beside the references) on a few folds.
 
-Steps marked ``parallel`` do not depend on each other (the fine-tuning runs, the scarcity
-runs' folds) and may run side by side (``demo --jobs``).
+Steps marked ``parallel`` with the same ``batch`` may run side by side (``demo --jobs``), each
+as soon as the steps of its batch that write its inputs are done: every fold's fit, MSM,
+pre-training and fine-tuning (:data:`FOLDS`), the scarcity runs' folds.
 
-Settings: ``quick`` (under 5 minutes on 2 CPU cores), the paper's (the full MSM set, 250
-epochs, batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
+Settings: ``quick`` (minutes on 2 CPU cores), the paper's (the full MSM set, 250 epochs,
+batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ class Step:
     inputs: tuple[Path, ...]
     outputs: tuple[Path, ...]
     clean: tuple[Path, ...] = ()     # removed before a stale step runs again (a run folder)
-    parallel: bool = False           # independent of the parallel steps next to it
+    parallel: bool = False           # independent of the parallel steps of its batch
+    batch: str = ""                  # the parallel steps that may run side by side
 
 
 @dataclass(frozen=True)
@@ -51,7 +54,7 @@ class Settings:
     scarcity_folds: int = 2          # folds of the data-scarcity study
     scarcity_groups: int = 4         # training presses 1..this in the study
     batch: int = 32
-    fit_sequences: int = 6           # calibration presses fitted
+    fit_sequences: int = 6           # training presses fitted per fold
 
 
 # The recipe the measurements support (README, "Training that learns"): tip offsets, the
@@ -60,76 +63,102 @@ RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99")
 # The same without tip offsets: the paper's network, which a predictor pressing one mesh again
 # runs far faster (its graph layers do not read the press), for some accuracy (README).
 PAPER_NETWORK = tuple(a for a in RECIPE if a != "--tip-offsets")
-QUICK = Settings(msm_locations=60, msm_directions=4, pretrain_epochs=40, finetune_epochs=80,
-                 lr=2e-3)
+# quick: per fold a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on
+# 3 training presses: five folds' fits, MSM sets and pre-training cost about twice what the
+# former single calibration fit did (measured: README, "pipeline demo")
+QUICK = Settings(msm_locations=16, msm_directions=3, pretrain_epochs=80, finetune_epochs=80,
+                 lr=2e-3, fit_sequences=3)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
                  pretrain_epochs=250, finetune_epochs=250, lr=1e-4, scarcity_folds=5,
                  scarcity_groups=12, fit_sequences=10)
 # Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
                  lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2)
-CALIBRATION_SEED = 7919          # added to --seed: the calibration presses are other presses
+
+
+@dataclass(frozen=True)
+class Lab:
+    """The twin's lab knobs (``pipeline synth`` options): whose phantom the demo runs on."""
+
+    markers: str = "5x5"             # RxC grid, or scattered:N
+    marker_pitch_mm: float = 20.0    # of a grid
+    size_mm: str = "100x100"         # the footprint LxW
+    mocap_rate_hz: float = 500.0
+
+    def synth_args(self) -> tuple[str, ...]:
+        """The synth options that make this lab (none for the default one)."""
+        default = Lab()
+        pairs = [("--markers", self.markers, default.markers),
+                 ("--marker-pitch", f"{self.marker_pitch_mm:g}", f"{default.marker_pitch_mm:g}"),
+                 ("--size", self.size_mm, default.size_mm),
+                 ("--mocap-rate", f"{self.mocap_rate_hz:g}", f"{default.mocap_rate_hz:g}")]
+        return tuple(a for opt, v, d in pairs if v != d for a in (opt, v))
+
+FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
 
 # Fine-tuning variants on the twin's states: transfer learning from the MSM run, and the
 # same training from scratch (the baseline).
 VARIANTS: tuple[str, ...] = ("tl", "notl")
 
 
-def session_steps(out: Path, name: str, seed: int, places: int, repeats: int) -> list[Step]:
+def session_steps(out: Path, name: str, seed: int, places: int, repeats: int,
+                  lab: Lab = Lab()) -> list[Step]:
     """synth -> ingest -> sync -> extract of one twin session: ``out/NAME/`` (the lab files),
     NAME.mcap, NAME_synced.h5 and NAME_states.h5 beside it."""
     sd = ("--seed", str(seed))
     ses, mcap = out / name, out / f"{name}.mcap"
     synced, states = out / f"{name}_synced.h5", out / f"{name}_states.h5"
     return [
-        Step(("synth", str(ses), *sd, "--locations", str(places), "--repeats", str(repeats)),
-             (), (ses,)),
+        Step(("synth", str(ses), *sd, "--locations", str(places), "--repeats", str(repeats),
+              *lab.synth_args()), (), (ses,)),
         Step(("ingest", str(ses), "--out", str(mcap)), (ses,), (mcap,)),
         Step(("sync", str(mcap), "--out", str(synced)), (mcap,), (synced,)),
         Step(("extract", str(synced), "--out", str(states), *sd), (synced,), (states,)),
     ]
 
 
+def msm_dir(out: Path, fold: int) -> Path:
+    """Where fold ``fold``'s fitted MSM lives: params.json, msm.h5, splits.json."""
+    return out / "msm" / f"fold{fold}"
+
+
+def pretrain_dir(out: Path, fold: int) -> Path:
+    """Fold ``fold``'s pre-training run on its fitted MSM."""
+    return out / "runs" / f"msm_fold{fold}"
+
+
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
-               recipe: tuple[str, ...] = RECIPE) -> list[Step]:
+               recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab()) -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping).
     ``recipe``: the training flags every run shares (``RECIPE`` or ``PAPER_NETWORK``)."""
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
-    calib_states, fit = out / "calibration_states.h5", out / "msm_params.json"
-    msm, msm_splits, pre = out / "msm.h5", out / "msm_splits.json", out / "runs" / "msm"
-    steps = session_steps(out, "session", seed, 5, 4) + [
+    steps = session_steps(out, "session", seed, 5, 4, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
-    steps += session_steps(out, "calibration", seed + CALIBRATION_SEED, 3, 2)
-    steps += [
-        Step(("fit-msm", str(calib_states), "--out", str(fit), "--max-sequences",
-              str(s.fit_sequences), *sd), (calib_states,), (fit,)),
-        Step(("simulate", "--out", str(msm), "--params", str(fit), "--layout",
-              str(calib_states), "--locations", str(s.msm_locations), "--directions",
-              str(s.msm_directions), "--max-angle", "20", *sd), (fit, calib_states), (msm,)),
-        Step(("split", str(msm), "--out", str(msm_splits), "--folds", "1", *sd), (msm,),
-             (msm_splits,)),
-    ]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe, *sd)
-    steps.append(Step(("train", "--data", str(msm), "--splits", str(msm_splits), "--out",
-                       str(pre), "--epochs", str(s.pretrain_epochs), *train),
-                      (msm, msm_splits), (pre / "best.pt",), (pre,)))
+    folds = range(s.folds)
+    steps += [_fit_step(out, fold, states, splits, s, sd) for fold in folds]
+    steps += [_simulate_step(out, fold, states, s, sd) for fold in folds]
+    steps += [_msm_split_step(out, fold, sd) for fold in folds]
+    steps += [_pretrain_step(out, fold, s, train) for fold in folds]
     runs = []
-    for fold in range(s.folds):
+    for fold in folds:
         for tag in VARIANTS:
             run = out / "runs" / f"exp_{tag}_fold{fold}"
             runs.append(run)
-            init = ("--init", str(pre / "best.pt")) if tag == "tl" else ()
-            inputs = (states, splits) + ((pre / "best.pt",) if init else ())
+            pre = pretrain_dir(out, fold) / "best.pt"
+            init = ("--init", str(pre)) if tag == "tl" else ()
+            inputs = (states, splits) + ((pre,) if init else ())
             steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
                                "--fold", str(fold), "--out", str(run), "--epochs",
                                str(s.finetune_epochs), *init, *train), inputs,
-                              (run / "best.pt",), (run,), parallel=True))
+                              (run / "best.pt",), (run,), parallel=True, batch=FOLDS))
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
-    steps.append(Step(("eval", *map(str, runs), str(pre), "--out", str(out / "metrics.json")),
-                      (pre / "best.pt", *(r / "best.pt" for r in runs)),
-                      (out / "metrics.json",)))
+    pres = [pretrain_dir(out, fold) for fold in folds]
+    steps.append(Step(("eval", *map(str, runs), *map(str, pres), "--out",
+                       str(out / "metrics.json")),
+                      tuple(r / "best.pt" for r in runs + pres), (out / "metrics.json",)))
     for fold in range(s.scarcity_folds):
         run = out / "runs" / f"exp_tl_fold{fold}"
         result = out / "scarcity" / f"fold{fold}.json"
@@ -137,5 +166,40 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                            "--scarcity-groups", str(s.scarcity_groups), "--no-rrd",
                            "--device", "cuda" if device == "cuda" else "cpu"),
                           (run / "best.pt",), (result,), (result.parent / f"fold{fold}"
-                                                          ".scarcity_runs",), parallel=True))
+                                                          ".scarcity_runs",),
+                          parallel=True, batch="scarcity"))
     return steps
+
+
+def _fit_step(out: Path, fold: int, states: Path, splits: Path, s: Settings,
+              sd: tuple[str, ...]) -> Step:
+    """fit-msm on fold ``fold``'s training presses."""
+    params = msm_dir(out, fold) / "params.json"
+    return Step(("fit-msm", str(states), "--splits", str(splits), "--fold", str(fold),
+                 "--out", str(params), "--max-sequences", str(s.fit_sequences), "--workers", "1",
+                 *sd),
+                (states, splits), (params,), parallel=True, batch=FOLDS)
+
+
+def _simulate_step(out: Path, fold: int, states: Path, s: Settings,
+                   sd: tuple[str, ...]) -> Step:
+    """The fold's fitted MSM, sized to the footprint, sampled at the lab's markers."""
+    d = msm_dir(out, fold)
+    return Step(("simulate", "--out", str(d / "msm.h5"), "--params", str(d / "params.json"),
+                 "--layout", str(states), "--locations", str(s.msm_locations), "--directions",
+                 str(s.msm_directions), "--max-angle", "20", "--workers", "1", *sd),
+                (d / "params.json", states), (d / "msm.h5",), parallel=True, batch=FOLDS)
+
+
+def _msm_split_step(out: Path, fold: int, sd: tuple[str, ...]) -> Step:
+    d = msm_dir(out, fold)
+    return Step(("split", str(d / "msm.h5"), "--out", str(d / "splits.json"), "--folds", "1",
+                 *sd), (d / "msm.h5",), (d / "splits.json",), parallel=True, batch=FOLDS)
+
+
+def _pretrain_step(out: Path, fold: int, s: Settings, train: tuple[str, ...]) -> Step:
+    d, run = msm_dir(out, fold), pretrain_dir(out, fold)
+    return Step(("train", "--data", str(d / "msm.h5"), "--splits", str(d / "splits.json"),
+                 "--out", str(run), "--epochs", str(s.pretrain_epochs), *train),
+                (d / "msm.h5", d / "splits.json"), (run / "best.pt",), (run,), parallel=True,
+                batch=FOLDS)

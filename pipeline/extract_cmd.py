@@ -7,30 +7,19 @@ from typing import TYPE_CHECKING
 
 import click
 
-from core.protocol import FOOTPRINT_M, STEP_N
+from core.protocol import STEP_N
 from core.text import count
-from pipeline.options import finite_float, resolve_rrd, rrd_option, seed_option
+from pipeline.options import SIZE_MM, finite_float, resolve_rrd, rrd_option, seed_option
 
 if TYPE_CHECKING:
     from extract.extract import Extracted
-
-
-def _size(text: str) -> tuple[float, float]:
-    try:
-        w, h = (float(v) for v in text.lower().split("x")[:2])
-    except ValueError:
-        raise click.BadParameter(
-            f"expected WIDTHxLENGTH in mm, e.g. 100x100, got {text!r}") from None
-    if not (w > 0 and h > 0):
-        raise click.BadParameter(f"sizes must be positive, got {text!r}")
-    return w * 1e-3, h * 1e-3
 
 
 @click.command()
 @click.argument("synced", nargs=-1, required=True,
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="States file to write (schema phantom.states 2.0).")
+              help="States file to write (schema phantom.states 2.1).")
 @click.option("--step", type=finite_float(min=0, min_open=True, unit="N"), default=STEP_N,
               show_default=True,
               help="Force level spacing, N: at least 3 x the force noise sync measured (and "
@@ -39,36 +28,38 @@ def _size(text: str) -> tuple[float, float]:
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
 @click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True), default=20.0,
               show_default=True, help="Frames within this of a level's instant are fitted.")
-@click.option("--phantom-size", default="x".join(f"{v * 1e3:g}" for v in FOOTPRINT_M),
-              show_default=True,
-              help="Phantom footprint WIDTHxLENGTH in mm (the marker grid is centred on it).")
+@click.option("--phantom-size", type=SIZE_MM, default=None,
+              help="Phantom footprint LxW in mm, overriding session.toml's [phantom] size_mm "
+                   "(which sync keeps in the synced file; default 100x100).")
 @click.option("--shared-locations", is_flag=True,
               help="The synced files' location ids name the same places in every session.")
 @seed_option
 @rrd_option
 def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float | None,
-            half_window_ms: float, phantom_size: str, shared_locations: bool, seed: int,
+            half_window_ms: float, phantom_size: tuple[float, float] | None,
+            shared_locations: bool, seed: int,
             rrd: Path | None, no_rrd: bool) -> None:
     """Extract static states every --step N from synced presses, with training examples.
 
-    Reads SYNCED files (from `pipeline sync`). In each press's loading phase, takes the 26
-    points (25 markers + tip) and the force at the instant the force first reaches each level
-    (k = 0: the surface just before contact), from a line fitted over the frames around it;
-    moves them into the phantom frame (rest surface z = 0, +z out, footprint from
-    --phantom-size); builds single-step (t -> t+1) and multi-step examples (15 random pairs at
-    least two levels apart per press, seeded). Writes --out (HDF5 phantom.states 2.0) and a rerun
-    recording of the levels on each force curve and the states in 3D (--rrd, default beside
-    --out). Presses whose force sync flagged as saturated (gauge on the amplifier's rail) or
-    beyond the sensor's rated load are left out whole. Excluded presses and dropped states
+    Reads SYNCED files (from `pipeline sync`). In each press's loading phase, takes the
+    points (the N phantom markers, then the tip) and the force at the instant the force
+    first reaches each level (k = 0: the surface just before contact), from a line fitted
+    over the frames around it; moves them into the phantom frame (rest surface z = 0, +z
+    out, the footprint and in-plane axis from session.toml's [phantom] layout, which the
+    synced file carries); builds single-step (t -> t+1) and multi-step examples (15 random
+    pairs at least two levels apart per press, seeded). Writes --out (HDF5 phantom.states
+    2.1, with the point names and the footprint) and a rerun recording of the levels on each
+    force curve and the states in 3D (--rrd, default beside --out). Presses whose force sync
+    flagged as saturated (gauge on the amplifier's rail) or beyond the sensor's rated load
+    are left out whole. Excluded presses and dropped states
     are counted in the file and printed.
     """
     from extract.extract_stage import run_extract
     from extract.static_states import ExtractParams
 
-    size = _size(phantom_size)
     params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    ex = run_extract(synced, out, rrd_path, params, seed, size, shared_locations)
+    ex = run_extract(synced, out, rrd_path, params, seed, phantom_size, shared_locations)
     a = ex.arrays
     presses = len(set(a["states/sequence"].tolist()))
     left = _left_out(ex)

@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import bounded_int, finite_float, resolve_rrd, rrd_option, seed_option
+from pipeline.options import (
+    SPACING_MM,
+    bounded_int,
+    finite_float,
+    resolve_rrd,
+    rrd_option,
+    seed_option,
+)
 from sim.msm import paper
 
 OUT = click.Path(dir_okay=False, path_type=Path)
@@ -30,24 +37,30 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Share the load among the masses within this radius (m) of the tip "
                    "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "
                    "own].")
+@click.option("--spacing-mm", "spacing_mm", type=SPACING_MM, default=None,
+              help="Lab states: the masses' spacing in mm, rounded per axis so the grid covers "
+                   "the states' footprint_m exactly [default: the paper's 100/31 = 3.226 mm]. "
+                   "An MSM file brings its own grid.")
 @click.option("--workers", type=bounded_int(0), default=0,
               help="Processes sharing the sequences (default: the cores this process may use).")
 @seed_option
 @rrd_option
 def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
             fold: int, start: tuple[float, float], contact_radius: float | None,
-            workers: int, seed: int, rrd: Path | None, no_rrd: bool) -> None:
+            spacing_mm: float | None, workers: int, seed: int, rrd: Path | None,
+            no_rrd: bool) -> None:
     """Fit the MSM spring constants to measured states (as the paper found 100 and 21 N/m).
 
-    Reads STATES (a phantom.states file: extracted lab states or MSM states; with --splits,
-    its fold manifest). Finds (k_between, k_fixed) in [1, 1e5] N/m minimising the mean
-    distance between the measured points and the MSM's static response to the measured loads,
-    in the phantom frame (see sim/msm/msm_fit.py). Prints the constants, the distance beside
-    the start constants' and a still surface's (pooled and per press), and says when a
-    constant ends on a bound. Writes --out (when given): the constants, the distances and the
-    full MSM parameters as JSON (phantom.msm_params, read by `pipeline simulate --params`),
-    and a rerun recording of the fitted MSM beside the measured markers (--rrd, default
-    beside --out).
+    Reads STATES (a phantom.states file: extracted lab states or MSM states; with --splits, its
+    fold manifest). Finds (k_between, k_fixed) in [1, 1e5] N/m minimising the mean distance
+    between the measured points and the MSM's static response to the measured loads, in the
+    phantom frame (see sim/msm/msm_fit.py), on a grid covering the lab states' footprint_m at
+    the paper's mass spacing (the paper's 100 mm square where they have none; an MSM file's own
+    grid). Prints the constants, the distance beside the start constants' and a still surface's
+    (pooled and per press), and says when a constant ends on a bound. Writes --out (when given):
+    the constants, the distances and the full MSM parameters (the grid included) as JSON
+    (phantom.msm_params, read by `pipeline simulate --params`), and a rerun recording of the
+    fitted MSM beside the measured markers (--rrd, default beside --out).
     """
     from sim.msm.fit_msm_stage import run_fit_msm
     from sim.msm.workers import default_workers
@@ -55,7 +68,8 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | N
     rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None
     result = run_fit_msm(states, out, rrd_path, splits=splits, fold=fold,
                          max_sequences=max_sequences, seed=seed, start=start,
-                         contact_radius=contact_radius, workers=workers or default_workers())
+                         contact_radius=contact_radius, workers=workers or default_workers(),
+                         spacing=None if spacing_mm is None else spacing_mm * 1e-3)
     click.echo(fit_summary(result) + (f"\nwrote {out}" if out else "")
                + (f", {rrd_path}" if rrd_path else ""))
 
@@ -65,7 +79,7 @@ def fit_summary(result) -> str:  # noqa: ANN001 - FitResult, imported lazily
     mm = 1e3
     lines = [f"k_between {result.k_between:.4g} N/m, k_fixed {result.k_fixed:.4g} N/m "
              f"(contact radius {result.contact_radius_m * mm:g} mm) over {result.states} states "
-             f"of {result.sequences} sequences",
+             f"of {result.sequences} sequences" + (f", on {result.grid}" if result.grid else ""),
              f"mean distance {result.mean_distance_m * mm:.3f} mm; start constants "
              f"{result.start_distance_m * mm:.3f} mm; still surface "
              f"{result.still_distance_m * mm:.3f} mm "

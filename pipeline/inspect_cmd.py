@@ -15,8 +15,10 @@ def inspect(file: Path, as_json: bool) -> None:
     """Summarise FILE: format, frames, rate, marker/body/channel names, missing samples, units,
     schema version and provenance.
 
-    Reads any lab file (QTM TSV 3D/6D, C3D, QTM MAT, force log CSV/MAT/Parquet, ATI .cal) and
-    any file the pipeline writes (raw MCAP, HDF5 outputs, JSON manifests, .rrd recordings).
+    Reads any lab file (QTM TSV 3D/6D, QTM analog and force-plate TSV, C3D, QTM MAT, force
+    logs: CSV in any common dialect, ATI DAQ F/T and Net F/T CSV, Simulink/Speedgoat MAT arrays
+    and structs v4/v7/v7.3, Parquet; ATI .cal; a session.toml beside a log says how to read it)
+    and any file the pipeline writes (raw MCAP, HDF5 outputs, JSON manifests, .rrd recordings).
     Writes nothing; prints text, or with --json one JSON object whose keys are the same for
     every format (null where a key does not apply).
     """

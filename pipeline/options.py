@@ -171,6 +171,35 @@ def bounded_int(min: int | None = None, max: int | None = None,  # noqa: A002
     return BoundedInt(min, max, unit, why)
 
 
+MAX_SIZE_MM = 2000.0     # no phantom pressed by hand is larger (and the states file's limit
+                         # of plausible metres is 5 m)
+
+
+class SizeMM(click.ParamType):
+    """A footprint ``LxW`` in mm (e.g. ``150x80``), as metres; anything else one line."""
+
+    name = "LxW"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> tuple[float, float]:
+        """``value`` as (L, W) in m, or BadInput naming the option and what is wrong."""
+        if isinstance(value, tuple):
+            return value
+        parts = str(value).lower().split("x")
+        try:
+            sizes = [float(v) for v in parts]
+        except ValueError:
+            sizes = []
+        if len(sizes) != 2 or not all(math.isfinite(v) and 0 < v <= MAX_SIZE_MM for v in sizes):
+            raise BadInput(None, f"{_option_name(param)} {value!r}: expected LxW, two lengths "
+                                 f"in mm (0, {MAX_SIZE_MM:g}], e.g. 150x80")
+        return sizes[0] * 1e-3, sizes[1] * 1e-3
+
+
+SIZE_MM = SizeMM()
+SPACING_MM = FiniteFloat(0, 100, min_open=True, unit="mm")    # the MSM's masses' spacing
+
+
 def _option_name(param: click.Parameter | None) -> str:
     """The option as the user typed it (``--lr``), or the argument's name."""
     if param is None:

@@ -8,7 +8,15 @@ from pathlib import Path
 import click
 
 from core.protocol import THICKNESS_M
-from pipeline.options import bounded_int, finite_float, resolve_rrd, rrd_option, seed_option
+from pipeline.options import (
+    SIZE_MM,
+    SPACING_MM,
+    bounded_int,
+    finite_float,
+    resolve_rrd,
+    rrd_option,
+    seed_option,
+)
 from sim.msm import paper
 
 OUT = click.Path(dir_okay=False, path_type=Path)
@@ -30,7 +38,14 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
               default=paper.FMAX_N,
               show_default=True,
               help="Largest force (N). Refused when it drives the MSM deeper than its surface "
-                   "is wide (100 mm); states deeper than --thickness are counted.")
+                   "is wide (its narrower side); states deeper than --thickness are counted.")
+@click.option("--size", type=SIZE_MM, default=None,
+              help="The surface's footprint LxW in mm (along x by y, e.g. 150x80) "
+                   "[default: the --layout states' footprint_m, else the --params fit's grid, "
+                   "else the paper's 100x100].")
+@click.option("--spacing-mm", "spacing_mm", type=SPACING_MM, default=None,
+              help="The masses' spacing in mm, rounded per axis so the grid covers the "
+                   "footprint exactly [default: the paper's 100/31 = 3.226 mm].")
 @click.option("--k-between", type=SPRING, default=paper.K_BETWEEN, show_default=True,
               help="Between-mass spring constant (N/m).")
 @click.option("--k-fixed", type=SPRING, default=paper.K_FIXED, show_default=True,
@@ -42,15 +57,17 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
 @click.option("--params", "params_file", type=IN, default=None,
               help="Spring constants and contact radius from `pipeline fit-msm --out` "
                    "(phantom.msm_params JSON): overrides --k-between, --k-fixed and "
-                   "--contact-radius.")
+                   "--contact-radius, and brings the grid they were fitted on (a --size, "
+                   "--spacing-mm or --layout footprint asking for another is refused).")
 @click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
               default=0.0, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
                    "one: the indenter's contact patch (0: one mass, the paper's n_n = 1).")
 @click.option("--layout", type=IN, default=None,
-              help="Lab states file (from `pipeline extract`): sample the MSM at its markers' "
-                   "rest positions, with the loaded patch's centre as the tip (the last "
-                   "point), and load only inside the markers' footprint: the graph the "
+              help="Lab states file (from `pipeline extract`): size the surface to its "
+                   "footprint_m, sample the MSM at its markers' rest positions (any number, "
+                   "named by its point_names), with the loaded patch's centre as the tip (the "
+                   "last point), and load only inside the markers' bounding box: the graph the "
                    "network is fine-tuned on.")
 @click.option("--max-angle", type=finite_float(0, 90, unit="deg"), default=paper.MAX_ANGLE_DEG,
               show_default=True,
@@ -75,20 +92,24 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
 @seed_option
 @rrd_option
 def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float,
+             size: tuple[float, float] | None, spacing_mm: float | None,
              k_between: float, k_fixed: float, thickness: float, params_file: Path | None,
              contact_radius: float, layout: Path | None, max_angle: float, tol: float,
              workers: int, shard: str | None, merge: bool, rrd_sequences: int,
              shards: tuple[Path, ...], seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Generate the paper's mass-spring-model (MSM) training states.
 
-    Reads nothing (or, with --merge, the SHARDS files). Writes --out, a phantom.states HDF5
-    file laid out like extracted lab states: states/points (S, 1024, 3) in m, tip (the loaded
-    mass), force, force_vector, step, sequence (= location * directions + direction),
-    location; single-step examples (t, t+1) and 15 random multi-step pairs per sequence; root
-    attributes source="msm", msm_params, protocol, solver, max_residual_N and
-    stored_residual_N. Each state is the static equilibrium of the surface MSM (32 x 32
-    masses over 100 x 100 mm, 100 and 21 N/m) solved directly to --tol, not by explicit
-    integration (max_residual_N: the largest force left on any mass of any state). Points are
+    Reads nothing (or --params, --layout; with --merge, the SHARDS files). Writes --out, a
+    phantom.states HDF5 file laid out like extracted lab states: states/points (S, N, 3) in m
+    (every mass, or with --layout the lab's markers then the tip), tip (the loaded mass),
+    force, force_vector, step, sequence (= location * directions + direction), location;
+    single-step examples (t, t+1) and 15 random multi-step pairs per sequence; root attributes
+    source="msm", msm_params (the grid too), footprint_m, protocol, solver, max_residual_N and
+    stored_residual_N (with --layout also layout and point_names). Each state is the static
+    equilibrium of the surface MSM (the paper's: 32 x 32 masses over 100 x 100 mm, 100 and
+    21 N/m; any LxW footprint at the paper's mass spacing with --size or --layout) solved
+    directly to --tol, not by explicit integration (max_residual_N: the largest force left on
+    any mass of any state). Points are
     stored as float32: their ~1e-8 m quantisation leaves ~1e-6 to 1e-5 N on a mass
     (stored_residual_N), a floor no --tol lowers. Also writes a rerun recording of a few
     sequences (--rrd, default beside --out). The surface has no floor: states whose tip goes
@@ -123,7 +144,8 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
                                                               k_fixed=k_fixed),
                            tol=tol, workers=n_workers, shard=shard, layout=layout,
                            params_file=params_file, rrd_sequences=rrd_sequences,
-                           thickness=thickness)
+                           thickness=thickness, size=size,
+                           spacing=None if spacing_mm is None else spacing_mm * 1e-3)
         sim = run.sim
         what = (f"simulated {len(sim.locations)} locations with {n_workers} workers "
                 f"(max residual {sim.max_residual:.2g} N solved, "

@@ -25,7 +25,7 @@ def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str 
           seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Split a states file into k folds of train/val/test examples, grouped.
 
-    Reads STATES (phantom.states 2.0, from `pipeline extract` or `pipeline simulate`). Writes
+    Reads STATES (phantom.states 2.x, from `pipeline extract` or `pipeline simulate`). Writes
     --out: per fold the group ids and the single-/multi-step example ids of each role, nested
     training subsets of 1..n groups (data-scarcity study), the states file's name and sha256
     (trainers refuse a manifest whose data changed), and a rerun recording of the fold roles on

@@ -48,10 +48,12 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     a lock that fails is refused. Frames made of gauge voltages on the amplifier's rail (the
     .cal's OutputRange) or beyond the sensor's rated load are flagged and counted; extract
     leaves their presses out. Writes --out (HDF5:
-    per press the time, 25 phantom markers + tip, force vector and magnitude, tip depth and
-    quality flags; the calibration results and their uncertainty; provenance) and a rerun
-    recording of the alignment and the tip (--rrd, default beside --out). Nothing is written
-    on bad input.
+    per press the time, the phantom markers + tip, force vector and magnitude, tip depth and
+    quality flags; the calibration results and their uncertainty; session.toml's [phantom]
+    layout, for extract; provenance) and a rerun recording of the alignment and the tip
+    (--rrd, default beside --out). Any number (>= 4) of phantom markers; a curved phantom
+    (markers more than 1 mm RMS off their rest plane) is refused. Nothing is written on bad
+    input.
     """
     from sync.sync_params import SyncParams
     from sync.sync_stage import run_sync

@@ -37,22 +37,36 @@ from pipeline.options import resolve_rrd, rrd_option, seed_option
               help="The force file session.toml names: csv (default) or mat with --force-via "
                    "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
                    "file) with --force-via analog. Both of a route are written.")
+@click.option("--markers", default="5x5", show_default=True,
+              help="Phantom markers: a grid RxC (R rows along +x, C markers each, centred, "
+                   "named row-major P00, P01, ...) or scattered:N (N markers at random "
+                   "lattice nodes, at least 10 mm apart and 10 mm inside the edges; P00 -> P01 "
+                   "along +x, written to session.toml as [phantom] x_axis and anchor).")
+@click.option("--marker-pitch", "marker_pitch_mm", type=float, default=20.0, show_default=True,
+              help="Distance between neighbouring grid markers in mm (at least 10).")
+@click.option("--size", default="100x100", show_default=True,
+              help="The block's footprint LxW in mm (L along +x; 40 to 300 each; 32 mm thick).")
+@click.option("--mocap-rate", "rate_hz", type=float, default=500.0, show_default=True,
+              help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
+                   "analog needs a rate that divides 1000).")
 @click.option("--view-press", type=click.IntRange(0), default=0, show_default=True,
               help="Press shown in the rerun recording.")
 @seed_option
 @rrd_option
 def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | None,
           pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,
-          force_via: str, force_file: str | None, view_press: int, seed: int, rrd: Path | None,
+          force_via: str, force_file: str | None, markers: str, marker_pitch_mm: float,
+          size: str, rate_hz: float, view_press: int, seed: int, rrd: Path | None,
           no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
-    Reads nothing. Writes OUT_DIR: session.toml; indentation.tsv and indentation_6D.tsv (QTM
-    TSV 3D of 25 phantom + 4 indenter markers and 6D of the body 'Indenter', 500 Hz, noise and
-    gaps); pivot.tsv (QTM TSV 3D, the tip in a divot); force.csv and force.mat (Speedgoat log
-    at 1 kHz on its own clock: six Nano17 gauge voltages with bias, and the trigger), or with
-    --force-via analog the same gauges at 1 kHz on the mocap clock in indentation.c3d (with
-    the markers) and indentation_a.tsv (QTM analog export);
+    Reads nothing. Writes OUT_DIR: session.toml (with the [phantom] table: the footprint, and
+    how the markers fix the phantom frame); indentation.tsv and indentation_6D.tsv (QTM TSV 3D
+    of the phantom markers, --markers, + 4 indenter markers and 6D of the body 'Indenter', at
+    --mocap-rate, noise and gaps); pivot.tsv (QTM TSV 3D, the tip in a divot); force.csv and
+    force.mat (Speedgoat log at 1 kHz on its own clock: six Nano17 gauge voltages with bias,
+    and the trigger), or with --force-via analog the same gauges at 1 kHz on the mocap clock in
+    indentation.c3d (with the markers) and indentation_a.tsv (QTM analog export);
     FT<serial>.cal (ATI calibration, SI-12-0.12); truth.h5 (noise-free markers and tip on the
     mocap clock, true force, clock offset and drift, tip offset, static states every 0.5 N);
     and a rerun recording of one press beside its truth (--rrd, default
@@ -69,7 +83,9 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
         out_dir, seed=seed, locations=locations, repeats=repeats, rrd=rrd_path,
         view_press=view_press, press_seconds=press_seconds,
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
-        force_file=force_file, force_via=force_via)
-    click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, seed {seed}, "
+        force_file=force_file, force_via=force_via, markers=markers,
+        marker_pitch_mm=marker_pitch_mm, size=size, rate_hz=rate_hz)
+    click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, {markers} "
+               f"markers on {size} mm at {rate_hz:g} Hz, seed {seed}, "
                f"in {time.perf_counter() - start:.1f} s"
                + (f"; recording {rrd_path}" if rrd_path else ""))

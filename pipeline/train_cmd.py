@@ -13,7 +13,7 @@ EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
 @click.command()
-@click.option("--data", required=True, type=EXISTING, help="States file (phantom.states 2.0).")
+@click.option("--data", required=True, type=EXISTING, help="States file (phantom.states 2.x).")
 @click.option("--splits", required=True, type=EXISTING,
               help="Fold manifest of that file (phantom.folds 2.0, from `pipeline split`).")
 @click.option("--fold", type=bounded_int(0), default=0, show_default=True)

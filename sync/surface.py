@@ -11,12 +11,16 @@ import numpy as np
 from core.errors import BadInput
 from sync.presses import Press
 
+# A flat phantom's markers rest within this of their plane (RMS): marker noise is ~0.1 mm and
+# the rest positions are medians; a dome or a limb is millimetres off.
+FLAT_RMS_M = 1e-3
+
 
 def rest_surface(phantom: np.ndarray, cluster: np.ndarray, tip: np.ndarray,
                  source: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """The phantom markers' rest plane (a point, the unit normal out of the phantom).
 
-    ``phantom`` (T, 25, 3) and ``cluster`` (T, M, 3) markers, ``tip`` (T, 3): the shaft from
+    ``phantom`` (T, N, 3) and ``cluster`` (T, M, 3) markers, ``tip`` (T, 3): the shaft from
     the tip to the cluster's centre stands above the surface, which orients the normal.
     """
     return rest_plane(phantom, mean_seen(cluster) - tip, source)
@@ -39,6 +43,7 @@ def rest_plane(phantom: np.ndarray, up: np.ndarray, source: str | Path
         raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
     centre = rest[ok].mean(axis=0)
     normal = np.linalg.svd(rest[ok] - centre)[2][2]
+    _check_flat(rest[ok], centre, normal, source)
     along = up @ normal
     along = along[np.isfinite(along)]
     if along.size == 0:
@@ -46,6 +51,19 @@ def rest_plane(phantom: np.ndarray, up: np.ndarray, source: str | Path
     if np.median(along) < 0:
         normal = -normal
     return centre, normal
+
+
+def _check_flat(rest: np.ndarray, centre: np.ndarray, normal: np.ndarray,
+                source: str | Path) -> None:
+    """Refuse a curved phantom: its markers' rest positions far off their best plane (depth and
+    the phantom frame are measured from that plane)."""
+    off = (rest - centre) @ normal
+    rms = float(np.sqrt(np.mean(off ** 2)))
+    if rms > FLAT_RMS_M:
+        raise BadInput(source, f"the phantom markers at rest lie {rms * 1e3:.2f} mm RMS (up to "
+                               f"{np.abs(off).max() * 1e3:.2f} mm) off their best plane, beyond "
+                               f"{FLAT_RMS_M * 1e3:g} mm: a curved phantom; the pipeline needs "
+                               "a flat one")
 
 
 def tip_depth(tip: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:

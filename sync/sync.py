@@ -3,7 +3,7 @@
 Steps, each in its own module of :mod:`sync`:
 
 1. the indenter cluster's shape and the tip offset from the pivot recording, the cluster's pose
-   in every trial frame and the tip it carries, the 26th point (:mod:`sync.tip_track`);
+   in every trial frame and the tip it carries, the last point (:mod:`sync.tip_track`);
 2. short marker gaps filled, longer ones kept missing and flagged (:mod:`sync.gaps`); the tip
    track low-passed (zero phase) against the lever arm's noise (:mod:`sync.smooth`); the tip
    depth below the phantom's rest plane (:mod:`sync.surface`);
@@ -34,6 +34,7 @@ import numpy as np
 
 from core.errors import BadInput
 from core.series import RawSession
+from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
 from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
@@ -77,6 +78,7 @@ class SyncResult:
     calibration: dict[str, Any]
     presses_cut_off: int = 0         # presses left out: cut off by the end of a recording
     rail_samples: int = 0            # force log samples with a gauge on the amplifier's rail
+    phantom: dict = field(default_factory=dict)   # the phantom's layout (data_schema.phantom)
     session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
 
 
@@ -145,7 +147,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
         clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,
         surface_point=surface_point, surface_normal=normal, location_centres=loc_centres,
         rate_hz=rate, calibration=calibration, presses_cut_off=cut_off, session=session,
-        rail_samples=int(rail.sum()),
+        rail_samples=int(rail.sum()), phantom=PhantomLayout.from_json(raw.phantom).as_json(),
     )
 
 

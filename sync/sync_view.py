@@ -8,7 +8,7 @@ camera frames the phantom. Entities:
 * ``depth/tip``: the tip's depth below the phantom's rest surface (mm; negative above it);
 * ``force_vs_depth``: a static plot image of force (N) over tip depth (mm), before and after:
   aligned, loading and unloading fall on one curve, unaligned they open a loop;
-* ``scene/surface``: the phantom's surface through its 25 markers as a wire mesh
+* ``scene/surface``: the phantom's surface through its markers as a wire mesh
   (LineStrips3D, 50 Hz), coloured by how far the markers have moved from their rest positions
   (viridis, range in the view's name);
   ``scene/phantom`` (blue) and ``scene/cluster`` (orange) markers, gap-filled samples yellow;

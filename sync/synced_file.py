@@ -35,7 +35,7 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
         "provenance": provenance, "source": source, "calibration": result.calibration,
         "quality_bits": QUALITY_BITS, "force_bits": FORCE_BITS,
         "units_length": "m", "units_force": "N", "units_time": "ns",
-        "rate_hz": result.rate_hz, "name": result.name,
+        "rate_hz": result.rate_hz, "name": result.name, "phantom": result.phantom,
         "calibration/force_bias/units": ",".join(result.calibration["force"]["units"]),
         **{f"calibration/{k}": v for k, v in _calibration_attrs(result).items()},
         "presses/cut_off": result.presses_cut_off,

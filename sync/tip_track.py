@@ -1,4 +1,4 @@
-"""The indenter tip in every mocap frame, the 26th point of a synced record.
+"""The indenter tip in every mocap frame, the last point of a synced record.
 
 The tip offset comes from the pivot recording (the cluster swung about the tip held in a
 divot); the cluster's pose is then fitted in every trial frame (3 of 4 markers suffice, robustly

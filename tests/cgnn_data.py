@@ -20,6 +20,7 @@ from split.split_stage import build_manifest, default_plan, write_manifest
 
 SIGMA = 0.015
 GRID = 7
+DENT_NAMES = [f"D{k:02d}" for k in range(GRID * GRID)]   # the dent file's point names
 
 
 def dent(rest: np.ndarray, tip_xy: np.ndarray, depth: float) -> np.ndarray:
@@ -32,7 +33,7 @@ def dent(rest: np.ndarray, tip_xy: np.ndarray, depth: float) -> np.ndarray:
 
 def write_dent_states(path: Path, places: int = 4, repeats: int = 2, steps: int = 5,
                       seed: int = 0) -> dict[str, np.ndarray]:
-    """A phantom.states 2.0 file of the dent model; returns its arrays."""
+    """A phantom.states 2.1 file of the dent model (points named); returns its arrays."""
     rng = np.random.default_rng(seed)
     g = (np.arange(GRID) + 0.5) / GRID * 0.1
     rest = np.stack([*np.meshgrid(g, g), np.zeros((GRID, GRID))], -1).reshape(-1, 3)
@@ -60,7 +61,8 @@ def write_dent_states(path: Path, places: int = 4, repeats: int = 2, steps: int 
         "multi/start": multi[:, 0], "multi/end": multi[:, 1],
     }
     attrs = {"provenance": "{}", "source": "lab", "units_length": "m", "units_force": "N",
-             "step_n": 0.5, "frame": "phantom", "session_names": json.dumps(["dent"])}
+             "step_n": 0.5, "frame": "phantom", "session_names": json.dumps(["dent"]),
+             "point_names": json.dumps(DENT_NAMES)}
     write_h5(path, STATES, arrays, attrs)
     return arrays
 

@@ -327,11 +327,14 @@ def _other_capture(folder: Path) -> str:
 
 
 def _numbers_for_a_log(folder: Path) -> str:
-    """Channel numbers name analog channels, not the columns of a force log."""
+    """In a force log, channel numbers count the columns that are not time: one beyond them
+    is refused, naming the range."""
     _toml(folder, 'file = "indentation_a.tsv"', 'file = "log.csv"')
-    _toml(folder, 'channels = ["Nano17 G0"', 'channels = [1')
+    text = (folder / "session.toml").read_text()
+    line = next(x for x in text.splitlines() if x.startswith("channels = ["))
+    _toml(folder, line, "channels = [1, 2, 3, 4, 5, 7]")
     (folder / "log.csv").write_text("time,a,b,c,d,e,f\n0,1,2,3,4,5,6\n0.001,1,2,3,4,5,6\n")
-    return "session.toml: channel number 1: channel numbers and rate_hz are for analog channels"
+    return "log.csv: force.channels: channel number 7 is not in the file (channels 1 to 6"
 
 
 @pytest.fixture(scope="module")

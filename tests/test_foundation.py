@@ -35,6 +35,16 @@ def test_atomic_output_renames_only_on_success(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
 
 
+def test_an_output_refused_by_its_own_check_is_named_as_asked_not_by_its_temporary_name(
+        tmp_path):
+    out = tmp_path / "states.h5"
+    with pytest.raises(BadInput) as e, atomic_output(out) as tmp:
+        tmp.write_text("bad")
+        raise BadInput(tmp, "root attribute footprint_m is wrong", "line 3")
+    assert e.value.line() == f"{out}:line 3: root attribute footprint_m is wrong"
+    assert not list(tmp_path.iterdir())
+
+
 def test_atomic_outputs_refuse_one_path_twice(tmp_path):
     a = tmp_path / "o" / "a.mcap"
     for twice in (a, tmp_path / "o" / ".." / "o" / "a.mcap"):
@@ -135,7 +145,8 @@ def _session(tmp_path, **over):
     for name in ("t.tsv", "f.csv", "s.cal"):
         (tmp_path / name).write_text("x")
     text = {
-        "mocap": 'file = "t.tsv"\nphantom_markers = ["P1", "P2"]\nindenter_markers = ["I1"]',
+        "mocap": 'file = "t.tsv"\nphantom_markers = ["P1", "P2", "P3", "P4"]\n'
+                 'indenter_markers = ["I1"]',
         "force": 'file = "f.csv"\nchannels = ["a","b","c","d","e","f"]\ncalibration = "s.cal"',
     }
     text.update(over)
@@ -146,7 +157,7 @@ def _session(tmp_path, **over):
 
 def test_session_toml_parses(tmp_path):
     s = read_session(_session(tmp_path))
-    assert s.mocap.phantom_markers == ["P1", "P2"]
+    assert s.mocap.phantom_markers == ["P1", "P2", "P3", "P4"]
     assert s.force.units == ["V"] * 6 and s.force.time_unit == "s"
 
 

@@ -267,10 +267,6 @@ def _toml_time_unit_list(folder: Path) -> str:
     return _toml_edit(folder, 'time_unit = "s"', 'time_unit = ["s"]')
 
 
-def _toml_trigger_column_number(folder: Path) -> str:
-    return _toml_edit(folder, 'trigger_column = "trigger"', "trigger_column = 3")
-
-
 def _toml_schema_version_2(folder: Path) -> str:
     return _toml_edit(folder, 'schema_version = "1.0"', 'schema_version = "2.0"')
 
@@ -355,7 +351,7 @@ def read_mocap_file(path: Path):  # noqa: ANN201 - a MarkerSeries
 BAD = [_absent_marker, _duplicate_marker, _unknown_format, _cal_not_6x6, _force_missing_column,
        _force_text_in_numbers, _force_time_not_increasing, _truncated_tsv, _duplicate_in_toml,
        _toml_pivot_not_a_table, _toml_units_not_text, _toml_units_not_volts,
-       _toml_time_unit_list, _toml_trigger_column_number, _toml_schema_version_2,
+       _toml_time_unit_list, _toml_schema_version_2,
        _force_row_with_extra_field, _cal_force_units_not_force, _cal_nan_value,
        _mocap_infinite_coordinate, _mocap_time_out_of_range, _mocap_frequency_too_low,
        _mocap_damaged_qtm_mat, _mocap_c3d_cut_in_parameters]

@@ -173,7 +173,8 @@ def ingested(tmp_path_factory) -> tuple[Path, Path]:
         'name = "real-2026"\n[mocap]\nfile = "trial.tsv"\n'
         f"phantom_markers = {json.dumps(names[:10])}\nindenter_markers = "
         f"{json.dumps(names[10:14])}\n[force]\nfile = \"force.csv\"\n"
-        'channels = ["a", "b", "c", "d", "e", "f"]\ncalibration = "ft.cal"\n')
+        'channels = ["a", "b", "c", "d", "e", "f"]\ncalibration = "ft.cal"\n'
+        "[phantom]\nrows = 2\n")                        # 10 markers: 2 rows of 5
     out = folder.parent / "real.mcap"
     res = CliRunner().invoke(cli, ["-q", "ingest", str(folder), "--out", str(out)])
     assert res.exit_code == 0, res.stderr

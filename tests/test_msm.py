@@ -48,7 +48,7 @@ def test_paper_displacements_of_a_centred_normal_load(centre_normal):
 
 def test_geometry_of_the_grid():
     h = 0.1 / 31
-    assert MODEL.N == 1024 and MODEL.params.spacing == pytest.approx(h)
+    assert MODEL.N == 1024 and MODEL.params.spacing_x == pytest.approx(h)
     assert np.allclose(MODEL.rest[MODEL.node(31, 31)], [0.1, 0.1, 0.0])
     edges = MODEL.edges()
     assert len(edges) == 31 * 32 * 2 + 31 * 31                   # rows, columns, one diagonal

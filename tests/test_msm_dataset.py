@@ -268,7 +268,7 @@ def test_a_marker_between_masses_follows_the_bilinear_blend():
     from sim.msm.msm_sampling import contact_masses, sample_at
 
     model = MSM()
-    h = model.params.spacing
+    h = model.params.spacing_x
     point = np.array([[2.25 * h, 5.5 * h]])                 # a quarter and a half between masses
     s = sample_at(model, point)
     assert sorted(s.masses[0].tolist()) == sorted([5 * 32 + 2, 5 * 32 + 3, 6 * 32 + 2,

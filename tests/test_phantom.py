@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sim.twin.marker_layout import MarkerLayout
 from sim.twin.phantom import Phantom, PhantomSpec
 
 LEVELS = np.array([0.25, 0.5, 1.0, 2.0, 4.0, 6.2, 7.5])
@@ -32,7 +33,7 @@ def _nodal_forces(ph: Phantom, u: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(delta, axis=1)
     n = delta / length[:, None]
     e = ((disp[j] - disp[i]) * n).sum(axis=1) / length
-    tension = s.stiffness * length * (e + s.stiffening * e**3)
+    tension = ph.kappa * length * (e + s.stiffening * e**3)
     out = np.zeros_like(ph.rest)
     np.add.at(out, i, tension[:, None] * n)
     np.add.at(out, j, -tension[:, None] * n)
@@ -118,3 +119,43 @@ def test_stiffer_material_presses_less() -> None:
     stiff = Phantom(PhantomSpec(stiffness=13.0)).load_path((10, 10), [0, 0, -1],
                                                            np.array([2.0]))
     assert (stiff.tip[0, 2] - stiff.tip[-1, 2]) < (soft.tip[0, 2] - soft.tip[-1, 2])
+
+
+def test_a_dense_grid_gets_a_finer_lattice_closed_by_the_block_edges() -> None:
+    """6 x 6 markers 12 mm apart: a 3 mm lattice laid from the markers, every marker on a
+    node, the block's edges at +-50 mm closing cells between 1.5 and 4.5 mm, and presses
+    between four markers still two spacings clear of each."""
+    ph = Phantom(PhantomSpec(markers=MarkerLayout(rows=6, cols=6, pitch=0.012)))
+    xs = ph.rest[ph.grid[:, 0, -1], 0]
+    assert xs[0] == -0.05 and xs[-1] == 0.05
+    cells = np.diff(xs)
+    np.testing.assert_allclose(cells[1:-1], 0.003, atol=1e-12)
+    assert np.all((cells >= 0.0015) & (cells <= 0.0045))
+    at = ph.rest[ph.grid[ph.marker_ij[:, 0], ph.marker_ij[:, 1], -1]]
+    grid = at[:, :2].reshape(6, 6, 2)
+    np.testing.assert_allclose(grid[0, :, 0] * 1e3, [-30, -18, -6, 6, 18, 30], atol=1e-9)
+    np.testing.assert_allclose(grid[:, 0, 1] * 1e3, [-30, -18, -6, 6, 18, 30], atol=1e-9)
+    cand = ph.candidate_locations()
+    pos = ph.rest[ph.grid[cand[:, 0], cand[:, 1], -1], :2]
+    inside = np.all(np.abs(pos) < 0.030, axis=1)              # within the marker grid
+    assert inside.sum() >= 9
+    gap = np.abs(cand[:, None, :] - ph.marker_ij[None]).max(axis=2).min(axis=1)
+    assert gap.min() >= 2
+
+
+def test_a_finer_lattice_keeps_the_blocks_depth() -> None:
+    """The springs scale with the spacing (kappa ~ h^1.1): a normal press at the centre of
+    the 4 mm lattice (5 x 5 markers 16 mm apart) sinks within 3 % of the 5 mm lattice's
+    from 1 to 7.5 N; with kappa unscaled it would sink 13 % less."""
+    fine = Phantom(PhantomSpec(markers=MarkerLayout(pitch=0.016)))
+    np.testing.assert_allclose(np.diff(fine.rest[fine.grid[:, 0, -1], 0])[1:-1], 0.004)
+    assert fine.kappa < Phantom().kappa
+    levels = np.array([1.0, 2.0, 4.0, 6.2, 7.5])
+
+    def depth(ph: Phantom) -> np.ndarray:
+        c = ph.nodes[0] // 2
+        tip = ph.load_path((c, c), [0, 0, -1], levels).tip[:, 2]
+        return tip[0] - tip[1:]
+
+    ratio = depth(fine) / depth(Phantom())
+    assert np.all(np.abs(ratio - 1) < 0.03), ratio

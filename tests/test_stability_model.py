@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent_fold, write_dent_split, write_dent_states
+from cgnn_data import DENT_NAMES, dent_fold, write_dent_split, write_dent_states
 
 from core.errors import BadInput
 from train import predictor as predictor_module
@@ -296,6 +296,8 @@ def test_the_exported_graph_says_which_guards_it_lacks(dent_run: Path, tmp_path:
     export_onnx(dent_run, tmp_path / "m.onnx")
     props = {p.key: p.value for p in onnx.load(str(tmp_path / "m.onnx")).metadata_props}
     assert {"units", "carried", "not_checked", "training_envelope"} <= set(props)
+    assert json.loads(props["point_names"]) == DENT_NAMES      # the points it was trained on
+    assert Predictor.load(dent_run).point_names == DENT_NAMES
     assert "NaN" in props["not_checked"] and "N^2" in props["not_checked"]
     norm = Normaliser.from_dict(load_checkpoint(dent_run / "best.pt")["norm"])
     env = json.loads(props["training_envelope"])

@@ -82,6 +82,9 @@ def test_session_folder_parses_and_truth_validates(skewed: Path) -> None:
     assert len(cfg.mocap.indenter_markers) == 4
     assert cfg.mocap.trigger_event == "Trigger" and cfg.force.trigger_column == "trigger"
     assert cfg.force.calibration is not None and cfg.pivot_file is not None
+    # the paper's phantom: 100 x 100 mm, a square grid centred on it (no axis, no anchor)
+    assert cfg.raw["phantom"] == {"size_mm": [100.0, 100.0]}
+    assert cfg.phantom.size_m == (0.1, 0.1) and cfg.phantom.x_axis is None
     validate_h5(skewed / "truth.h5", TRUTH)
     head = (skewed / "indentation.tsv").read_bytes()[:4000].decode()
     assert "TRAJECTORY_TYPES\tMeasured" in head and "\r\nFrame\tTime\tP00 X\tP00 Y" in head

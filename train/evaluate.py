@@ -263,18 +263,25 @@ def table2(result: dict) -> str:
 
 
 def _fold_table(result: dict) -> str:
-    """Mean L_d per fold of every variant tested on more than one fold, beside the
-    references of that fold (empty when no variant has several folds)."""
-    labels = [r["label"] for r in result["overall"] if r["folds"] > 1]
-    if not labels:
-        return ""
+    """Per test set, the mean L_d per fold of every variant tested on more than one of its
+    folds, beside the references of that fold (empty when no variant has several folds).
+    Runs on files that each call their one fold 0 (one MSM set per lab fold) are left out."""
+    multi = [(r["label"], r["test_set"]) for r in result["overall"]
+             if len(set(r["fold_ids"])) > 1]
+    tables = [_one_fold_table(result["runs"], ts, [lb for lb, t in multi if t == ts])
+              for ts in dict.fromkeys(t for _, t in multi)]
+    return "".join(tables)
+
+
+def _one_fold_table(runs: list[dict], test_set: str, labels: list[str]) -> str:
+    """The per-fold table of ``labels`` on ``test_set``."""
     by_fold: dict[int, dict] = {}
-    for run in result["runs"]:
-        if run["label"] in labels:
+    for run in runs:
+        if run["label"] in labels and run["test_set"] == test_set:
             by_fold.setdefault(run["fold"], {"refs": run["references"]})[run["label"]] = run
     head = ["fold", *labels, *(f"*{n}*" for n in DISPLACEMENT)]
-    lines = ["", "Mean L_d per fold [mm] (in brackets: gain over the best reference)", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = ["", f"Mean L_d per fold on {test_set} [mm] (in brackets: gain over the best "
+                 "reference)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for fold in sorted(by_fold):
         cells = [str(fold)]
         for label in labels:

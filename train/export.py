@@ -30,11 +30,13 @@ def export_onnx(run: str | Path, out: str | Path) -> None:
     """Write ``out`` (ONNX) from a run folder or checkpoint, N a dynamic axis, with the
     guards it lacks and the training envelope in its metadata."""
     run = Path(run)
-    si = SIModel(*model_from(load_checkpoint(run / "best.pt" if run.is_dir() else run)))
+    state = load_checkpoint(run / "best.pt" if run.is_dir() else run)
+    si = SIModel(*model_from(state))
+    names = state["meta"]["data"].get("point_names")      # the points it was trained on
     with atomic_output(out) as tmp:
         to_onnx(si, tmp)
         graph = onnx.load(str(tmp))
-        for key, value in guards(si).items():
+        for key, value in {**guards(si), "point_names": json.dumps(names)}.items():
             entry = graph.metadata_props.add()
             entry.key, entry.value = key, value
         onnx.save(graph, str(tmp))

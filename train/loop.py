@@ -34,6 +34,7 @@ from torch.nn.parallel import DistributedDataParallel
 
 from core.errors import BadInput
 from core.progress import say, warn
+from data_schema.states import point_names
 from train.augment import about_normal, move_batch
 from train.checkpoint import load_checkpoint, save_checkpoint
 from train.data import (
@@ -224,7 +225,8 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
     check_learnable(states, train, data, opts.fold)
     init_state = load_checkpoint(init) if init is not None else None
     meta = {"options": asdict(opts), "config": config.to_dict(),
-            "data": {"file": str(Path(data).resolve()), "sha256": doc["data"]["sha256"]},
+            "data": {"file": str(Path(data).resolve()), "sha256": doc["data"]["sha256"],
+                     "point_names": point_names(data)},
             "splits": str(Path(splits).resolve()),
             "init": str(Path(init).resolve()) if init else None,
             "variant": make_variant(config.to_dict(), asdict(opts), data,

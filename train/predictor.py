@@ -122,6 +122,7 @@ class Predictor:
         self._scene: Scene | None = None
         self._outside: list[str] = []      # this call's reasons to flag it
         self._still = False                # this call's tip does not move
+        self.point_names: list[str] | None = None   # the points it was trained on (load)
 
     @classmethod
     def load(cls, path: str | Path, device: str = "cpu", backend: str = "auto") -> Predictor:
@@ -131,7 +132,10 @@ class Predictor:
         if path.is_dir():
             path = path / "best.pt"
         dev = torch.device(device)
-        return cls(SIModel(*model_from(load_checkpoint(path, dev), dev)), dev, backend)
+        state = load_checkpoint(path, dev)
+        out = cls(SIModel(*model_from(state, dev)), dev, backend)
+        out.point_names = state["meta"]["data"].get("point_names")
+        return out
 
     def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None
                 ) -> tuple[np.ndarray, float]:

@@ -4,7 +4,7 @@ A model's score never stands alone: if it does not beat these, it has learned no
 shipping, whatever its absolute number (docs/ARCHITECTURE.md, "Scoring a model").
 
 - **nothing moves**: the deformed points are the input points; the tip, where it is one of the
-  points (the lab's 26th point, the MSM's loaded mass: a point at the tip's start), goes to the
+  points (the lab's last point, the MSM's loaded mass: a point at the tip's start), goes to the
   end of C, which the input gives. Its change of force is 0.
 - **nearest press**: the displacement field (target - input, per point index) of the training
   example whose C = [tip start, tip end] is nearest, added to the test input (the tip as above;

@@ -29,16 +29,20 @@ def run_fit_msm(states: str | Path, out: str | Path | None = None,
                 rrd: str | Path | None = None, *, splits: str | Path | None = None,
                 fold: int = 0, max_sequences: int = 10, seed: int = 0,
                 start: tuple[float, float] = (paper.K_BETWEEN, paper.K_FIXED),
-                contact_radius: float | None = None, workers: int = 1) -> FitResult:
+                contact_radius: float | None = None, workers: int = 1,
+                spacing: float | None = None) -> FitResult:
     """Fit the MSM to ``states`` (``splits``: fold ``fold``'s training presses only); write
-    the constants to ``out`` and the recording to ``rrd`` when given."""
+    the constants to ``out`` and the recording to ``rrd`` when given. Lab states are fitted on
+    a grid over their footprint at ``spacing`` m (default the paper's), an MSM file on its own.
+    """
     only = training_sequences(splits, fold) if splits else None
     sequences, params = read_measured(states, max_sequences=max_sequences, seed=seed,
-                                      contact_radius=contact_radius, only=only)
+                                      contact_radius=contact_radius, only=only,
+                                      spacing=spacing)
     result = fit_msm(sequences, params, start=start, workers=workers)
     settings = {"max_sequences": max_sequences, "start": list(start), "seed": seed,
                 "splits": str(splits) if splits else None, "fold": fold,
-                "contact_radius": sequences[0].contact_radius}
+                "contact_radius": sequences[0].contact_radius, "spacing": spacing}
     inputs = [states] + ([splits] if splits else [])
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         if tmp_out is not None:

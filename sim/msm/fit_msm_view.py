@@ -42,10 +42,12 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
     shown = sequences[:: max(1, len(sequences) // max(count, 1))][:count]
     states = [grid_states(fitted, s) for s in shown]
     largest = max((np.linalg.norm(x - model.rest, axis=-1).max() for x in states), default=0.0)
-    size = fitted.size
+    length, width = fitted.footprint
+    size = max(length, width)
     views = [phantom_view(f"press {s.sequence}: fitted MSM 0 .. {largest * 1e3:.1f} mm (sqrt), "
                           "measured orange, model blue", [f"+ /fit/seq_{s.sequence:04d}/**"],
-                          np.array([size / 2, size / 2, -size * 0.05]), size) for s in shown]
+                          np.array([length / 2, width / 2, -size * 0.05]), size)
+             for s in shown]
     bars = rrb.Vertical(*(rrb.BarChartView(name=f"{name}: mean distance per press [mm]",
                                            origin=f"/distance/{key[:-2]}")
                           for key, name, _ in SERIES))

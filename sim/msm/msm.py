@@ -1,11 +1,14 @@
 """The surface mass-spring model (MSM) of the paper, and its reference explicit solver.
 
-A 100 x 100 mm single-layer surface of 32 x 32 masses on a triangulated grid: linear springs
-between neighbours along the rows, the columns and one diagonal ((i, j) to (i + 1, j + 1)),
-each with its rest length (so the force depends on the current length: large deflections are
-geometrically nonlinear), and a zero-length "fixed" spring from every mass to its rest position.
-Grid spacing is size / (n - 1) = 100/31 mm. Mass (i, j) rests at (x, y, z) = (j h, i h, 0); the
-surface normal is +z and an indenting force points into the surface (negative z).
+A single-layer surface of masses on a triangulated rectangular grid (the paper's: 32 x 32
+masses over 100 x 100 mm): linear springs between neighbours along the rows, the columns and
+one diagonal ((i, j) to (i + 1, j + 1)), each with its rest length (so the force depends on the
+current length: large deflections are geometrically nonlinear), and a zero-length "fixed"
+spring from every mass to its rest position. The grid has ``n_y`` rows of ``n`` masses, spaced
+``h_x = size / (n - 1)`` along x and ``h_y = size_y / (n_y - 1)`` along y (the paper's 100/31 mm
+both ways), so it covers the footprint [0, size] x [0, size_y] exactly. Mass (i, j) (row i,
+column j, row-major index i n + j) rests at (x, y, z) = (j h_x, i h_y, 0); the surface normal
+is +z and an indenting force points into the surface (negative z).
 
 The reference solver integrates ``m a = f(x) + f_ext - c v`` explicitly (semi-implicit Euler,
 time step ``dt``) until the paper's stability criterion holds on every mass: ``|v| < v_static``
@@ -42,10 +45,17 @@ class MSMError(BadInput):
 
 @dataclass(frozen=True)
 class MSMParams:
-    """The paper's MSM parameters (SI units)."""
+    """The MSM's parameters (SI units): the paper's by default.
 
-    n: int = paper.GRID_N               # masses per side
-    size: float = paper.SIZE_M          # m, side length of the surface
+    The grid: ``n`` masses along x over ``size``, ``n_y`` along y over ``size_y``; left out
+    (None), the y ones are the x ones (a square: the paper's 32 x 32 over 100 mm, and what an
+    older ``msm_params`` record of ``n`` and ``size`` alone means). Stored resolved, so a
+    record always names both axes. :func:`sim.msm.msm_grid.grid_params` sizes a grid to a
+    footprint.
+    """
+
+    n: int = paper.GRID_N               # masses along x (per side of the square)
+    size: float = paper.SIZE_M          # m, the surface's length along x
     mass: float = paper.MASS_KG         # kg per mass
     damping: float = paper.DAMPING      # N s/m: damping force -c v on each mass
     k_between: float = paper.K_BETWEEN  # N/m, springs between masses
@@ -53,11 +63,19 @@ class MSMParams:
     dt: float = paper.DT_S              # s, explicit time step of the reference solver
     v_static: float = paper.V_STATIC    # m/s, stability criterion on every mass
     f_static: float = paper.F_STATIC    # N, stability criterion on every mass
+    n_y: int | None = None              # masses along y (None: n)
+    size_y: float | None = None         # m, the surface's width along y (None: size)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.n, int | np.integer) or self.n < 2:
-            raise MSMError(f"n must be an integer >= 2, got {self.n!r}")
-        for name in ("size", "mass", "damping", "k_between", "k_fixed", "dt",
+        if self.n_y is None:
+            object.__setattr__(self, "n_y", self.n)
+        if self.size_y is None:
+            object.__setattr__(self, "size_y", self.size)
+        for name in ("n", "n_y"):
+            value = getattr(self, name)
+            if not isinstance(value, int | np.integer) or isinstance(value, bool) or value < 2:
+                raise MSMError(f"{name} must be an integer >= 2, got {value!r}")
+        for name in ("size", "size_y", "mass", "damping", "k_between", "k_fixed", "dt",
                      "v_static", "f_static"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating) and math.isfinite(value)
@@ -65,9 +83,19 @@ class MSMParams:
                 raise MSMError(f"{name} must be a finite positive number, got {value!r}")
 
     @property
-    def spacing(self) -> float:
-        """Rest length of the row and column springs (m)."""
+    def spacing_x(self) -> float:
+        """Rest length of the row springs, the masses' spacing along x (m)."""
         return self.size / (self.n - 1)
+
+    @property
+    def spacing_y(self) -> float:
+        """Rest length of the column springs, the masses' spacing along y (m)."""
+        return self.size_y / (self.n_y - 1)
+
+    @property
+    def footprint(self) -> tuple[float, float]:
+        """(L, W): the surface's extent along x and y (m); it covers [0, L] x [0, W]."""
+        return float(self.size), float(self.size_y)
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -78,11 +106,13 @@ class MSM:
 
     def __init__(self, params: MSMParams | None = None) -> None:
         self.params = params or MSMParams()
-        n, h = self.params.n, self.params.spacing
-        self.n, self.N = n, n * n
-        ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-        self.rest = np.stack([jj * h, ii * h, np.zeros_like(ii, float)], -1).reshape(-1, 3)
-        self.rest_length = {f: h * math.hypot(*f) for f in FAMILIES}
+        rows, cols = int(self.params.n_y), int(self.params.n)
+        hx, hy = self.params.spacing_x, self.params.spacing_y
+        self.rows, self.cols, self.N = rows, cols, rows * cols
+        ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+        self.rest = np.stack([jj * hx, ii * hy, np.zeros_like(ii, float)], -1).reshape(-1, 3)
+        # hx hypot(dj, di hy / hx): on a square exactly the h hypot(di, dj) it always was
+        self.rest_length = {(di, dj): hx * math.hypot(dj, di * hy / hx) for di, dj in FAMILIES}
 
     @cached_property
     def dt_limit(self) -> float:
@@ -92,19 +122,19 @@ class MSM:
     # -- indexing -----------------------------------------------------------------------------
     def node(self, i: int, j: int) -> int:
         """Mass index of grid position (row i, column j)."""
-        return int(i) * self.n + int(j)
+        return int(i) * self.cols + int(j)
 
     def edges(self) -> np.ndarray:
         """(E, 2) mass indices of every between-mass spring (rows, columns, diagonals)."""
-        n = self.n
-        idx = np.arange(self.N).reshape(n, n)
-        return np.vstack([np.c_[idx[: n - di, : n - dj].ravel(), idx[di:, dj:].ravel()]
+        r, c = self.rows, self.cols
+        idx = np.arange(self.N).reshape(r, c)
+        return np.vstack([np.c_[idx[: r - di, : c - dj].ravel(), idx[di:, dj:].ravel()]
                           for di, dj in FAMILIES])
 
     def triangles(self) -> np.ndarray:
-        """(2 (n-1)^2, 3) triangles of the surface, split along the diagonal springs."""
-        n = self.n
-        idx = np.arange(self.N).reshape(n, n)
+        """(2 (rows - 1) (cols - 1), 3) triangles of the surface, split along the diagonal
+        springs."""
+        idx = np.arange(self.N).reshape(self.rows, self.cols)
         p, r, d, q = idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]
         return np.vstack([np.c_[p.ravel(), r.ravel(), d.ravel()],
                           np.c_[p.ravel(), d.ravel(), q.ravel()]]).astype(np.int32)
@@ -112,9 +142,9 @@ class MSM:
     # -- forces and energy --------------------------------------------------------------------
     def _springs(self, g: np.ndarray):
         """Per family: ((di, dj), difference vectors, lengths) of the springs of grid ``g``."""
-        n = self.n
+        r, c = self.rows, self.cols
         for di, dj in FAMILIES:
-            d = g[di:, dj:] - g[: n - di, : n - dj]
+            d = g[di:, dj:] - g[: r - di, : c - dj]
             yield (di, dj), d, np.sqrt(np.einsum("...k,...k->...", d, d))
 
     def energy_forces(self, x: np.ndarray, f_ext: np.ndarray) -> tuple[float, np.ndarray]:
@@ -128,20 +158,20 @@ class MSM:
     def _forces(self, x: np.ndarray, f_ext: np.ndarray, with_energy: bool
                 ) -> tuple[float, np.ndarray]:
         p = self.params
-        n = self.n
+        r, c = self.rows, self.cols
         disp = x - self.rest
         f = f_ext - p.k_fixed * disp
-        fg = f.reshape(n, n, 3)
+        fg = f.reshape(r, c, 3)
         energy = 0.0
         if with_energy:
             energy = 0.5 * p.k_fixed * np.einsum("ij,ij->", disp, disp) - np.einsum(
                 "ij,ij->", f_ext, x)
-        for (di, dj), d, length in self._springs(x.reshape(n, n, 3)):
+        for (di, dj), d, length in self._springs(x.reshape(r, c, 3)):
             stretch = length - self.rest_length[(di, dj)]
             if with_energy:
                 energy += 0.5 * p.k_between * np.einsum("ij,ij->", stretch, stretch)
             fs = (p.k_between * stretch / length)[..., None] * d
-            fg[: n - di, : n - dj] += fs
+            fg[: r - di, : c - dj] += fs
             fg[di:, dj:] -= fs
         return float(energy), f
 
@@ -165,7 +195,7 @@ class MSM:
         """
         kb = self.params.k_between
         out = {}
-        for fam, d, length in self._springs(x.reshape(self.n, self.n, 3)):
+        for fam, d, length in self._springs(x.reshape(self.rows, self.cols, 3)):
             u = d / length[..., None]
             geo = kb * (1.0 - self.rest_length[fam] / length)
             if clamp:
@@ -175,36 +205,60 @@ class MSM:
             out[fam] = k
         return out
 
+    # -- band storage ---------------------------------------------------------------------------
+    @property
+    def by_columns(self) -> bool:
+        """Whether the band numbers the masses column by column: where the rows are longer
+        than the columns, so the band is as narrow as the grid allows (a 48 x 26 grid: 83
+        unknowns, not 149). The paper's square keeps row-major order."""
+        return self.cols > self.rows
+
     @property
     def band_width(self) -> int:
-        """Half-bandwidth of the tangent stiffness: masses row-major, three unknowns each."""
-        return 3 * (self.n + 1) + 2
+        """Half-bandwidth of the tangent stiffness: masses numbered along the shorter side
+        (:attr:`by_columns`), three unknowns each."""
+        return 3 * (min(self.rows, self.cols) + 1) + 2
+
+    @cached_property
+    def band_order(self) -> np.ndarray | None:
+        """The unknowns (3N,) in band order: ``K_band = K[order][:, order]``; None where the
+        band keeps the masses' own row-major order."""
+        if not self.by_columns:
+            return None
+        masses = np.arange(self.N).reshape(self.rows, self.cols).T.ravel()
+        return (3 * masses[:, None] + np.arange(3)).ravel()
 
     def stiffness_band(self, x: np.ndarray | None = None, clamp: bool = False) -> np.ndarray:
-        """Tangent stiffness at ``x`` (rest when None) in LAPACK upper band storage.
+        """Tangent stiffness at ``x`` (rest when None) in LAPACK upper band storage, unknowns
+        in :attr:`band_order`.
 
         ``ab[bw + i - j, j] = K[i, j]`` for ``j - bw <= i <= j`` (``bw`` = :attr:`band_width`):
         the springs' blocks (:meth:`edge_stiffness`) plus ``k_fixed`` on the diagonal.
         """
         x = self.rest if x is None else x
-        n, N, bw = self.n, self.N, self.band_width
+        blocks = self.edge_stiffness(x, clamp)
+        r, c = self.rows, self.cols
+        if self.by_columns:            # the transposed grid: family (di, dj) becomes (dj, di)
+            blocks = {(dj, di): k.transpose(1, 0, 2, 3) for (di, dj), k in blocks.items()}
+            r, c = c, r
+        N, bw = self.N, self.band_width
         ab = np.zeros((bw + 1, 3 * N))
-        diag = np.zeros((n, n, 3, 3))
+        diag = np.zeros((r, c, 3, 3))
         diag[..., [0, 1, 2], [0, 1, 2]] = self.params.k_fixed
-        for (di, dj), k in self.edge_stiffness(x, clamp).items():
-            diag[: n - di, : n - dj] += k
+        for (di, dj), k in blocks.items():
+            diag[: r - di, : c - dj] += k
             diag[di:, dj:] += k
-            by_target = np.zeros((n, n, 3, 3))
+            by_target = np.zeros((r, c, 3, 3))
             by_target[di:, dj:] = k
             by_target = by_target.reshape(N, 3, 3)
-            off = di * n + dj
-            for r in range(3):
-                for c in range(3):
-                    ab[bw - 3 * off + r - c, 3 * off + c::3] = -by_target[off:, r, c]
+            off = di * c + dj
+            for a in range(3):
+                for b in range(3):
+                    ab[bw - 3 * off + a - b, 3 * off + b::3] = -by_target[off:, a, b]
         diag = diag.reshape(N, 3, 3)
-        for r in range(3):
-            for c in range(r, 3):
-                ab[bw + r - c, c::3] = diag[:, r, c]
+        for a in range(3):
+            for b in range(a, 3):
+                ab[bw + a - b, b::3] = diag[:, a, b]
         return ab
 
 

@@ -5,7 +5,9 @@ holds states ``s * (steps + 1) + t`` for t = 0 (rest) .. steps; ``tip`` is the l
 ``force`` the force magnitude, ``force_vector`` the force; single-step examples are
 (t, t + 1) for every t of every sequence, multi-step examples ``min(15, #pairs)`` random pairs
 (start, end) with end - start >= 2 per sequence (drawn without replacement, sorted). The root
-attribute ``step_n`` is the protocol's force step, ``fmax / steps``.
+attribute ``step_n`` is the protocol's force step, ``fmax / steps``; ``footprint_m`` the MSM's
+surface [L, W] (m); with a lab's layout, ``layout`` its markers' rest positions and
+``point_names`` their names then "tip" (where the lab's states name them).
 
 A shard's file (``shard=(i, count)``) is a complete states file of its block of locations;
 :mod:`sim.msm.msm_shards` joins them.
@@ -93,6 +95,7 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
         "frame": "phantom",
         "session_names": json.dumps(["msm"]),
         "msm_params": json.dumps(params.as_dict()),
+        "footprint_m": np.array(params.footprint, dtype=np.float64),
         "protocol": json.dumps(asdict(plan.protocol)),
         "solver": json.dumps({"method": "static equilibrium (preconditioned L-BFGS)",
                               "tol_N": tol}),
@@ -110,7 +113,8 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
 def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
              tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
              command_params: dict | None = None, layout: np.ndarray | None = None,
-             inputs: Sequence[Path] = (), thickness: float = THICKNESS_M
+             inputs: Sequence[Path] = (), thickness: float = THICKNESS_M,
+             point_names: Sequence[str] | None = None
              ) -> tuple[Simulated, dict[str, np.ndarray]]:
     """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
     simulation and the arrays written.
@@ -118,8 +122,9 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
     With ``layout`` (a lab's rest points, :func:`sim.msm.msm_layout.lab_layout`) the states
     are the MSM sampled at those points plus the tip, and the loads fall inside the layout's
     footprint (where the lab pressed), so the network pre-trains on the graph it is
-    fine-tuned on. A protocol that drives the MSM deeper than its surface is wide is refused
-    before simulating (:mod:`sim.msm.msm_depth`; ``thickness``, the phantom's, in the message).
+    fine-tuned on; ``point_names`` (the layout's names then "tip") names those points. A
+    protocol that drives the MSM deeper than its surface is wide is refused before simulating
+    (:mod:`sim.msm.msm_depth`; ``thickness``, the phantom's, in the message).
     """
     check_tol(tol)
     model = MSM(params)
@@ -135,5 +140,10 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
     attrs = file_attrs(plan, params, tol, prov, shard, sim)
     if layout is not None:
         attrs["layout"] = json.dumps(np.asarray(layout, dtype=float).round(9).tolist())
+        if point_names is not None:
+            if len(point_names) != len(layout) + 1:
+                raise MSMError(f"{len(point_names)} point names for {len(layout)} layout "
+                               "points and the tip")
+            attrs["point_names"] = json.dumps(list(point_names))
     write_states(out, arrays, attrs)
     return sim, arrays

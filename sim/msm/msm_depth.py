@@ -3,7 +3,8 @@
 The surface model has no floor: a large enough force (or soft enough springs) pushes the
 loaded mass arbitrarily deep (the paper's constants at 100 N: 280-830 mm). Two bounds:
 
-- deeper than the MSM's own surface is wide (100 mm) is no surface indentation at all, and
+- deeper than the MSM's own surface is wide (its narrower side: 100 mm on the paper's square)
+  is no surface indentation at all, and
   the files it makes fail plausibility later: refused in one line naming ``--fmax``, before
   anything is simulated. :func:`check_depth` solves the normal load ``fmax`` at the plan's
   most exposed locations (nearest the border, where the surface is softest: the deepest of
@@ -38,7 +39,7 @@ def exposed(plan: Plan, model: MSM, locations: np.ndarray, count: int = CHECK_LO
     """The ``count`` locations whose loaded mass is nearest the border (then nearest a
     corner): where the surface is softest."""
     xy = model.rest[plan.nodes[locations], :2]
-    near = np.minimum(xy, model.params.size - xy)           # (L, 2): to the nearer edge
+    near = np.minimum(xy, np.array(model.params.footprint) - xy)   # (L, 2): to the nearer edge
     order = np.lexsort((near.max(axis=1), near.min(axis=1)))
     return np.asarray(locations)[order[:count]]
 
@@ -84,11 +85,12 @@ def beyond(tips: np.ndarray, thickness: float) -> tuple[int, float]:
 
 def _refuse_too_deep(plan: Plan, params: MSMParams, depth: float, thickness: float,
                      where: str) -> None:
-    if depth <= params.size:
+    wide = min(params.footprint)
+    if depth <= wide:
         return
     raise BadInput(None, f"--fmax {plan.protocol.fmax:g} N drives the MSM {depth * 1e3:.0f} "
                          f"mm deep ({where}; springs {params.k_between:g} and "
                          f"{params.k_fixed:g} N/m), deeper than its surface is wide "
-                         f"({params.size * 1e3:g} mm) and {depth / thickness:.0f} times the "
+                         f"({wide * 1e3:g} mm) and {depth / thickness:.0f} times the "
                          f"phantom's {thickness * 1e3:g} mm thickness: lower --fmax or "
                          "stiffen the springs")

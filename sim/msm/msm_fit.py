@@ -24,6 +24,7 @@ from scipy.optimize import minimize
 from core.errors import BadInput
 from sim.msm import paper
 from sim.msm.msm import MSM, MSMError, MSMParams
+from sim.msm.msm_grid import describe
 from sim.msm.msm_measured import MeasuredSequence
 from sim.msm.msm_static import StaticSolver, solve_path
 from sim.msm.workers import worker_pool
@@ -55,6 +56,7 @@ class FitResult:
     contact_radius_m: float = 0.0
     at_bound: list[str] = field(default_factory=list)
     per_sequence: list[dict] = field(default_factory=list)
+    grid: str = ""               # the surface fitted on, e.g. "150 x 80 mm of 48 x 26 masses"
 
 
 def grid_states(params: MSMParams, seq: MeasuredSequence, tol: float = FIT_TOL,
@@ -202,4 +204,4 @@ def _result(params: MSMParams, sequences: list[MeasuredSequence], fitted: tuple[
     return FitResult(fitted[0], fitted[1], fit.pooled, first.pooled, none.pooled,
                      tip_only.pooled, evaluations, len(sequences),
                      sum(len(s.forces) for s in sequences), sequences[0].contact_radius, bound,
-                     per)
+                     per, describe(params))

@@ -1,8 +1,10 @@
 """Measured states placed on the MSM grid, ready to compare with the model (``fit-msm``).
 
-A ``phantom.states`` 2.0 file is in the phantom frame, which is the MSM grid's frame
-(footprint ``[0, size]^2``, rest surface at z = 0, +z out of the surface), so measured points
-are placed on the grid where they are, with no frame of their own to guess:
+A ``phantom.states`` file is in the phantom frame, which is the MSM grid's frame (footprint
+``[0, L] x [0, W]``, rest surface at z = 0, +z out of the surface), so measured points are
+placed on the grid where they are, with no frame of their own to guess. The grid is the one an
+MSM file was made on, or for lab states one sized to their ``footprint_m`` (the paper's mass
+spacing unless told otherwise; the paper's 100 mm square where the file has no footprint):
 
 - each point follows the bilinear blend of the four masses around its rest (x, y)
   (:mod:`sim.msm.msm_sampling`): MSM states (points = the masses) land on their own mass, lab
@@ -26,8 +28,10 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
-from data_schema.states import validate_states
-from sim.msm.msm import MSM, MSMParams
+from data_schema.states import footprint, validate_states
+from sim.msm.msm import MSM, MSMError, MSMParams
+from sim.msm.msm_grid import grid_params
+from sim.msm.msm_layout import check_inside
 from sim.msm.msm_sampling import Sampling, contact_masses, sample_at
 
 TIP_MATCH = 1e-6          # m: a rest point this close to the tip's rest is the tip
@@ -50,13 +54,15 @@ class MeasuredSequence:
 
 def read_measured(path: str | Path, params: MSMParams | None = None,
                   max_sequences: int | None = None, seed: int = 0,
-                  contact_radius: float | None = None, only: np.ndarray | None = None
+                  contact_radius: float | None = None, only: np.ndarray | None = None,
+                  spacing: float | None = None
                   ) -> tuple[list[MeasuredSequence], MSMParams]:
     """The sequences of a states file on the MSM grid, and the grid parameters to fit with.
 
-    For an MSM file the grid (n, size, ...) and contact radius are the ones it was made with.
-    ``only`` keeps those sequence ids (the training presses of a fold); ``max_sequences``
-    then keeps that many of them, drawn with ``seed``.
+    For an MSM file the grid (n, size, n_y, size_y, ...) and contact radius are the ones it
+    was made with; for lab states a grid over their ``footprint_m`` at ``spacing`` (m; default
+    the paper's). ``only`` keeps those sequence ids (the training presses of a fold);
+    ``max_sequences`` then keeps that many of them, drawn with ``seed``.
     """
     path = Path(path)
     validate_states(path)
@@ -73,14 +79,13 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
         wanted = np.sort(np.concatenate(list(rows.values())))
         points = dict(zip(wanted.tolist(), f["states/points"][wanted].astype(float),
                           strict=True))
-    if params is None and source == "msm" and file_params is not None:
-        try:
-            params = MSMParams(**json.loads(attr_text(file_params)))
-        except (TypeError, ValueError) as e:
-            raise BadInput(path, f"unreadable msm_params attribute ({e})") from None
+    if params is None:
+        params = _file_grid(path, source, file_params, spacing)
+    if source == "lab":              # a marker beyond the surface would be fitted at its edge
+        check_inside(np.vstack([points[int(r[0])][:-1] for r in rows.values()]), params, path)
     if contact_radius is None:
         contact_radius = float(protocol.get("contact_radius", 0.0)) if source == "msm" else 0.0
-    model = MSM(params or MSMParams())
+    model = MSM(params)
     sequences = []
     for s, r in rows.items():
         r = r[np.argsort(step[r], kind="stable")]
@@ -93,6 +98,24 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     if not sequences:
         raise BadInput(path, "no sequence with a rest state and a loaded state to fit")
     return sequences, model.params
+
+
+def _file_grid(path: Path, source: str, file_params: object, spacing: float | None
+               ) -> MSMParams:
+    """The grid to place a file's states on: an MSM file's own (``spacing`` then refused: the
+    file's grid is what made the states), else one sized to the file's footprint."""
+    if source == "msm" and file_params is not None:
+        if spacing is not None:
+            raise BadInput(path, "an MSM states file carries the grid it was made on: leave "
+                                 "out --spacing-mm")
+        try:
+            return MSMParams(**json.loads(attr_text(file_params)))
+        except (TypeError, ValueError, MSMError) as e:
+            raise BadInput(path, f"unreadable msm_params attribute ({e})") from None
+    size = footprint(path)
+    if size is None and spacing is None:
+        return MSMParams()                       # a 2.0 file: the paper's grid, as always
+    return grid_params(size or MSMParams().footprint, spacing)
 
 
 def _chosen(ids: np.ndarray, only: np.ndarray | None, most: int | None, seed: int,

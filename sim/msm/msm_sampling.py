@@ -5,7 +5,7 @@ compare or sample the MSM at points that are not its masses (25 markers at 20 mm
 sit on a 3.2 mm grid). A point at rest position (x, y) on the grid follows the bilinear blend of the
 displacements of the four masses around it: no tie between two "nearest" masses, no jump
 when a marker sits half-way. Everything is in the phantom frame, which is the grid's frame
-(``[0, size]^2`` at z = 0, +z out of the surface).
+(``[0, L] x [0, W]`` at z = 0, +z out of the surface).
 
 An indenter is not a point: its tip touches the surface over a patch. ``contact_masses``
 gives the masses within ``radius`` of the tip (at least the nearest one: the paper's n_n = 1);
@@ -40,14 +40,15 @@ def sample_at(model: MSM, xy: np.ndarray) -> Sampling:
     A non-finite position (a marker missing at rest) gets mass 0 with weight 0 (it follows
     nothing; its measured distance is left out).
     """
-    n, h = model.n, model.params.spacing
+    p = model.params
     finite = np.isfinite(xy).all(axis=1)
-    g = np.clip(np.where(finite[:, None], xy, 0.0) / h, 0.0, n - 1 - 1e-9)
+    g = np.where(finite[:, None], xy, 0.0) / [p.spacing_x, p.spacing_y]
+    g = np.clip(g, 0.0, np.array([model.cols, model.rows]) - 1 - 1e-9)
     base = np.floor(g).astype(np.int64)                     # (P, 2): column (x), row (y)
     t = g - base
     masses, weights = [], []
     for dy, dx in ((0, 0), (0, 1), (1, 0), (1, 1)):
-        masses.append((base[:, 1] + dy) * n + base[:, 0] + dx)
+        masses.append((base[:, 1] + dy) * model.cols + base[:, 0] + dx)
         wx = t[:, 0] if dx else 1 - t[:, 0]
         wy = t[:, 1] if dy else 1 - t[:, 1]
         weights.append(wx * wy * finite)

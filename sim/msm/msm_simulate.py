@@ -85,7 +85,7 @@ def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = No
     jobs = [(params, plan.nodes[loc], plan.directions[loc], p.steps, p.fmax, tol,
              p.contact_radius, layout) for loc in locs]
     per_loc = p.directions * (p.steps + 1)
-    n_out = params.n * params.n if layout is None else len(layout) + 1
+    n_out = params.n * params.n_y if layout is None else len(layout) + 1
     points = np.empty((len(locs) * per_loc, n_out, 3), dtype=np.float32)
     tips = np.empty((len(locs) * per_loc, 3), dtype=np.float32)
     worst = stored = cpu = 0.0

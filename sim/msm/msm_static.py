@@ -1,10 +1,11 @@
 """The fast path: the MSM's static equilibrium solved directly instead of integrated in time.
 
 The equilibrium of the springs and the load is the minimum of the potential energy
-(:meth:`sim.msm.msm.MSM.energy_forces`). We minimise it with L-BFGS whose initial inverse Hessian
-is a banded Cholesky factor of the tangent stiffness: with masses in row-major order the
-half-bandwidth is 3 (n + 1) + 2 = 101 unknowns, so LAPACK factors the 3072 x 3072 matrix in
-~3 ms and applies it in ~0.1 ms (single precision: it only guides iterations whose forces are
+(:meth:`sim.msm.msm.MSM.energy_forces`). We minimise it with L-BFGS whose initial inverse
+Hessian is a banded Cholesky factor of the tangent stiffness: with masses numbered along the
+shorter side the half-bandwidth is 3 (n + 1) + 2 unknowns for n masses per side (101 on the
+paper's 32 x 32 grid, 83 on a 48 x 26 one), so LAPACK factors the 3072 x 3072 matrix in ~3 ms
+and applies it in ~0.1 ms (single precision: it only guides iterations whose forces are
 evaluated in double precision). A backtracking (Armijo) line search on the energy keeps every
 iteration downhill. A factor is reused across iterations and force steps and refreshed where
 convergence slows or a step had to be cut (the first load on the flat, tension-free surface
@@ -166,11 +167,20 @@ class StaticSolver:
             a = rho * float(s @ q)
             q -= a * y
             alphas.append(a)
-        solve = lapack.spbtrs if self._chol.dtype == np.float32 else lapack.dpbtrs
-        r = solve(self._chol, q.astype(self._chol.dtype), lower=0)[0].astype(np.float64)
+        r = self._band_solve(q)
         for s, y, rho, a in zip(s_mem, y_mem, rhos, reversed(alphas), strict=True):
             r += (a - rho * float(y @ r)) * s
         return -r
+
+    def _band_solve(self, q: np.ndarray) -> np.ndarray:
+        """``K^-1 q`` by the banded Cholesky factor (its unknowns in the model's band order)."""
+        solve = lapack.spbtrs if self._chol.dtype == np.float32 else lapack.dpbtrs
+        order = self.model.band_order
+        if order is None:
+            return solve(self._chol, q.astype(self._chol.dtype), lower=0)[0].astype(np.float64)
+        r = np.empty_like(q)
+        r[order] = solve(self._chol, q[order].astype(self._chol.dtype), lower=0)[0]
+        return r
 
     def _line_search(self, x: np.ndarray, energy: float, slope: float, p: np.ndarray,
                      f_ext: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, float]:

@@ -63,18 +63,19 @@ def pick_sequences(n_sequences: int, count: int) -> list[int]:
 
 
 def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], step_n: float,
-                             triangles: np.ndarray | None, count: int = 4) -> list[int]:
+                             triangles: np.ndarray | None, footprint: tuple[float, float],
+                             count: int = 4) -> list[int]:
     """Save the recording of ``count`` sequences of a states file's arrays (its force step
-    ``step_n``, N); returns them. ``triangles`` None: the states are points sampled at a lab's
-    layout, drawn as points."""
+    ``step_n``, N) on the MSM's surface ``footprint`` (L, W) m; returns them. ``triangles``
+    None: the states are points sampled at a lab's layout, drawn as points."""
     seq_of_state = arrays["states/sequence"]
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
     rows = {s: _rows(arrays, s) for s in chosen}
     largest = max((_displacement(arrays, r).max() for r in rows.values()), default=0.0)
     empty = len(arrays["states/step"]) == 0
-    first = np.array([[0.0, 0.0], [0.1, 0.1]]) if empty else arrays["states/points"][0, :, :2]
-    size = float(np.ptp(first[:, 0]))
+    first = np.array([[0.0, 0.0], footprint]) if empty else arrays["states/points"][0, :, :2]
+    size = float(np.ptp(first, axis=0).max())
     middle = (first.min(axis=0) + first.max(axis=0)) / 2
     bp = blueprint(chosen, largest * 1e3, step_n, size, middle)
     with recording(APP_ID, path, bp) as rec:

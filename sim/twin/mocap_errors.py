@@ -61,8 +61,8 @@ def gap_mask(rng: np.random.Generator, rate: np.ndarray, frame_rate: float,
 
 def gap_rates(tip: np.ndarray, surface_height: np.ndarray, phantom_rest: np.ndarray,
               n_indenter: int, errors: MocapErrors) -> np.ndarray:
-    """(T, 25 + n_indenter) gap-start rates from the tip (T, 3) and its height above the rest
-    surface (T,); ``phantom_rest`` (25, 3) are the phantom markers at rest (lab)."""
+    """(T, N + n_indenter) gap-start rates from the tip (T, 3) and its height above the rest
+    surface (T,); ``phantom_rest`` (N, 3) are the N phantom markers at rest (lab)."""
     near = surface_height < errors.near_height
     close = np.linalg.norm(tip[:, None, :2] - phantom_rest[None, :, :2], axis=2)
     phantom = np.where(near[:, None] & (close < errors.near_radius),

@@ -1,8 +1,10 @@
 """The phantom twin's silicone block: a volumetric spring lattice with a strain-stiffening material.
 
-The 100 x 100 x 32 mm block is a cubic lattice of nodes (21 x 21 x 5 by default: 5 mm across,
-8 mm through the thickness) joined by springs along the edges, the face diagonals and the body
-diagonals of every cell (13 directions per node); its bottom layer is fixed to the table. It is
+The block (100 x 100 x 32 mm by default; any footprint) is a lattice of nodes (21 x 21 x 5 by
+default: 5 mm across, 8 mm through the thickness; finer across for a dense marker grid, and
+the outermost cells closed by the block's edges: :mod:`sim.twin.marker_layout`) joined by
+springs along the edges, the face diagonals and the body diagonals of every cell (13
+directions per node); its bottom layer is fixed to the table. It is
 volumetric on purpose: the network is pre-trained on a surface mass-spring model, and the twin
 must leave it a real gap to cross.
 
@@ -11,7 +13,9 @@ on its rest direction, over its rest length), and a spring of rest length ``L`` 
 stores ``kappa * L**2 * (e**2 / 2 + beta * e**4 / 4)``: stiff where it is strained, which makes
 the block stiffen as it is pressed deeper (depth 5.3 mm at 0.5 N, 24.7 mm at 6.2 N and 27.0 mm
 at 7.5 N for a normal press at the centre; over a session of 20 presses the largest tip travel
-between two static states is about 30 mm, like the paper's experimental phantom). The
+between two static states is about 30 mm, like the paper's experimental phantom). On a finer
+lattice the springs are softer, ``kappa`` scaling as the spacing to the power 1.1: at 4 mm the
+centre press's depth stays within 2.5 % of the 5 mm lattice's from 1 to 7.5 N. The
 energy is convex, so every load has exactly one equilibrium and the depth along the load rises
 monotonically with the force (its derivative is ``f^T K^-1 f > 0``).
 
@@ -30,10 +34,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import PchipInterpolator
 
+from sim.twin.marker_layout import SPACING_M, MarkerLayout, lattice_axes, marker_nodes
+
 # the 13 lattice directions of a node: 3 edges, 6 face diagonals, 4 body diagonals
 _DIRECTIONS = ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
                (0, 1, 1), (0, 1, -1), (1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1))
 _PATCH = ((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1))   # the tip's contact node and neighbours
+STIFFNESS_EXPONENT = 1.1    # kappa ~ spacing ** this keeps the block's depth under a press
 
 
 @dataclass(frozen=True)
@@ -41,11 +48,11 @@ class PhantomSpec:
     """Geometry and material of the block (SI units)."""
 
     size: tuple[float, float, float] = (0.100, 0.100, 0.032)   # x, y, thickness (m)
-    nodes: tuple[int, int, int] = (21, 21, 5)                  # lattice nodes along x, y, z
-    stiffness: float = 6.494         # kappa (N/m): a spring's stiffness at small strain
+    layers: int = 5                  # lattice nodes through the thickness
+    stiffness: float = 6.494         # kappa (N/m): a spring's stiffness at small strain, on
+    #                                  the 5 mm lattice (scaled to the lattice's spacing)
     stiffening: float = 5.0          # beta: the quartic term of the spring energy
-    marker_grid: int = 5             # 5 x 5 surface markers ...
-    marker_pitch: float = 0.020      # ... 20 mm apart, centred on the block
+    markers: MarkerLayout = MarkerLayout()   # 5 x 5 surface markers 20 mm apart, centred
     marker_radius: float = 0.0015    # 3 mm spheres: centre 1.5 mm above the surface
     tip_share: float = 0.6           # share of the load on the contact node (rest: neighbours)
     tol: float = 1e-4                # N: largest force component left unbalanced on any node
@@ -76,10 +83,12 @@ class Phantom:
 
     def __init__(self, spec: PhantomSpec | None = None) -> None:
         self.spec = spec or PhantomSpec()
-        nx, ny, nz = self.spec.nodes
-        lx, ly, lz = self.spec.size
-        axes = (np.linspace(-lx / 2, lx / 2, nx), np.linspace(-ly / 2, ly / 2, ny),
-                np.linspace(0.0, lz, nz))
+        lz = self.spec.size[2]
+        xs, ys = lattice_axes(self.spec.size[:2], self.spec.markers)
+        axes = (xs, ys, np.linspace(0.0, lz, self.spec.layers))
+        self.nodes = (len(xs), len(ys), self.spec.layers)
+        nx, ny, nz = self.nodes
+        self.marker_ij = marker_nodes(self.spec.markers, xs, ys)   # (M, 2) (i, j): P00, P01, ..
         self.rest = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
         self.grid = np.arange(nx * ny * nz).reshape(nx, ny, nz)
         self.springs = _springs(self.grid)
@@ -98,34 +107,33 @@ class Phantom:
         self._A = sp.csr_matrix((coef.ravel(), (rows, ends.ravel())),
                                 shape=(len(length), self.n_dof))
         self._AT = self._A.T.tocsr()
-        self._energy = self.spec.stiffness * length**2     # kappa * L^2 per spring
+        self._energy = self.kappa * length**2     # kappa * L^2 per spring
         self._rest_k = (self._AT @ sp.diags(self._energy) @ self._A).tocsc()
         self.solves = 0
         self.iterations = 0
 
     # ------------------------------------------------------------------------- geometry
 
+    @property
+    def kappa(self) -> float:
+        """The springs' stiffness (N/m) on this lattice: ``spec.stiffness`` at 5 mm."""
+        ratio = self.spec.markers.spacing() / SPACING_M
+        return self.spec.stiffness * (1.0 if abs(ratio - 1.0) < 1e-12
+                                      else ratio ** STIFFNESS_EXPONENT)
+
+    @property
+    def n_markers(self) -> int:
+        """How many surface markers the block carries."""
+        return len(self.marker_ij)
+
     def top(self, i: int, j: int) -> int:
         """Node id of top-surface grid point (i along x, j along y)."""
         return int(self.grid[i, j, -1])
 
-    @cached_property
-    def marker_ij(self) -> np.ndarray:
-        """(M, 2) top-grid indices of the markers, row-major: marker ``5 * row + col``."""
-        s = self.spec
-        nx, ny, _ = s.nodes
-        pitch_nodes = s.marker_pitch / (s.size[0] / (nx - 1))
-        if abs(pitch_nodes - round(pitch_nodes)) > 1e-9:
-            raise ValueError("marker pitch must be a whole number of lattice spacings")
-        p = int(round(pitch_nodes))
-        first = (nx - 1 - p * (s.marker_grid - 1)) // 2
-        idx = first + p * np.arange(s.marker_grid)
-        return np.array([(i, j) for j in idx for i in idx])
-
     def candidate_locations(self, margin: float = 0.020) -> np.ndarray:
         """(C, 2) top nodes a press may target: at least two lattice spacings from every
         marker (the tip's patch never touches one) and ``margin`` from the edges."""
-        nx, ny, _ = self.spec.nodes
+        nx, ny, _ = self.nodes
         pos = self.rest[self.grid[:, :, -1]][..., :2]
         inner = ((np.abs(pos[..., 0]) <= self.spec.size[0] / 2 - margin)
                  & (np.abs(pos[..., 1]) <= self.spec.size[1] / 2 - margin))

@@ -13,10 +13,13 @@ sensor's ``FT<serial>.cal``, a recording) and leaves every other file alone.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 from core.atomic import atomic_outputs
 from core.errors import BadInput
+from sim.twin.marker_layout import parse_layout, parse_size
+from sim.twin.phantom import PhantomSpec
 from sim.twin.synth_view import write_twin_recording
 from sim.twin.twin import Twin, simulate
 from sim.twin.twin_files import FILES, RECORDING, calibration_name, file_keys, write_lab_files
@@ -25,13 +28,18 @@ from sim.twin.twin_truth import write_truth
 
 
 def run_synth(out_dir: str | Path, seed: int = 0, locations: int = 5, repeats: int = 4,
-              rrd: str | Path | None = None, view_press: int = 0, **params: object) -> Path:
+              rrd: str | Path | None = None, view_press: int = 0, markers: str = "5x5",
+              marker_pitch_mm: float = 20.0, size: str = "100x100",
+              **params: object) -> Path:
     """Simulate a session and write its folder (see the module docstring); returns the folder.
 
-    ``params`` are further :class:`TwinParams` fields; ``rrd`` also writes a rerun recording of
-    press ``view_press``.
+    ``markers`` (``RxC`` or ``scattered:N``), ``marker_pitch_mm`` and ``size`` (``LxW`` mm)
+    lay out the phantom (:mod:`sim.twin.marker_layout`); ``params`` are further
+    :class:`TwinParams` fields (``rate_hz``: the mocap's frame rate); ``rrd`` also writes a
+    rerun recording of press ``view_press``.
     """
-    p = TwinParams(seed=seed, locations=locations, repeats=repeats, **params)
+    spec = phantom_spec(markers, marker_pitch_mm, size, seed)
+    p = TwinParams(seed=seed, locations=locations, repeats=repeats, phantom=spec, **params)
     folder = _output_folder(out_dir)
     if rrd is not None and not 0 <= view_press < locations * repeats:
         raise BadInput("--view-press",
@@ -39,6 +47,15 @@ def run_synth(out_dir: str | Path, seed: int = 0, locations: int = 5, repeats: i
     twin = simulate(p)
     write_twin(twin, folder, rrd, view_press)
     return folder
+
+
+def phantom_spec(markers: str = "5x5", marker_pitch_mm: float = 20.0, size: str = "100x100",
+                 seed: int = 0) -> PhantomSpec:
+    """The block of ``--markers``, ``--marker-pitch`` and ``--size`` (thickness as default)."""
+    base = PhantomSpec()
+    footprint = parse_size(size)
+    return replace(base, size=(*footprint, base.size[2]),
+                   markers=parse_layout(markers, marker_pitch_mm, seed))
 
 
 def _output_folder(out_dir: str | Path) -> Path:

@@ -47,14 +47,16 @@ BOX_M = 0.0025           # half side of the cube drawn around a true marker
 
 def blueprint(twin: Twin, k: int, depth_mm: float) -> rrb.Blueprint:
     """The phantom in 3D on the left, framed from above; the force over time on the right."""
-    size = twin.phantom.spec.size
+    spec = twin.phantom.spec
+    size = spec.size
     rest = twin.paths[k].interpolate(np.zeros(1), "surface").reshape(-1, 3)
     centre = twin.lab(rest.mean(axis=0))
     up = twin.to_lab[:3, 2]
     return rrb.Blueprint(
         rrb.Horizontal(
-            phantom_view(f"press {k}: depth 0 .. {depth_mm:.0f} mm; true markers in green "
-                         "cubes, measured orange", ["+ /phantom/**", "+ /truth/**",
+            phantom_view(f"press {k}: {spec.markers.describe()} on {size[0] * 1e3:g} x "
+                         f"{size[1] * 1e3:g} mm; depth 0 .. {depth_mm:.0f} mm; true markers in "
+                         "green cubes, measured orange", ["+ /phantom/**", "+ /truth/**",
                                                     "+ /measured/**"],
                          centre, max(size[:2]), up),
             plot(f"force magnitude [N]: truth green, logger orange, {STEP_N:g} N states",
@@ -96,21 +98,21 @@ def surface_depth(twin: Twin, k: int, frames: np.ndarray) -> np.ndarray:
 def log_press(rec: rr.RecordingStream, twin: Twin, k: int, frames: np.ndarray,
               depth: np.ndarray) -> None:
     """Log press ``k``: surface, true and measured markers, tip, force and static states."""
-    m = twin.mocap
+    m, n = twin.mocap, twin.phantom.n_markers
     ns = _ns(m.time_s[frames])
     _log_surface(rec, twin, k, frames, ns, depth)
-    _log_boxes(rec, "truth/markers", m.points[frames, :25], ns)
+    _log_boxes(rec, "truth/markers", m.points[frames, :n], ns)
     _log_boxes(rec, "truth/cluster", m.cluster[frames], ns)
-    _log_points(rec, "measured/markers", m.measured[frames, :25], ns, COLORS["measured"])
-    _log_points(rec, "measured/cluster", m.measured[frames, 25:], ns, COLORS["measured"])
-    _log_points(rec, "truth/tip", m.points[frames, 25:], ns, COLORS["tip"], radius=0.002)
-    shafts = np.stack([m.points[frames, 25], m.cluster[frames].mean(axis=1)], axis=1)
+    _log_points(rec, "measured/markers", m.measured[frames, :n], ns, COLORS["measured"])
+    _log_points(rec, "measured/cluster", m.measured[frames, n:], ns, COLORS["measured"])
+    _log_points(rec, "truth/tip", m.points[frames, n:], ns, COLORS["tip"], radius=0.002)
+    shafts = np.stack([m.points[frames, n], m.cluster[frames].mean(axis=1)], axis=1)
     rec.log("truth/shaft", rr.LineStrips3D.from_fields(colors=[COLORS["shaft"]],
                                                        radii=[0.0008]), static=True)
     rec.send_columns("truth/shaft", indexes=[time_column(TIMELINE, ns)],
                      columns=rr.LineStrips3D.columns(strips=list(shafts)))
     mine = twin.states.press == k
-    rec.log("truth/states", rr.Points3D(twin.states.points[mine, 25],
+    rec.log("truth/states", rr.Points3D(twin.states.points[mine, n],
                                         colors=[COLORS["states"]], radii=[0.0012]), static=True)
     _log_force(rec, twin, frames, mine)
 

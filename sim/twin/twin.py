@@ -1,13 +1,14 @@
 """The phantom twin: a whole lab session simulated in memory (:func:`simulate`).
 
-A volumetric silicone block (:mod:`sim.twin.phantom`) on the table, 5 x 5 markers on its top,
-an indenter cluster held by a hand (:mod:`sim.twin.indenter`) pressing each location several
-times (:mod:`sim.twin.twin_scene`), seen by Qualisys with noise and occlusions
-(:mod:`sim.twin.twin_mocap`, QTM's 6D body: :mod:`sim.twin.body_fit`), a Nano17 logged by a
-Speedgoat on its own clock (:mod:`sim.twin.twin_force_log`), a pivot calibration
-(:mod:`sim.twin.twin_pivot`) and the true static states (:mod:`sim.twin.twin_states`).
-:mod:`sim.twin.synth_stage` writes it as the lab would, with ``truth.h5``
-(:mod:`sim.twin.twin_truth`). The same seed gives the same session.
+A volumetric silicone block (:mod:`sim.twin.phantom`) on the table, markers on its top (5 x 5
+20 mm apart by default; any grid, a scattered layout, any footprint:
+:mod:`sim.twin.marker_layout`), an indenter cluster held by a hand (:mod:`sim.twin.indenter`)
+pressing each location several times (:mod:`sim.twin.twin_scene`), seen by Qualisys with
+noise and occlusions (:mod:`sim.twin.twin_mocap`, QTM's 6D body: :mod:`sim.twin.body_fit`),
+a Nano17 logged by a Speedgoat on its own clock (:mod:`sim.twin.twin_force_log`), a pivot
+calibration (:mod:`sim.twin.twin_pivot`) and the true static states
+(:mod:`sim.twin.twin_states`). :mod:`sim.twin.synth_stage` writes it as the lab would, with
+``truth.h5`` (:mod:`sim.twin.twin_truth`). The same seed gives the same session.
 """
 
 from __future__ import annotations

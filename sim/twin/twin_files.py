@@ -3,7 +3,8 @@
 Session folder::
 
     session.toml          which file is which (data_schema.session)
-    indentation.tsv       QTM TSV 3D, 500 Hz, 25 phantom + 4 indenter markers, EVENT Trigger lines
+    indentation.tsv       QTM TSV 3D at the mocap rate (500 Hz by default), the N phantom markers
+                          (P00, P01, ...; 25 by default) + 4 indenter markers, EVENT Trigger lines
     indentation_6D.tsv    QTM TSV 6D of the body "Indenter"
     pivot.tsv             QTM TSV 3D of the 4 indenter markers, tip held in a divot
     force.csv, force.mat  the Speedgoat log: time (s, logger clock), G0..G5 (V), trigger (V)
@@ -43,7 +44,7 @@ from sim.twin.lab_writers import (
     write_session_toml,
 )
 from sim.twin.twin import Twin
-from sim.twin.twin_scene import PHANTOM_MARKERS, TRIGGER_EVENT
+from sim.twin.twin_scene import TRIGGER_EVENT
 
 FILES = {"trial": "indentation.tsv", "bodies": "indentation_6D.tsv", "pivot": "pivot.tsv",
          "csv": "force.csv", "mat": "force.mat", "c3d": "indentation.c3d",
@@ -99,7 +100,7 @@ def _stamp(seed: int, minutes_before: int = 0) -> tuple[str, str]:
 
 
 def _marker_names(twin: Twin) -> list[str]:
-    return [*PHANTOM_MARKERS, *twin.indenter.names]
+    return [*twin.phantom.spec.markers.names, *twin.indenter.names]
 
 
 def _write_logger(twin: Twin, csv: Path, mat: Path, mat_date: str) -> None:
@@ -132,7 +133,8 @@ def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:
     p = twin.params
     mocap: dict[str, object] = {
         "file": FILES["trial"], "bodies_file": FILES["bodies"],
-        "phantom_markers": list(PHANTOM_MARKERS), "indenter_markers": list(twin.indenter.names),
+        "phantom_markers": list(twin.phantom.spec.markers.names),
+        "indenter_markers": list(twin.indenter.names),
         "indenter_body": BODY_NAME}
     source = {"csv": "csv", "mat": "mat", "tsv": "analog", "c3d": "c3d"}[p.force_source]
     force: dict[str, object] = {"file": FILES[source]}
@@ -153,4 +155,24 @@ def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:
            "name": f"phantom-twin-seed{p.seed}"}
     synth = {"seed": p.seed, "truth": FILES["truth"], "other_force_file": other}
     return top, {"mocap": mocap, "force": force, "pivot": {"file": FILES["pivot"]},
-                 "synth": synth}
+                 "phantom": phantom_table(twin), "synth": synth}
+
+
+def phantom_table(twin: Twin) -> dict[str, object]:
+    """session.toml's ``[phantom]``: the footprint; a non-square grid's rows; for a scattered
+    layout the in-plane axis (P00 -> P01, laid along +x) and P00's true place on the
+    footprint (``[0, L] x [0, W]``, mm). A grid needs neither: its rows run along +x and it is
+    centred on the block."""
+    spec, ph = twin.phantom.spec, twin.phantom
+    size = [round(float(s) * 1e3, 6) for s in spec.size[:2]]
+    table: dict[str, object] = {"size_mm": size}
+    layout = spec.markers
+    if layout.scattered:
+        names = layout.names
+        rest = ph.rest[ph.top(*ph.marker_ij[0])]
+        table.update(x_axis=[names[0], names[1]], anchor=names[0],
+                     anchor_mm=[round(float(rest[0]) * 1e3 + size[0] / 2, 6),
+                                round(float(rest[1]) * 1e3 + size[1] / 2, 6)])
+    elif layout.rows != layout.cols:
+        table["rows"] = layout.rows
+    return table

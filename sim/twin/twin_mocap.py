@@ -25,7 +25,7 @@ class Mocap:
     """The trial on the mocap clock: truth and what the cameras delivered."""
 
     time_s: np.ndarray          # (T,)
-    points: np.ndarray          # (T, 26, 3) truth: phantom markers + tip
+    points: np.ndarray          # (T, N + 1, 3) truth: the N phantom markers + tip
     cluster: np.ndarray         # (T, 4, 3) truth
     origin: np.ndarray          # (T, 3) body origin
     rotation: np.ndarray        # (T, 3, 3) body -> lab
@@ -34,8 +34,8 @@ class Mocap:
     force_lab: np.ndarray       # (T, 3) on the phantom
     force_sensor: np.ndarray    # (T, 3) on the tip, sensor frame
     torque_sensor: np.ndarray   # (T, 3)
-    visible: np.ndarray         # (T, 29)
-    measured: np.ndarray        # (T, 29, 3) noisy, NaN in gaps
+    visible: np.ndarray         # (T, N + 4): phantom markers, then the indenter's
+    measured: np.ndarray        # (T, N + 4, 3) noisy, NaN in gaps
     body_origin: np.ndarray     # (T, 3) QTM's 6D fit of the measured cluster, NaN when lost
     body_rotation: np.ndarray   # (T, 3, 3)
     body_residual: np.ndarray   # (T,)
@@ -67,7 +67,8 @@ def play_mocap(p: TwinParams, phantom: Phantom, lab: Lab, hand: Hand, paths: lis
     visible = gap_mask(g_gap, rates, p.rate_hz, p.errors)
     measured = truth + residual_noise(g_cam, truth.shape[:2], p.errors)
     measured[~visible] = np.nan
-    body_origin, body_rotation, body_residual = qtm_body(indenter.markers, measured[:, 25:])
+    body_origin, body_rotation, body_residual = qtm_body(indenter.markers,
+                                                         measured[:, phantom.n_markers:])
     return Mocap(
         time_s=time_s, points=np.concatenate([markers, tip[:, None]], axis=1), cluster=cluster,
         origin=origin, rotation=st.rotation, press=st.press, force=st.force,

@@ -22,7 +22,6 @@ from sim.twin.indenter import Hand
 from sim.twin.mocap_errors import MocapErrors
 from sim.twin.phantom import LoadPath, Phantom, PhantomSpec
 
-PHANTOM_MARKERS = tuple(f"P{k:02d}" for k in range(25))
 TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
 FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
 
@@ -38,7 +37,7 @@ class TwinParams:
     repeats: int = 4
     press_seconds: float | None = None   # mean duration of one press cycle (None: ~6 s)
     pivot_seconds: float = 20.0
-    rate_hz: float = 500.0
+    rate_hz: float = 500.0               # the mocap's frame rate (--mocap-rate)
     logger_hz: float = 1000.0
     trigger: bool = True
     offset_s: float | None = None        # None: drawn, |offset| in [0.3, 3] s, either sign
@@ -64,8 +63,11 @@ def check_params(p: TwinParams) -> None:
         ("--force-file", p.force_source in FORCE_FILES.get(p.force_via, ()),
          f"must be {' or '.join(FORCE_FILES.get(p.force_via, ()))} with --force-via "
          f"{p.force_via}"),
-        ("--force-via", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
-         "analog needs a force rate that is a whole multiple of the frame rate"),
+        ("--mocap-rate", 10.0 <= p.rate_hz <= 2000.0,
+         f"{p.rate_hz:g} Hz: must be between 10 and 2000 Hz"),
+        ("--mocap-rate", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
+         f"{p.rate_hz:g} Hz does not divide the {p.logger_hz:g} Hz force rate: through the "
+         "analog board (--force-via analog) the force has a whole number of samples per frame"),
         ("--offset", p.force_via != "analog" or (p.offset_s is None and p.drift_ppm is None),
          "--offset and --drift are the logger's clock; through the analog board there is one"),
         ("--press-seconds", p.press_seconds is None or 2.0 <= p.press_seconds <= 60.0,

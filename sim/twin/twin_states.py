@@ -18,7 +18,7 @@ from sim.twin.twin_scene import Lab
 class States:
     """True static states every 0.5 N of each press's loading phase."""
 
-    points: np.ndarray          # (S, 26, 3)
+    points: np.ndarray          # (S, N + 1, 3): the N phantom markers, then the tip
     force: np.ndarray           # (S,)
     force_vector: np.ndarray    # (S, 3)
     step: np.ndarray

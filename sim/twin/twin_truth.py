@@ -15,7 +15,7 @@ from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.truth import CLOCK_DOC, TRUTH
 from sim.twin.twin import Twin
-from sim.twin.twin_scene import PHANTOM_MARKERS, TwinParams
+from sim.twin.twin_scene import TwinParams
 
 GZIP = dict.fromkeys((d.path for d in TRUTH.datasets), 1)   # the large series, fast and small
 
@@ -37,7 +37,7 @@ def truth_arrays(twin: Twin) -> dict[str, Any]:
     end = np.array([np.flatnonzero(m.press == k)[-1] for k in range(len(presses))])
     peak = np.array([int(np.ceil(p.times[4] * rate - 1e-9)) for p in presses])
     data: dict[str, Any] = {
-        "point_names": [*PHANTOM_MARKERS, "tip"],
+        "point_names": [*twin.phantom.spec.markers.names, "tip"],
         "mocap/time_s": m.time_s, "mocap/points": m.points, "mocap/cluster": m.cluster,
         "mocap/body_origin": m.origin, "mocap/body_rotation": m.rotation,
         "mocap/visible": m.visible, "mocap/press": m.press,
@@ -52,7 +52,7 @@ def truth_arrays(twin: Twin) -> dict[str, Any]:
         "calibration/quantum": twin.sensor.quantum, "calibration/noise": twin.sensor.noise,
         "indenter/markers": ind.markers, "indenter/tip": ind.tip, "indenter/sensor": ind.sensor,
         "indenter/marker_names": list(ind.names),
-        "phantom/to_lab": twin.to_lab, "phantom/rest_points": m.points[0, :25],
+        "phantom/to_lab": twin.to_lab, "phantom/rest_points": m.points[0, :-1],
         "locations/contact": twin.contacts, "locations/node": twin.nodes,
         "presses/location": [p.location for p in presses],
         "presses/repeat": [p.repeat for p in presses],

@@ -1,0 +1,70 @@
+"""QTM force-plate exports (``<trial>_f_1.tsv``): the plate is the force sensor.
+
+A header of ``KEY <tab> value`` lines (``NO_OF_SAMPLES``, ``FREQUENCY``, ``FORCE_PLATE_TYPE``,
+``FORCE_PLATE_NAME``, the corners, ``FORCE_PLATE_LENGTH`` ...), then the column line
+``SAMPLE TIME Force_X Force_Y Force_Z Moment_X Moment_Y Moment_Z COP_X COP_Y COP_Z`` and the
+samples (older exports: no column line and no SAMPLE and TIME, the nine values only). QTM
+writes forces in N, moments in N m and the centre of pressure in mm, in the plate's own frame
+(the export's DESCRIPTION says which); the samples share the mocap's clock (time 0 at the
+first frame of the capture), as the analog board's do.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from core.errors import BadInput
+from ingest.csv_dialect import read_text_table, sniff_dialect
+from ingest.log_table import LogTable
+
+COLUMNS = ("Force_X", "Force_Y", "Force_Z", "Moment_X", "Moment_Y", "Moment_Z",
+           "COP_X", "COP_Y", "COP_Z")
+UNITS = dict(zip(COLUMNS, ("N",) * 3 + ("N*m",) * 3 + ("mm",) * 3, strict=True))
+WRENCH = list(COLUMNS[:6])
+
+
+def _exact_time(path: str | Path, time: np.ndarray, rate: float) -> np.ndarray:
+    """TIME as QTM writes it (5 decimals: 1200 Hz is not exact) recomputed from FREQUENCY,
+    once it agrees with it to half a sample; else the header contradicts the data."""
+    exact = time[0] + np.arange(len(time)) / rate
+    off = float(np.abs(time - exact).max()) if len(time) else 0.0
+    if not off <= 0.5 / rate:
+        raise BadInput(path, f"TIME departs from FREQUENCY {rate:g} Hz by up to "
+                             f"{off * 1e3:.3f} ms: the header contradicts the data")
+    return exact
+
+
+def looks_like_force_plate(head: str) -> bool:
+    """A QTM TSV header with FORCE_PLATE_* keys."""
+    return "\nFORCE_PLATE_" in head.replace("\r", "") and "\t" in head
+
+
+def read_force_plate(path: str | Path) -> LogTable:
+    """The plate's force, moment and centre of pressure, timed by TIME or FREQUENCY."""
+    d = sniff_dialect(path, delimiter="\t", decimal=".")
+    t = read_text_table(path, d, "qtm_tsv_force")
+    rate = d.metadata.get("FREQUENCY")
+    try:
+        t.rate_hz = None if rate is None else float(rate)
+    except ValueError:
+        raise BadInput(path, f"FREQUENCY {rate!r} is not a number") from None
+    if d.header_line is None:
+        if len(t.columns) != len(COLUMNS):
+            raise BadInput(path, f"rows have {len(t.columns)} fields; a force-plate export "
+                                 f"without a column line has the {len(COLUMNS)} of "
+                                 f"{', '.join(COLUMNS)}")
+        t.columns = dict(zip(COLUMNS, t.columns.values(), strict=True))
+        t.time = None
+    else:
+        t.columns = {k.strip(): v for k, v in t.columns.items()}
+        t.time = "TIME" if "TIME" in t.columns else None
+        if t.time is not None and t.rate_hz:
+            t.columns["TIME"] = _exact_time(path, np.asarray(t.columns["TIME"], float), t.rate_hz)
+    t.time_unit = "s"
+    t.units = {k: u for k, u in UNITS.items() if k in t.columns}
+    t.details.update(plate=d.metadata.get("FORCE_PLATE_NAME"),
+                     plate_type=d.metadata.get("FORCE_PLATE_TYPE"),
+                     description=d.metadata.get("DESCRIPTION"), clock="mocap")
+    return t
