@@ -29,7 +29,7 @@ from pipeline.stage_cache import is_fresh, write_stamp
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
               show_default=True, help="Folder for everything the demo writes.")
 @click.option("--quick", is_flag=True,
-              help="Small MSM set, short training: under 5 minutes on 2 CPU cores.")
+              help="Small MSM sets, short training: 6-9 minutes on 2 CPU cores (target 5).")
 @click.option("--smoke", is_flag=True,
               help="Only check the wiring: 2 folds, 2 epochs, a tiny MSM set (seconds).")
 @click.option("--force", is_flag=True, help="Run every step, even unchanged ones.")
