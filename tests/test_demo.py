@@ -69,6 +69,16 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     assert again.exit_code == 0, again.output
     steps = demo_steps(out, 0, SMOKE)
     assert again.output.count("(unchanged since its last run: skipped)") == len(steps)
+    (out / "msm" / "fold0" / "params.json").unlink()    # one fold's fit gone: what reads it,
+    third = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])   # and on
+    assert third.exit_code == 0, third.output
+    lines = third.output.splitlines()
+    rerun = [line for line, after in zip(lines, lines[1:] + [""], strict=True)
+             if "$ pipeline" in line and "skipped" not in after]
+    for name in ("fold0/params.json", "fold0/msm.h5", "fold0/splits.json", "msm_fold0 ",
+                 "exp_tl_fold0 ", "metrics.json"):
+        assert any(name in line for line in rerun), name
+    assert not any("fold1" in line for line in rerun if "pipeline eval" not in line), rerun
 
 
 def test_no_tip_offsets_trains_the_papers_network_with_the_rest_of_the_recipe(tmp_path):
