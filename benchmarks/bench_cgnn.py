@@ -4,7 +4,7 @@ The peer is the same network (same widths, same weights, same heads) with each g
 done the PyG way: kNN from torch (cdist + topk) turned into an edge list, then
 ``torch_geometric.nn.EdgeConv(nn, aggr="mean")``, which runs the whole MLP once per edge. Ours
 applies the first linear per point before gathering and the second after the mean (same
-function: tests/test_cgnn_model.py checks it against PyG within 1e-5).
+function: tests/train/test_model.py checks it against PyG within 1e-5).
 
 Measured in one run, medians over repeats:
 - batch-1 latency through :class:`train.Predictor` (ONNX Runtime and torch backends) at 26,
@@ -41,10 +41,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from train.model import CGNN, CGNNConfig, Features
+from train.model import CGNN, CGNNConfig
 from train.normalise import Normaliser
 from train.predictor import DEFAULT_REGION, Predictor
-from train.si_model import ENTRIES, SIModel, to_onnx
+from train.si_model import ENTRIES, SIModel, deformed, newtons, to_onnx
 
 
 def pyg_knn_edges(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -75,8 +75,7 @@ class PygPeer(nn.Module):
             edges = pyg_knn_edges(x.detach(), self.model.config.k)
             x = torch.relu(conv(x.reshape(b * n, -1), edges)).reshape(b, n, -1)
             outs.append(x)
-        f = Features(torch.cat(outs, -1), cond)
-        return self.model.heads(self.model.scene_terms(f), cond)
+        return self.model.heads(torch.cat(outs, -1), cond)
 
 
 def median_ms(fn: Callable[[], object], repeats: int, sync: Callable[[], None]) -> float:
@@ -122,7 +121,7 @@ class PeerPredictor:
         p = torch.from_numpy(points).to(self.device)
         c = torch.from_numpy(condition).to(self.device)
         disp, df = self.peer(NORM.points(p)[None], NORM.condition(c)[None])
-        return (p + disp[0] * NORM.disp_scale).cpu().numpy(), float(df[0]) * NORM.force_scale
+        return deformed(p, disp[0], NORM).cpu().numpy(), float(newtons(df[0], NORM))
 
 
 def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> None:
@@ -257,7 +256,7 @@ def training(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
 
     ms = {name: median_ms(partial(step, fn), steps, sync) for name, fn in (
         ("ours", partial(model, x, c)), ("PyG peer", partial(peer, x, c)),
-        ("shared", lambda: model.heads(model.scene_terms(Features(local, c)), c)))}
+        ("shared", lambda: model.heads(local, c)))}
     print(f"  ours {batch / ms['ours'] * 1e3:8.1f}  PyG peer {batch / ms['PyG peer'] * 1e3:8.1f}"
           f"  ratio {ms['PyG peer'] / ms['ours']:5.2f}x; per step: ours {ms['ours']:.0f} ms, "
           f"peer {ms['PyG peer']:.0f} ms, shared by both (heads, loss, Adam) {ms['shared']:.0f}"

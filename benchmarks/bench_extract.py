@@ -38,6 +38,7 @@ import h5py
 import numpy as np
 from click.testing import CliRunner
 
+from core.protocol import top_level
 from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
 from sync.sync_accuracy import TARGETS as SYNC_TARGETS
@@ -69,7 +70,7 @@ def make_session(seed: int, d: Path, lab: list[str]) -> float:
 def reached_levels(truth: h5py.File, step_n: float) -> dict[int, int]:
     """Per true press, the top level (every ``step_n`` N) its true contact force reached."""
     force, press = truth["force/magnitude"][()], truth["mocap/press"][()]
-    return {int(p): int(np.floor(force[press == p].max() / step_n + 1e-9))
+    return {int(p): top_level(force[press == p].max(), step_n)
             for p in np.unique(press[press >= 0])}
 
 

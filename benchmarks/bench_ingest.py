@@ -133,7 +133,7 @@ def ingest(folder: Path, out: Path, rrd: Path | None) -> None:
     from ingest.ingest_stage import run_ingest
 
     set_quiet(True)
-    run_ingest(folder, out, rrd)
+    run_ingest(folder, out, None, rrd)
 
 
 def timed(fn, fresh: tuple[Path, ...] = ()) -> float:  # noqa: ANN001 - any callable

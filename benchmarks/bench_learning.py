@@ -4,8 +4,10 @@ predictors that learn nothing (issue 16's table), so anyone can re-measure it.
     python benchmarks/bench_learning.py --seeds 0 1 2 [--out /tmp/bench_learning] [--jobs 2]
     python benchmarks/bench_learning.py --no-tip-offsets --out /tmp/bench_paper_network
 
-``--no-tip-offsets`` runs the paper's network instead of the recipe's (``pipeline demo
---no-tip-offsets``): what the speed of a mesh pressed again costs in accuracy (README).
+The demo trains with the recipe ``ours`` (:mod:`train.recipes`, ``pipeline train --recipe
+ours``). ``--no-tip-offsets`` runs the paper's network instead of the recipe's (``pipeline demo
+--no-tip-offsets``: ``--recipe ours --no-tip-offsets``): what the speed of a mesh pressed again
+costs in accuracy (docs/results.md).
 
 Per seed it runs ``pipeline demo --quick --seed S`` (each seed its own phantom session and
 calibration presses; unchanged steps are skipped on a second run) and prints, from its
@@ -32,9 +34,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
+from train.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
 from train.scarcity import curve  # noqa: E402
-
-REFS = ("nothing moves", "nearest press", "force, linear")
 
 
 def run_demo(out: Path, seed: int, jobs: int | None, extra: tuple[str, ...] = ()) -> float:
@@ -51,7 +52,7 @@ def variant_row(runs: list[dict], name: str) -> str:
     """One table row: fold-mean L_d, folds worse than each reference, force error."""
     ld = [r["metrics"]["all"]["ld_mean_mm"] for r in runs]
     worse = [sum(r["metrics"]["all"]["ld_mean_mm"] > r["references"][ref]["ld_mean_mm"]
-                 for r in runs) for ref in REFS[:2]]
+                 for r in runs) for ref in (NOTHING_MOVES, NEAREST_PRESS)]
     force = np.mean([r["metrics"]["all"]["force_abs_n"] for r in runs])
     return (f"| {name} | {np.mean(ld):.3f} | {worse[0]} of {len(runs)} | {worse[1]} of "
             f"{len(runs)} | {force:.3f} |")
@@ -59,9 +60,10 @@ def variant_row(runs: list[dict], name: str) -> str:
 
 def reference_row(runs: list[dict]) -> str:
     """The references' row on the same folds."""
-    ld = [np.mean([r["references"][ref]["ld_mean_mm"] for r in runs]) for ref in REFS[:2]]
-    force = np.mean([r["references"]["force, linear"]["force_abs_n"] for r in runs])
-    return (f"| nothing moves / nearest press / force, linear | {ld[0]:.3f} / {ld[1]:.3f} | – "
+    ld = [np.mean([r["references"][ref]["ld_mean_mm"] for r in runs])
+          for ref in (NOTHING_MOVES, NEAREST_PRESS)]
+    force = np.mean([r["references"][FORCE_LINEAR]["force_abs_n"] for r in runs])
+    return (f"| {' / '.join(NAMES)} | {ld[0]:.3f} / {ld[1]:.3f} | – "
             f"| – | {force:.3f} (linear) |")
 
 
@@ -79,8 +81,8 @@ def report(out: Path, seed: int, seconds: float) -> None:
     print(variant_row(by["tl"], "cGNN/MSM (TL)"))
     msm = by["msm"][0]
     print(variant_row(by["msm"], "cGNN/MSM on the MSM test set")
-          + f" (nothing moves {msm['references']['nothing moves']['ld_mean_mm']:.3f} mm, "
-          f"linear force {msm['references']['force, linear']['force_abs_n']:.3f} N)")
+          + f" ({NOTHING_MOVES} {msm['references'][NOTHING_MOVES]['ld_mean_mm']:.3f} mm, "
+          f"linear force {msm['references'][FORCE_LINEAR]['force_abs_n']:.3f} N)")
     tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
     sc = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
     gains = {v: ", ".join(f"{r['gain']['ld_gain']:+.0%}" for r in by[v]) for v in ("tl", "notl")}
@@ -88,7 +90,7 @@ def report(out: Path, seed: int, seconds: float) -> None:
           f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; gain over "
           f"the best reference per fold: TL {gains['tl']}; scratch {gains['notl']}")
     rows = scarcity_rows(out)
-    for name in ("TL", "no TL", "nothing moves", "nearest press"):
+    for name in ("TL", "no TL", NOTHING_MOVES, NEAREST_PRESS):
         groups, ld = curve(rows, name, "ld_mean_mm")
         print(f"scarcity {name:13}: " + ", ".join(f"{g}: {v:.3f}" for g, v in
                                                     zip(groups, ld, strict=True)) + " mm")

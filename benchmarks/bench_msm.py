@@ -31,9 +31,9 @@ import numpy as np
 
 from sim.msm.blas_threads import blas_threads
 from sim.msm.msm import MSM, MSMParams, simulate_reference
-from sim.msm.msm_dataset import generate
 from sim.msm.msm_protocol import Protocol, draw_plan
 from sim.msm.msm_static import DEFAULT_TOL, BandedTangent, StaticSolver, simulate_sequence
+from sim.msm.simulate_stage import generate
 
 PAPER_S_PER_EXAMPLE = 2.93                          # the paper's machine and code
 EXAMPLES_PER_LOCATION = 11 * 15                     # share one rest factorisation

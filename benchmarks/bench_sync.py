@@ -29,12 +29,13 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from calib.force_tare import apply_calibration, rest_baseline
 from core.progress import set_quiet
 from ingest.ingest_stage import run_ingest
 from ingest.mcap_io import read_raw_mcap
+from sim.twin.synth_params import SynthParams
 from sim.twin.synth_stage import run_synth
 from sync.clock import ClockFit
-from sync.force import apply_calibration, rest_baseline
 from sync.sync_accuracy import TARGETS, sync_errors
 from sync.sync_params import SyncParams
 from sync.sync_stage import run_sync
@@ -70,13 +71,13 @@ def naive_force_rms(mcap: Path, synced: Path, truth: Path) -> float:
 
 def long_session_force(workdir: Path) -> dict[str, tuple[float, float]]:
     """Loaded-force RMS (all presses, last press) of a 7-minute session, re-tared or not."""
-    folder = run_synth(workdir / "long", seed=0, press_seconds=20.0)
+    folder = run_synth(None, workdir / "long", SynthParams(seed=0, press_seconds=20.0))
     mcap = workdir / "long.mcap"
     run_ingest(folder, mcap)
     out = {}
     for key, retare in (("on", True), ("off", False)):
         synced = workdir / f"long_{key}.h5"
-        run_sync(mcap, synced, params=SyncParams(retare=retare))
+        run_sync(mcap, synced, SyncParams(retare=retare))
         whole = sync_errors(synced, folder / "truth.h5")["force_rms_loaded_n"]
         with h5py.File(synced) as s, h5py.File(folder / "truth.h5") as t:
             g = s["presses"][sorted(s["presses"])[-1]]
@@ -93,22 +94,22 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
                                                "analog": []}
     naive, times_seeds, times, times_rrd = [], [], [], []
     for seed in range(seeds):
-        folder = run_synth(workdir / f"s{seed}", seed=seed)
+        folder = run_synth(None, workdir / f"s{seed}", SynthParams(seed=seed))
         mcap = workdir / f"s{seed}.mcap"
         run_ingest(folder, mcap)
         truth = folder / "truth.h5"
         for method in ("trigger", "data"):
             out = workdir / f"s{seed}_{method}.h5"
             start = time.perf_counter()
-            run_sync(mcap, out, params=SyncParams(clock=method))
+            run_sync(mcap, out, SyncParams(clock=method))
             if method == "trigger":
                 times_seeds.append(time.perf_counter() - start)
             rows[method].append(sync_errors(out, truth))
         naive.append(naive_force_rms(mcap, workdir / f"s{seed}_trigger.h5", truth))
         plain = workdir / f"s{seed}_plain.h5"
-        run_sync(mcap, plain, params=SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
+        run_sync(mcap, plain, SyncParams(robust_scale_m=0.0, tip_cutoff_hz=0.0))
         rows["plain_tip"].append(sync_errors(plain, truth))
-        analog = run_synth(workdir / f"a{seed}", seed=seed, force_via="analog")
+        analog = run_synth(None, workdir / f"a{seed}", SynthParams(seed=seed, force_via="analog"))
         run_ingest(analog, workdir / f"a{seed}.mcap")
         run_sync(workdir / f"a{seed}.mcap", workdir / f"a{seed}.h5")
         rows["analog"].append(sync_errors(workdir / f"a{seed}.h5", analog / "truth.h5"))
@@ -120,7 +121,7 @@ def run(seeds: int, repeats: int, workdir: Path) -> None:
         run_sync(mcap, workdir / "t.h5")
         times.append(time.perf_counter() - start)
         start = time.perf_counter()
-        run_sync(mcap, workdir / "t.h5", workdir / "t.rrd")
+        run_sync(mcap, workdir / "t.h5", None, workdir / "t.rrd")
         times_rrd.append(time.perf_counter() - start)
     _report(rows, naive, retare, times_seeds, times, times_rrd, seeds)
 

@@ -31,7 +31,7 @@ import scipy.sparse.linalg as spla
 from ingest.ingest_stage import run_ingest
 from sim.twin.phantom import Phantom
 from sim.twin.synth_stage import write_twin
-from sim.twin.twin import simulate
+from sim.twin.twin import simulate_twin
 from sim.twin.twin_scene import TwinParams
 
 LEVELS = np.concatenate([[0.25], np.arange(0.5, 7.01, 0.5), [7.2, 7.3]])
@@ -94,7 +94,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "session"
-        sim_s, twin = median_time(lambda: simulate(TwinParams(seed=0)), args.repeats)
+        sim_s, twin = median_time(lambda: simulate_twin(TwinParams(seed=0)), args.repeats)
         write_s, _ = median_time(lambda: write_twin(twin, folder), args.repeats)
         read_s, _ = median_time(lambda: run_ingest(folder, Path(tmp) / "s.mcap"),
                                 args.repeats)

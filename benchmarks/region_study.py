@@ -1,7 +1,8 @@
 """Region of interest: what running the cGNN near the press only buys in time and costs in error.
 
-An MSM model is trained on the 32 x 32 grid (1024 points), with the recipe of the README's
-"Training that learns" (tip offsets, balanced loss, rotation, lr 2e-3), or taken from ``--run``
+An MSM model is trained on the 32 x 32 grid (1024 points), with the recipe of docs/model.md's
+"Training that learns" (``ours``, :mod:`train.recipes`: tip offsets, balanced loss, rotation,
+lr 2e-3; without its average of the weights, as measured), or taken from ``--run``
 (a run trained elsewhere, e.g. on a GPU). Presses it never saw are simulated on the same surface
 and sampled at its 1024 masses and at a 64 x 64 lattice (4096 points, the same physics seen
 denser; the model never trained at that density, so its error there is the whole model's too).
@@ -34,13 +35,13 @@ from bench_cgnn import median_ms
 from speed_accuracy_report import NOTHING, region_text
 
 from sim.msm.msm import MSMParams
-from sim.msm.msm_dataset import generate
 from sim.msm.msm_protocol import Protocol, draw_plan
-from sim.msm.msm_simulate import simulate
+from sim.msm.msm_simulate import simulate_plan
+from sim.msm.simulate_stage import generate
 from split.split_stage import build_manifest, default_plan, write_manifest
-from train.loop import TrainOptions, train_run
-from train.model import CGNNConfig
 from train.predictor import Predictor
+from train.recipes import OURS
+from train.train_stage import TrainInputs, TrainParams, run_train
 
 RADII_MM = (5, 10, 15, 20, 30, 45)
 TOLERANCE = 0.05          # the default radius changes mean L_d by less than this
@@ -56,8 +57,8 @@ def model(out: Path, epochs: int, lr: float, device: str, seed: int,
         out.mkdir(parents=True, exist_ok=True)
         generate(data, protocol, MSMParams(n=32), workers=min(2, os.cpu_count() or 1))
         write_manifest(splits, build_manifest(data, default_plan(data, None, None, 1, seed)))
-    opts = TrainOptions(epochs=epochs, lr=lr, seed=seed, loss="balanced", rotate=True)
-    train_run(data, splits, run, opts, CGNNConfig(tip_offsets=True), device=device)
+    opts, config = OURS.settings(epochs=epochs, lr=lr, seed=seed, ema=None)
+    run_train(TrainInputs(data, splits), run, TrainParams(opts, config, device))
     return run
 
 
@@ -71,7 +72,7 @@ def presses(side: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]
         x = np.linspace(0.0, params.size, side)
         xx, yy = np.meshgrid(x, x)
         layout = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], 1)
-    sim = simulate(plan, params, layout=layout)
+    sim = simulate_plan(plan, params, layout=layout)
     pts = sim.points if layout is None else sim.points[:, :-1]          # the tip is not a point
     per = UNSEEN.steps + 1
     out = []
@@ -110,7 +111,7 @@ def nothing_moves(cases: list) -> dict:
             "force_n": float(np.mean([f for _, _, _, f in cases]))}
 
 
-def region_rows(out: Path, epochs: int = 15, lr: float = 2e-3, device: str = "cpu",
+def region_rows(out: Path, epochs: int = 15, lr: float = OURS.options["lr"], device: str = "cpu",
                 seed: int = 0, repeats: int = 30, run: Path | None = None,
                 protocol: Protocol = TRAIN) -> dict:
     """Every row (1024 and 4096 points, each radius and the whole model), and the default.

@@ -48,14 +48,15 @@ from speed_accuracy_report import write_report
 
 from core.progress import set_quiet
 from sim.msm.msm import MSMParams
-from sim.msm.msm_dataset import generate
 from sim.msm.msm_protocol import Protocol
+from sim.msm.simulate_stage import generate
 from train.augment import about_normal, move_batch, tilt
 from train.data import Batch
 from train.evaluate import LoadedRun, example_errors, load_run, metrics
-from train.loop import TrainOptions, train_run
+from train.loop import TrainOptions
 from train.model import CGNN, CGNNConfig
 from train.si_model import Prediction, predict
+from train.train_stage import TrainInputs, TrainParams, run_train
 
 HAPTIC_MS = 1.0          # a 1 kHz haptic loop's whole budget
 VISUAL_MS = 1000 / 60    # one 60 Hz frame
@@ -124,7 +125,7 @@ def trained(out: Path, name: str, data: tuple[Path, Path], epochs: int, budget: 
     run_dir = out / "runs" / name
     opts = TrainOptions(fold=0, epochs=epochs, lr=budget.lr, seed=seed, **options)
     tic = time.perf_counter()
-    train_run(data[0], data[1], run_dir, opts, CGNNConfig(k=k), device=device)
+    run_train(TrainInputs(data[0], data[1]), run_dir, TrainParams(opts, CGNNConfig(k=k), device))
     print(f"  trained {name} ({epochs} epochs) in {time.perf_counter() - tic:.0f} s",
           flush=True)
     return load_run(run_dir, device)

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after the backend is chosen
 
 from core.atomic import atomic_output  # noqa: E402
+from train.references import NOTHING_MOVES  # noqa: E402
 
 
 def table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:
@@ -42,7 +43,7 @@ REGION = [("points", "points", "d"), ("setting", "region", "s"),
           ("force_vs_whole_n", "force vs whole [N]", ".3f"), ("ms", "latency [ms]", ".2f")]
 
 
-NOTHING = "nothing moves (reference)"
+NOTHING = f"{NOTHING_MOVES} (reference)"
 
 
 def region_text(region: dict) -> str:

@@ -1,6 +1,6 @@
 """Rerun recordings of each stage: opened beside the output, written atomically, read back.
 
-Each stage's view logs what a person checks at that stage (README, "Rerun recordings"); this
+Each stage's view logs what a person checks at that stage (docs/recordings.md); this
 module only handles where the recording goes and how tests and `pipeline inspect` read it
 back.
 """

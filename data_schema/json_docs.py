@@ -9,10 +9,17 @@
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
   ``{"groups": [...], "single": [example ids], "multi": [example ids]}`` plus
   ``train_subsets`` (nested lists of 1..n training groups, for the data-scarcity study).
-- metrics (``pipeline eval --out``): ``runs`` (one row per run: run, label, fold, test_set,
-  metrics) and ``overall`` (one row per label: label, test_set, folds, metrics,
-  fold_ld_mean_sd_mm), optionally ``scarcity`` rows; ``metrics`` maps ``single``, ``multi``
-  and ``all`` to the count ``n`` and the Table-2 numbers in mm, N and N^2.
+- ``phantom.metrics`` 1.0 (``pipeline eval --out``): ``runs`` (one row per run: run, label,
+  variant, fold, test_set, metrics, references, gain) and ``overall`` (one row per label and
+  test set: label, variant, test_set, folds, fold_ids, metrics, fold_ld_mean_sd_mm,
+  references, gain, folds_not_beating_references), optionally ``scarcity`` rows (fold,
+  groups, predictor, ld_mean_mm, ld_max_mm, force_abs_n), and its ``provenance``;
+  ``metrics`` maps ``single``, ``multi`` and ``all`` to the count ``n`` and the Table-2
+  numbers in mm, N and N^2; ``references`` maps each no-learning reference to its ``all``
+  metrics (L_d null for one that moves no point); ``gain`` names the best reference of L_d
+  and of force with its value and the model's relative gain over it; ``variant`` the run's
+  model, training data, rotation, aug and the variant it was fine-tuned from (or null).
+  A document from before 1.0 (no ``schema``) is refused: re-run ``pipeline eval``.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -115,52 +123,156 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
+METRICS = JsonSchema("phantom.metrics", "1.0", {
+    "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
+})
+METRICS_OPTIONAL = {"scarcity": list}
+# The predictors that learn nothing (train/references.py), by the names a document keys them by
+NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR = "nothing moves", "nearest press", "force, linear"
+REFERENCES = (NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR)
+_NUMBER = (int, float)
+_TEXT_OR_NONE = (str, type(None))
+_NUMBER_OR_NONE = (int, float, type(None))
 METRIC_ROWS = {
     "runs": {"run": str, "label": str, "variant": dict, "fold": int, "test_set": str,
-             "metrics": dict},
-    "overall": {"label": str, "variant": dict, "test_set": str, "folds": int, "metrics": dict,
-                "fold_ld_mean_sd_mm": (int, float)},
+             "metrics": dict, "references": dict, "gain": dict},
+    "overall": {"label": str, "variant": dict, "test_set": str, "folds": int, "fold_ids": list,
+                "metrics": dict, "fold_ld_mean_sd_mm": _NUMBER, "references": dict,
+                "gain": dict, "folds_not_beating_references": list},
 }
+VARIANT = {"model": str, "train_data": str, "rotate": bool, "aug": bool,
+           "pretrained": (dict, type(None))}
+GAIN = {"ld_reference": _TEXT_OR_NONE, "ld_reference_mm": _NUMBER_OR_NONE,
+        "ld_gain": _NUMBER_OR_NONE, "force_reference": _TEXT_OR_NONE,
+        "force_reference_n": _NUMBER_OR_NONE, "force_gain": _NUMBER_OR_NONE}
+SCARCITY_ROW = {"fold": int, "groups": int, "predictor": str, "ld_mean_mm": _NUMBER_OR_NONE,
+                "ld_max_mm": _NUMBER_OR_NONE, "force_abs_n": _NUMBER}
+METRIC_KEYS = ("n", "force_mse_n2", "force_abs_n", "force_abs_sd_n", "ld_mean_mm",
+               "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")
+LD_KEYS = ("ld_mean_mm", "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")  # None: moves no point
 METRIC_LIMITS = {"_mm": 100.0, "_n": 1000.0, "_n2": 1e6}   # beyond the phantom's size, a press
 METRIC_SETS = ("single", "multi", "all")
+_MISSING = object()
 
 
 def validate_metrics(path: str | Path) -> dict[str, Any]:
-    """Read a metrics document of ``pipeline eval`` and check it; return it.
+    """Read a ``phantom.metrics`` document of ``pipeline eval`` and check every field of it;
+    return it.
 
-    Every row has its keys with their types; every metric is a finite, non-negative number of
-    plausible size for its unit (an error in micrometres written as millimetres is refused);
-    each set counts at least one example.
+    Every row has its keys with their types; every metric is a finite, non-negative
+    number of plausible size for its unit (an error in micrometres written as millimetres is
+    refused), and each set counts at least one example; each reference's metrics alike (L_d
+    null for a reference that moves no point); each gain names a reference of its row and is
+    at most 1 (a model error below zero); a variant is its fields, recursively through the
+    run it was fine-tuned from; the fold lists name folds of the row.
     """
     doc = _load(path)
-    if not isinstance(doc, dict) or not all(isinstance(doc.get(k), list) for k in METRIC_ROWS):
-        raise BadInput(path, "not a metrics document (needs lists 'runs' and 'overall')")
+    if isinstance(doc, dict) and "schema" not in doc and set(METRIC_ROWS) <= set(doc):
+        raise BadInput(path, "a metrics document from before phantom.metrics 1.0 (no schema): "
+                             "re-run `pipeline eval`")
+    doc = validate_json_doc(path, METRICS)
+    _typed_keys(path, doc, {**METRICS.keys, **METRICS_OPTIONAL}, "the document",
+                optional=METRICS_OPTIONAL)
     for table, keys in METRIC_ROWS.items():
         for i, row in enumerate(doc[table]):
-            where = f"{table}[{i}]"
-            if not isinstance(row, dict):
-                raise BadInput(path, f"{where} is not an object")
-            for key, kind in keys.items():
-                if not isinstance(row.get(key), kind) or isinstance(row.get(key), bool):
-                    raise BadInput(path, f"{where}.{key} missing or not of type {kind}")
-            _check_metric_sets(path, row["metrics"], f"{where}.metrics")
+            _check_row(path, row, keys, f"{table}[{i}]")
     for i, row in enumerate(doc.get("scarcity", [])):
-        if not isinstance(row, dict):
-            raise BadInput(path, f"scarcity[{i}] is not an object")
-        _check_numbers(path, {k: v for k, v in row.items()   # a reference may have no L_d
-                              if k not in ("transfer", "predictor") and v is not None},
-                       f"scarcity[{i}]")
+        where = f"scarcity[{i}]"
+        _typed_keys(path, row, SCARCITY_ROW, where)
+        _check_numbers(path, {k: row[k] for k in SCARCITY_ROW    # a reference may have no L_d
+                              if k != "predictor" and row[k] is not None}, where)
     return doc
+
+
+def _check_row(path: str | Path, row: Any, keys: dict, where: str) -> None:
+    """One row of ``runs`` or ``overall``: its keys, metrics, references, gain and variant."""
+    _typed_keys(path, row, keys, where)
+    _check_metric_sets(path, row["metrics"], f"{where}.metrics")
+    if not row["references"]:
+        raise BadInput(path, f"{where}.references is empty")
+    strange = sorted(set(row["references"]) - set(REFERENCES))
+    if strange:
+        raise BadInput(path, f"{where}.references names no reference: {strange} (they are "
+                             f"{list(REFERENCES)})")
+    for name, values in row["references"].items():
+        _check_metric_values(path, values, f"{where}.references[{name!r}]", null_ld=True)
+    _check_gain(path, row["gain"], set(row["references"]), f"{where}.gain")
+    _check_variant(path, row["variant"], f"{where}.variant")
+    if "fold_ids" in row:
+        _check_folds(path, row, where)
+
+
+def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) -> None:
+    """The best reference of L_d and of force (one of the row's, or null) and the gain over
+    it: at most 1 (the model's error is not below zero), null where either is missing."""
+    _typed_keys(path, gain, GAIN, where)
+    for what in ("ld", "force"):
+        name = gain[f"{what}_reference"]
+        if name is not None and name not in references:
+            raise BadInput(path, f"{where}.{what}_reference {name!r} is not one of the row's "
+                                 "references")
+        value = gain[f"{what}_gain"]
+        if value is not None and not (math.isfinite(value) and value <= 1):
+            raise BadInput(path, f"{where}.{what}_gain is {value!r}: not a finite number "
+                                 "<= 1")
+    _check_numbers(path, {k: gain[k] for k in GAIN if k.endswith(("_mm", "_n"))
+                          and gain[k] is not None}, where)
+
+
+def _check_variant(path: str | Path, variant: Any, where: str) -> None:
+    """A run's variant: model, training data, rotation, aug, and the variant it was
+    fine-tuned from (null, or a variant)."""
+    _typed_keys(path, variant, VARIANT, where)
+    if variant["pretrained"] is not None:
+        _check_variant(path, variant["pretrained"], f"{where}.pretrained")
+
+
+def _check_folds(path: str | Path, row: dict, where: str) -> None:
+    """``fold_ids``: one per fold pooled; the folds not beating the references among them."""
+    ids, worse = row["fold_ids"], row["folds_not_beating_references"]
+    if not (_int_list(ids) and _int_list(worse)):
+        raise BadInput(path, f"{where}: fold_ids and folds_not_beating_references must be "
+                             "lists of integers")
+    if len(ids) != row["folds"] or not set(worse) <= set(ids):
+        raise BadInput(path, f"{where}: fold_ids must list its {row['folds']} folds, and "
+                             "folds_not_beating_references only folds of them")
+    _check_numbers(path, {"fold_ld_mean_sd_mm": row["fold_ld_mean_sd_mm"]}, where)
+
+
+def _typed_keys(path: str | Path, obj: Any, keys: dict, where: str,
+                optional: Mapping[str, Any] = MappingProxyType({})) -> None:
+    """``obj`` is an object with ``keys`` (those in ``optional`` may be absent), each of its
+    type (a boolean is no number); a key added by hand is left alone, as in every document."""
+    if not isinstance(obj, dict):
+        raise BadInput(path, f"{where} is not an object")
+    for key, kind in keys.items():
+        if key in optional and key not in obj:
+            continue
+        value = obj.get(key, _MISSING)
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if value is _MISSING or not isinstance(value, kind) or (
+                isinstance(value, bool) and bool not in kinds):
+            raise BadInput(path, f"{where}.{key} missing or not of type {kind}")
 
 
 def _check_metric_sets(path: str | Path, metrics: dict, where: str) -> None:
     if "all" not in metrics or set(metrics) - set(METRIC_SETS):
         raise BadInput(path, f"{where} must hold 'all' and only {METRIC_SETS}")
     for name, values in metrics.items():
-        if not isinstance(values, dict) or not isinstance(values.get("n"), int) or \
-                values["n"] < 1:
-            raise BadInput(path, f"{where}.{name}.n must count at least one example")
-        _check_numbers(path, values, f"{where}.{name}")
+        _check_metric_values(path, values, f"{where}.{name}")
+
+
+def _check_metric_values(path: str | Path, values: Any, where: str,
+                         null_ld: bool = False) -> None:
+    """One set's metrics: :data:`METRIC_KEYS`, ``n`` at least 1, the rest finite and
+    plausible (with ``null_ld``, the L_d values may be null: a predictor moving no point)."""
+    if not isinstance(values, dict) or not isinstance(values.get("n"), int) or \
+            isinstance(values["n"], bool) or values["n"] < 1:
+        raise BadInput(path, f"{where}.n must count at least one example")
+    if not set(METRIC_KEYS) <= set(values):
+        raise BadInput(path, f"{where} lacks {sorted(set(METRIC_KEYS) - set(values))}")
+    _check_numbers(path, {k: v for k, v in values.items()
+                          if not (null_ld and k in LD_KEYS and v is None)}, where)
 
 
 def _check_numbers(path: str | Path, values: dict, where: str) -> None:

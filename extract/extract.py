@@ -39,12 +39,11 @@ class Extracted:
     untrusted_presses: int = 0     # presses left out: force saturated or beyond rated range
 
 
-def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
-            shared_locations: bool = False) -> Extracted:
+def extract(sessions: Sequence[Session], params: ExtractParams) -> Extracted:
     """States and examples of every press of every session, in session then time order.
 
-    Location ids are the files' own, offset per file unless ``shared_locations`` (the user
-    says the same id is the same place in every session).
+    Location ids are the files' own, offset per file unless ``params.shared_locations`` (the
+    user says the same id is the same place in every session).
     """
     check_step(sessions, params.step_n)
     check_same_phantom(sessions)
@@ -77,7 +76,7 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
                 done.append(st)
                 seq += 1
         views.append((session.presses, done))
-        if not shared_locations:
+        if not params.shared_locations:
             loc_offset += max(session.locations) + 1
     if not cols["points"]:
         why = (f": all {untrusted} presses have a saturated or over-range force (flagged by "
@@ -87,7 +86,7 @@ def extract(sessions: Sequence[Session], params: ExtractParams, seed: int = 0,
     arrays["states/tip"] = arrays["states/points"][:, -1]
     arrays["sessions/transform"] = np.stack(transforms)
     single, multi = example_pairs(arrays["states/step"], arrays["states/sequence"],
-                                  np.random.default_rng(seed))
+                                  np.random.default_rng(params.seed))
     arrays.update({"single/start": single[:, 0], "single/end": single[:, 1],
                    "multi/start": multi[:, 0], "multi/end": multi[:, 1]})
     return Extracted(arrays, names, excluded, views, untrusted)

@@ -26,18 +26,16 @@ from extract.static_states import ExtractParams
 from extract.synced_presses import read_synced
 
 
-def run_extract(synced: Sequence[str | Path], out: str | Path, rrd: str | Path | None = None,
-                params: ExtractParams | None = None, seed: int = 0,
-                size_m: tuple[float, float] | None = None, shared_locations: bool = False
+def run_extract(inputs: Sequence[str | Path], out: str | Path,
+                params: ExtractParams | None = None, rrd: str | Path | None = None
                 ) -> Extracted:
-    """Extract the states of ``synced`` into ``out`` (and the recording ``rrd``); ``size_m``
-    overrides the footprint the synced files' layout states."""
-    params = params or ExtractParams()
-    sessions = [read_synced(path, size_m) for path in synced]
-    ex = extract(sessions, params, seed, shared_locations)
+    """Extract the states of the synced files ``inputs`` into ``out`` (and the recording
+    ``rrd``); ``params.size_m`` overrides the footprint the synced files' layout states."""
+    synced, params = inputs, params or ExtractParams()
+    sessions = [read_synced(path, params.size_m) for path in synced]
+    ex = extract(sessions, params)
     first = sessions[0]
-    prov = make_provenance("extract", {**asdict(params), "seed": seed, "size_m": size_m},
-                           synced, STATES.name, STATES.version)
+    prov = make_provenance("extract", _recorded(params), synced, STATES.name, STATES.version)
     attrs = {**_attrs(ex, params, prov), "point_names": json.dumps(first.point_names),
              "footprint_m": np.asarray(first.layout.size_m, dtype=float)}
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
@@ -46,6 +44,12 @@ def run_extract(synced: Sequence[str | Path], out: str | Path, rrd: str | Path |
         if tmp_rrd is not None:
             write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m)
     return ex
+
+
+def _recorded(params: ExtractParams) -> dict[str, Any]:
+    """The settings the provenance records: every one but ``shared_locations`` (which it
+    has never recorded; adding it would change the bytes of every states file)."""
+    return {k: v for k, v in asdict(params).items() if k != "shared_locations"}
 
 
 def _attrs(ex: Extracted, params: ExtractParams, provenance: dict) -> dict[str, Any]:

@@ -2,7 +2,7 @@
 
 Lab and MSM states share one frame (rest surface at z = 0, +z out of the phantom, footprint
 on [0, L] x [0, W]) so that a location means the same place in both. The rest plane itself
-is sync's (:func:`sync.surface.rest_plane`, stored in the synced file's calibration); the
+is sync's (:func:`calib.rest_plane.rest_plane`, stored in the synced file's calibration); the
 in-plane axis and the origin come from the phantom's layout (session.toml's ``[phantom]``,
 :mod:`data_schema.phantom`, stored in the synced file's ``phantom`` attribute).
 """

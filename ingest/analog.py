@@ -1,7 +1,7 @@
 """Force through the mocap system's analog board: analog channels of a C3D file or of a QTM
 analog TSV export (``<trial>_a.tsv``), on the mocap's own clock.
 
-Both readers (:func:`ingest.c3d.read_c3d_analog`, :func:`ingest.qtm_tsv.read_qtm_analog`) give
+Both readers (:func:`ingest.c3d.read_c3d_analog`, :func:`ingest.qtm_analog.read_qtm_analog`) give
 an :class:`AnalogExport`: every channel in the physical units the file states, with the scale
 factors that were applied. :func:`analog_force` picks the six gauge or wrench channels that
 ``session.toml`` names (by name or by 1-based channel number) and returns them as a

@@ -16,9 +16,11 @@ from core.series import MarkerSeries
 from ingest.analog import AnalogExport
 from ingest.c3d import read_c3d, read_c3d_analog
 from ingest.force_log import text_log_format
+from ingest.qtm_3d import read_qtm_3d
+from ingest.qtm_analog import read_qtm_analog
 from ingest.qtm_force_plate import looks_like_force_plate
 from ingest.qtm_mat import is_qtm_mat, read_qtm_mat
-from ingest.qtm_tsv import looks_like_qtm_tsv, parse_qtm_header, read_qtm_3d, read_qtm_analog
+from ingest.qtm_scan import looks_like_qtm_tsv, parse_qtm_header
 from ingest.sniff import head_text, read_head, sniff
 
 FORMATS = (

@@ -11,6 +11,7 @@ succeeds; inputs are only read.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from core.atomic import atomic_outputs, same_path
@@ -33,15 +34,21 @@ from ingest.detect import detect_format, read_mocap
 from ingest.force_source import read_force
 from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
-from ingest.qtm_tsv import read_qtm_6d
+from ingest.qtm_6d import read_qtm_6d
 
 
-def run_ingest(folder: str | Path, out: str | Path, rrd: str | Path | None = None,
-                   compression: str = "none") -> RawSession:
-    """Read, check and store the session in ``folder``; ``rrd`` also writes the recording.
+@dataclass(frozen=True)
+class IngestParams:
+    """Every setting of ``pipeline ingest``."""
 
-    ``compression`` of the MCAP chunks: "none" (fast) or "zstd" (about half the size).
-    """
+    compression: str = "none"     # of the MCAP chunks: none (fast) or zstd (about half the size)
+
+
+def run_ingest(inputs: str | Path, out: str | Path, params: IngestParams | None = None,
+               rrd: str | Path | None = None) -> RawSession:
+    """Read, check and store the session in the folder ``inputs`` as the MCAP ``out``;
+    ``rrd`` also writes the recording."""
+    folder, compression = inputs, (params or IngestParams()).compression
     cfg = read_session(folder)
     inputs = session_inputs(cfg)
     if rrd is not None and same_path(out, rrd):

@@ -23,8 +23,10 @@ from ingest.ati_cal import read_ati_cal
 from ingest.c3d import read_c3d, read_c3d_analog
 from ingest.force_log import read_force_log, read_log_table
 from ingest.force_source import read_force
+from ingest.qtm_3d import read_qtm_3d
+from ingest.qtm_6d import read_qtm_6d
+from ingest.qtm_analog import read_qtm_analog
 from ingest.qtm_mat import read_qtm_mat
-from ingest.qtm_tsv import read_qtm_3d, read_qtm_6d, read_qtm_analog
 
 TIME_NAMES = ("time", "t", "timestamp", "time_s", "times")
 TRIGGER_NAMES = ("trigger", "sync")

@@ -54,9 +54,14 @@ INSPECT: dict[str, Callable[[Path], dict[str, Any]]] = {
 }
 
 
-def run_inspect(path: str | Path) -> dict[str, Any]:
-    """The summary of ``path`` (see the module doc for its keys); unknown formats are bad input."""
-    path = Path(path)
+def run_inspect(inputs: str | Path, out: None = None, params: None = None,
+                rrd: None = None) -> dict[str, Any]:
+    """The summary of the file ``inputs`` (see the module doc for its keys); unknown formats
+    are bad input. Inspect writes nothing and has no settings: ``out``, ``params`` and
+    ``rrd`` are there for the runners' one signature and stay None."""
+    if not (out is None and params is None and rrd is None):
+        raise ValueError("inspect writes nothing and has no settings: out, params, rrd are None")
+    path = Path(inputs)
     if not path.is_file():
         raise BadInput(path, "no such file")
     fmt = "file"

@@ -41,7 +41,8 @@ from pipeline.stage_cache import is_fresh, write_stamp
                    "GPU].")
 @click.option("--no-tip-offsets", is_flag=True,
               help="Train the paper's network (the recipe without --tip-offsets): much faster "
-                   "for a predictor pressing one mesh again, less accurate (README, Latency).")
+                   "for a predictor pressing one mesh again, less accurate "
+                   "(docs/model.md, Latency).")
 @click.option("--markers", default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
 @click.option("--marker-pitch", type=finite_float(0, min_open=True, unit="mm"),

@@ -57,15 +57,16 @@ class Settings:
     fit_sequences: int = 6           # training presses fitted per fold
 
 
-# The recipe the measurements support (README, "Training that learns"): tip offsets, the
-# balanced loss, rotation augmentation; the paper's own settings are the flags' defaults.
-RECIPE = ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99")
+# The recipe the measurements support (docs/model.md, "Training that learns"; train/recipes.py):
+# tip offsets, the balanced loss, rotation augmentation, the weights' average; its step size
+# is the settings' (--lr below overrides the recipe's).
+RECIPE = ("--recipe", "ours")
 # The same without tip offsets: the paper's network, which a predictor pressing one mesh again
-# runs far faster (its graph layers do not read the press), for some accuracy (README).
-PAPER_NETWORK = tuple(a for a in RECIPE if a != "--tip-offsets")
+# runs far faster (its graph layers do not read the press), for some accuracy (docs/results.md).
+PAPER_NETWORK = (*RECIPE, "--no-tip-offsets")
 # quick: per fold a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on
 # 3 training presses: five folds' fits, MSM sets and pre-training cost about twice what the
-# former single calibration fit did (measured: README, "pipeline demo")
+# former single calibration fit did (measured: docs/results.md, "Learning")
 QUICK = Settings(msm_locations=16, msm_directions=3, pretrain_epochs=80, finetune_epochs=80,
                  lr=2e-3, fit_sequences=3)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import click
 
-from data_schema.json_docs import validate_metrics
+from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, validate_metrics
 from pipeline.demo_plan import msm_dir
 
 FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
@@ -92,9 +92,9 @@ def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
     for r in runs:
         m, refs = r["metrics"]["all"], r["references"]
         ld.append(m["ld_mean_mm"] if m["ld_mean_mm"] is not None else float("inf"))
-        still.append(refs["nothing moves"]["ld_mean_mm"])
+        still.append(refs[NOTHING_MOVES]["ld_mean_mm"])
         force.append(m["force_abs_n"])
-        linear.append(refs["force, linear"]["force_abs_n"])
+        linear.append(refs[FORCE_LINEAR]["force_abs_n"])
     return [("MSM models, mean L_d on their test sets",
              all(a <= MSM_VS_STILL * b for a, b in zip(ld, still, strict=True)),
              ", ".join(f"{a:.3f}" for a in ld) + " mm; nothing moves "
@@ -112,7 +112,7 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
         gains = [r["gain"]["ld_gain"] if r["gain"]["ld_gain"] is not None else -1.0
                  for r in by[variant]]                      # -100 %: predictions not finite
         force = [r["metrics"]["all"]["force_abs_n"]
-                 / r["references"]["force, linear"]["force_abs_n"] for r in by[variant]]
+                 / r["references"][FORCE_LINEAR]["force_abs_n"] for r in by[variant]]
         checks.append((f"{name}: mean L_d below the best reference in every fold",
                        min(gains, default=0) >= FOLD_GAIN,
                        "gains " + ", ".join(f"{g:+.0%}" for g in gains)
@@ -149,7 +149,7 @@ def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
         return []
     groups, tl = curve(rows, "TL", "ld_mean_mm")
     _, scratch = curve(rows, "no TL", "ld_mean_mm")
-    _, near = curve(rows, "nearest press", "ld_mean_mm")
+    _, near = curve(rows, NEAREST_PRESS, "ld_mean_mm")
     cuts = [1 - a / b for a, b in zip(tl, scratch, strict=True)]
     if not cuts:                                  # runs without --init: no TL to compare
         return []

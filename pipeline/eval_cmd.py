@@ -33,20 +33,21 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     """Evaluate trained runs on their folds' test examples (the paper's Table 2).
 
     Reads RUNS (folders from `pipeline train`: best.pt, which names its data and manifest).
-    Writes --out (JSON: per run and per variant pooled over folds, single- and multi-step
-    apart: force MSE, force absolute error mean +- sd, mean and max distance error L_d mean
-    +- sd over examples), the same as a Markdown table (--out with .md), and a rerun recording
-    of predicted beside true surfaces coloured by error and of predicted beside true force
-    (--rrd, default beside --out). Every run is scored beside three predictors that learn
-    nothing (nothing moves; the nearest training press's displacement; force linear in the
-    tip's motion), on the same test examples, with its gain over the best of them.
+    Writes --out (JSON, phantom.metrics 1.0 with its provenance: per run and per variant
+    pooled over folds, single- and multi-step apart: force MSE, force absolute error mean +-
+    sd, mean and max distance error L_d mean +- sd over examples), the same as a Markdown
+    table (--out with .md), and a rerun recording of predicted beside true surfaces coloured
+    by error and of predicted beside true force (--rrd, default beside --out). Every run is
+    scored beside three predictors that learn nothing (nothing moves; the nearest training
+    press's displacement; force linear in the tip's motion), on the same test examples, with
+    its gain over the best of them.
     """
-    from train.eval_stage import run_eval
+    from train.eval_stage import EvalParams, run_eval
     from train.evaluate import not_beating
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    result, table = run_eval(runs, out, rrd_path, device, scarcity, scarcity_epochs,
-                             scarcity_groups)
+    result, table = run_eval(runs, out, EvalParams(device, scarcity, scarcity_epochs,
+                                                   scarcity_groups), rrd_path)
     click.echo(table + f"\nwrote {out}, {out.with_suffix('.md')}"
                + (f", {rrd_path}" if rrd_path else ""))
     worse = not_beating(result)

@@ -16,9 +16,10 @@ def export(run: Path, onnx_path: Path) -> None:
 
     Reads RUN (a run folder from `pipeline train`, its best.pt, or a checkpoint file). Writes
     --onnx: inputs `points` (1, N, 3) m in the phantom frame (N free) and `condition` (1, 6) m;
-    outputs `deformed` (1, N, 3) m and `dforce` (1,) N; normalisation is inside the graph.
+    outputs `deformed` (1, N, 3) m and `dforce` (1,) N; normalisation is inside the graph;
+    the metadata hold the guards the graph lacks, the training envelope and the provenance.
     """
-    from train.export_stage import run_export
+    from train.export_stage import ExportParams, run_export
 
-    run_export(run, onnx_path)
+    run_export(run, onnx_path, ExportParams())
     click.echo(f"{onnx_path}: ONNX model of {run}")

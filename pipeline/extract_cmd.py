@@ -7,9 +7,11 @@ from typing import TYPE_CHECKING
 
 import click
 
-from core.protocol import STEP_N
 from core.text import count
+from extract.static_states import ExtractParams
 from pipeline.options import SIZE_MM, finite_float, resolve_rrd, rrd_option, seed_option
+
+D = ExtractParams           # the option defaults are its fields'
 
 if TYPE_CHECKING:
     from extract.extract import Extracted
@@ -20,15 +22,16 @@ if TYPE_CHECKING:
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="States file to write (schema phantom.states 2.1).")
-@click.option("--step", type=finite_float(min=0, min_open=True, unit="N"), default=STEP_N,
+@click.option("--step", type=finite_float(min=0, min_open=True, unit="N"), default=D.step_n,
               show_default=True,
               help="Force level spacing, N: at least 3 x the force noise sync measured (and "
                    "1/320 N, a Nano17's resolution), at most the largest peak force.")
-@click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=D.max_speed,
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
-@click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True), default=20.0,
-              show_default=True, help="Frames within this of a level's instant are fitted.")
-@click.option("--phantom-size", type=SIZE_MM, default=None,
+@click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True),
+              default=D.half_window_s * 1e3, show_default=True,
+              help="Frames within this of a level's instant are fitted.")
+@click.option("--phantom-size", type=SIZE_MM, default=D.size_m,
               help="Phantom footprint LxW in mm, overriding session.toml's [phantom] size_mm "
                    "(which sync keeps in the synced file; default 100x100).")
 @click.option("--shared-locations", is_flag=True,
@@ -55,11 +58,11 @@ def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float |
     are counted in the file and printed.
     """
     from extract.extract_stage import run_extract
-    from extract.static_states import ExtractParams
 
-    params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed)
+    params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed,
+                           seed=seed, size_m=phantom_size, shared_locations=shared_locations)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    ex = run_extract(synced, out, rrd_path, params, seed, phantom_size, shared_locations)
+    ex = run_extract(synced, out, params, rrd_path)
     a = ex.arrays
     presses = len(set(a["states/sequence"].tolist()))
     left = _left_out(ex)

@@ -14,8 +14,9 @@ from pipeline.options import (
     rrd_option,
     seed_option,
 )
-from sim.msm import paper
+from sim.msm.fit_msm_params import FitMsmParams
 
+D = FitMsmParams            # the option defaults are its fields'
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 
@@ -23,17 +24,18 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.command("fit-msm")
 @click.argument("states", type=IN)
 @click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
-@click.option("--max-sequences", type=bounded_int(1), default=10, show_default=True,
+@click.option("--max-sequences", type=bounded_int(1), default=D.max_sequences, show_default=True,
               help="Sequences used (drawn with --seed when the file or fold has more).")
 @click.option("--splits", type=IN, default=None,
               help="Fold manifest of STATES: fit on the training presses of --fold only, so "
                    "the fit never sees that fold's test presses.")
-@click.option("--fold", type=bounded_int(0), default=0, show_default=True)
+@click.option("--fold", type=bounded_int(0), default=D.fold, show_default=True)
 @click.option("--start", nargs=2, type=finite_float(unit="N/m"),
-              default=(paper.K_BETWEEN, paper.K_FIXED),
+              default=D.start,
               show_default=True,
               help="Starting k_between k_fixed (N/m; the paper's constants).")
-@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"), default=None,
+@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
+              default=D.contact_radius,
               help="Share the load among the masses within this radius (m) of the tip "
                    "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "
                    "own].")
@@ -41,7 +43,7 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Lab states: the masses' spacing in mm, rounded per axis so the grid covers "
                    "the states' footprint_m exactly [default: the paper's 100/31 = 3.226 mm]. "
                    "An MSM file brings its own grid.")
-@click.option("--workers", type=bounded_int(0), default=0,
+@click.option("--workers", type=bounded_int(0), default=D.workers,
               help="Processes sharing the sequences (default: the cores this process may use).")
 @seed_option
 @rrd_option
@@ -62,14 +64,15 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | N
     (phantom.msm_params, read by `pipeline simulate --params`), and a rerun recording of the
     fitted MSM beside the measured markers (--rrd, default beside --out).
     """
+    from sim.msm.fit_msm_params import FitMsmInputs
     from sim.msm.fit_msm_stage import run_fit_msm
-    from sim.msm.workers import default_workers
 
     rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None
-    result = run_fit_msm(states, out, rrd_path, splits=splits, fold=fold,
-                         max_sequences=max_sequences, seed=seed, start=start,
-                         contact_radius=contact_radius, workers=workers or default_workers(),
-                         spacing=None if spacing_mm is None else spacing_mm * 1e-3)
+    params = FitMsmParams(max_sequences=max_sequences, fold=fold, start=start,
+                          contact_radius=contact_radius,
+                          spacing=None if spacing_mm is None else spacing_mm * 1e-3,
+                          workers=workers, seed=seed)
+    result = run_fit_msm(FitMsmInputs(states, splits), out, params, rrd_path)
     click.echo(fit_summary(result) + (f"\nwrote {out}" if out else "")
                + (f", {rrd_path}" if rrd_path else ""))
 

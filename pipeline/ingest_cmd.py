@@ -27,10 +27,11 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
     provenance metadata) and a rerun recording of the raw trajectories and force (--rrd,
     default beside --out). Inputs are never modified; nothing is written on bad input.
     """
-    from ingest.ingest_stage import run_ingest
+    from ingest.ingest_stage import IngestParams, run_ingest
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    s = run_ingest(session_dir, out, rrd_path, "zstd" if zstd else "none")
+    s = run_ingest(session_dir, out, IngestParams(compression="zstd" if zstd else "none"),
+                   rrd_path)
     m, f = s.markers, s.force
     click.echo(f"{out}: {m.frames} mocap frames ({len(m.labels)} markers, {m.rate_hz:g} Hz, "
                f"{m.missing_samples()} missing samples), {f.frames} force samples "

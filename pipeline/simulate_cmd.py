@@ -7,7 +7,6 @@ from pathlib import Path
 
 import click
 
-from core.protocol import THICKNESS_M
 from pipeline.options import (
     SIZE_MM,
     SPACING_MM,
@@ -17,8 +16,9 @@ from pipeline.options import (
     rrd_option,
     seed_option,
 )
-from sim.msm import paper
+from sim.msm.simulate_params import SimulateParams
 
+D = SimulateParams          # the option defaults are its fields'
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
@@ -26,16 +26,16 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
 
 @click.command()
 @click.option("--out", required=True, type=OUT, help="States file to write (HDF5).")
-@click.option("--locations", type=bounded_int(1), default=paper.LOCATIONS, show_default=True,
+@click.option("--locations", type=bounded_int(1), default=D.locations, show_default=True,
               help="Random masses loaded, one per location.")
-@click.option("--directions", type=bounded_int(1), default=paper.DIRECTIONS,
+@click.option("--directions", type=bounded_int(1), default=D.directions,
               show_default=True,
               help="Force directions per location: the normal + random ones within 45 deg.")
-@click.option("--steps", type=bounded_int(1), default=paper.STEPS, show_default=True,
+@click.option("--steps", type=bounded_int(1), default=D.steps, show_default=True,
               help="Equal force steps up to --fmax.")
 @click.option("--fmax", type=finite_float(0, 1e3, min_open=True, unit="N",
                                           why="beyond any indentation"),
-              default=paper.FMAX_N,
+              default=D.fmax,
               show_default=True,
               help="Largest force (N). Refused when it drives the MSM deeper than its surface "
                    "is wide (its narrower side); states deeper than --thickness are counted.")
@@ -46,12 +46,12 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
 @click.option("--spacing-mm", "spacing_mm", type=SPACING_MM, default=None,
               help="The masses' spacing in mm, rounded per axis so the grid covers the "
                    "footprint exactly [default: the paper's 100/31 = 3.226 mm].")
-@click.option("--k-between", type=SPRING, default=paper.K_BETWEEN, show_default=True,
+@click.option("--k-between", type=SPRING, default=D.k_between, show_default=True,
               help="Between-mass spring constant (N/m).")
-@click.option("--k-fixed", type=SPRING, default=paper.K_FIXED, show_default=True,
+@click.option("--k-fixed", type=SPRING, default=D.k_fixed, show_default=True,
               help="Fixed-spring constant (N/m).")
 @click.option("--thickness", type=finite_float(0, 1, min_open=True, unit="m"),
-              default=THICKNESS_M, show_default=True,
+              default=D.thickness, show_default=True,
               help="The phantom's thickness (m): states whose tip goes deeper are counted in "
                    "the closing line.")
 @click.option("--params", "params_file", type=IN, default=None,
@@ -60,7 +60,7 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
                    "--contact-radius, and brings the grid they were fitted on (a --size, "
                    "--spacing-mm or --layout footprint asking for another is refused).")
 @click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
-              default=0.0, show_default=True,
+              default=D.contact_radius, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
                    "one: the indenter's contact patch (0: one mass, the paper's n_n = 1).")
 @click.option("--layout", type=IN, default=None,
@@ -69,24 +69,25 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
                    "named by its point_names), with the loaded patch's centre as the tip (the "
                    "last point), and load only inside the markers' bounding box: the graph the "
                    "network is fine-tuned on.")
-@click.option("--max-angle", type=finite_float(0, 90, unit="deg"), default=paper.MAX_ANGLE_DEG,
+@click.option("--max-angle", type=finite_float(0, 90, unit="deg"), default=D.max_angle_deg,
               show_default=True,
               help="Largest angle of a force direction from the normal (degrees).")
 @click.option("--tol", type=finite_float(1e-9, 1e-2, unit="N",
                                          why="below 1e-9 N float64 cannot settle; above "
                                              "1e-2 N the states are not static"),
-              default=paper.STATIC_TOL_N, show_default=True,
+              default=D.tol, show_default=True,
               help="Static tolerance: largest force left on any mass (N) of the float64 "
                    "solution. Points are stored as float32 (~1e-8 m quantisation at 0.1 m), "
                    "which leaves a residual of ~1e-6 to 1e-5 N whatever --tol is; both are "
                    "stored (max_residual_N, stored_residual_N).")
-@click.option("--workers", type=bounded_int(0), default=0,
+@click.option("--workers", type=bounded_int(0), default=D.workers,
               help="Processes (default: the cores this process may use).")
-@click.option("--shard", metavar="I/N", default=None,
+@click.option("--shard", metavar="I/N", default=D.shard,
               help="Simulate only block I (0-based) of N contiguous blocks of locations.")
 @click.option("--merge", is_flag=True,
               help="Join the SHARDS files of one sharded run into --out instead of simulating.")
-@click.option("--rrd-sequences", type=bounded_int(0), default=4, show_default=True,
+@click.option("--rrd-sequences", type=bounded_int(0), default=D.rrd_sequences,
+              show_default=True,
               help="Sequences shown in the recording.")
 @click.argument("shards", nargs=-1, type=IN)
 @seed_option
@@ -122,32 +123,28 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
       pipeline simulate --shard 1/2 --out part1.h5
       pipeline simulate --merge part0.h5 part1.h5 --out MSM.h5
     """
-    from sim.msm.msm import MSMParams
-    from sim.msm.msm_protocol import Protocol
+    from sim.msm.simulate_params import SimulateInputs
     from sim.msm.simulate_stage import run_merge, run_simulate
-    from sim.msm.workers import default_workers
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
+    params = SimulateParams(
+        locations=locations, directions=directions, steps=steps, fmax=fmax,
+        max_angle_deg=max_angle, seed=seed, contact_radius=contact_radius,
+        k_between=k_between, k_fixed=k_fixed, size=size,
+        spacing=None if spacing_mm is None else spacing_mm * 1e-3, tol=tol, workers=workers,
+        shard=shard, thickness=thickness, rrd_sequences=rrd_sequences)
     if merge:
         if shard is not None:
             raise click.UsageError("--merge and --shard exclude each other")
-        run = run_merge(shards, out, rrd_path, rrd_sequences, thickness)
+        run = run_merge(shards, out, params, rrd_path)
         what = f"merged {len(shards)} shards"
     else:
         if shards:
             raise click.UsageError("SHARDS are only read with --merge")
-        protocol = Protocol(locations=locations, directions=directions, steps=steps,
-                            fmax=fmax, max_angle_deg=max_angle, seed=seed,
-                            contact_radius=contact_radius)
-        n_workers = workers or default_workers()
-        run = run_simulate(out, rrd_path, protocol, MSMParams(k_between=k_between,
-                                                              k_fixed=k_fixed),
-                           tol=tol, workers=n_workers, shard=shard, layout=layout,
-                           params_file=params_file, rrd_sequences=rrd_sequences,
-                           thickness=thickness, size=size,
-                           spacing=None if spacing_mm is None else spacing_mm * 1e-3)
+        run = run_simulate(SimulateInputs(layout=layout, params_file=params_file), out, params,
+                           rrd_path)
         sim = run.sim
-        what = (f"simulated {len(sim.locations)} locations with {n_workers} workers "
+        what = (f"simulated {len(sim.locations)} locations with {run.workers} workers "
                 f"(max residual {sim.max_residual:.2g} N solved, "
                 f"{sim.stored_residual:.2g} N as stored in float32)")
     a = run.arrays

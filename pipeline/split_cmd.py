@@ -7,16 +7,20 @@ from pathlib import Path
 import click
 
 from pipeline.options import resolve_rrd, rrd_option, seed_option
+from split.split import SplitParams
+
+D = SplitParams             # the option defaults are its fields'
 
 
 @click.command()
 @click.argument("states", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Fold manifest to write (JSON, schema phantom.folds 2.0).")
-@click.option("--folds", type=int, default=5, show_default=True, help="Number of folds.")
-@click.option("--ratio", default=None,
+@click.option("--folds", type=int, default=D.folds, show_default=True, help="Number of folds.")
+@click.option("--ratio", default=D.ratio,
               help="TRAIN:VAL:TEST group counts ratio [default: 12:3:5 lab, 7:2:1 MSM].")
-@click.option("--group", "group_by", type=click.Choice(["sequence", "location"]), default=None,
+@click.option("--group", "group_by", type=click.Choice(["sequence", "location"]),
+              default=D.group_by,
               help="Keep whole presses (sequence) or whole places (location) in one role "
                    "[default: sequence for lab states, location for MSM].")
 @seed_option
@@ -35,8 +39,9 @@ def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str 
     from split.split_stage import run_split
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    doc = run_split(states, out, rrd_path, group_by, parse_ratio(ratio) if ratio else None,
-                    folds, seed)
+    params = SplitParams(group_by=group_by, ratio=parse_ratio(ratio) if ratio else None,
+                         folds=folds, seed=seed)
+    doc = run_split(states, out, params, rrd_path)
     f0 = doc["folds"][0]
     click.echo(f"{out}: {len(doc['folds'])} folds over {doc['groups']} {doc['group_by']} groups "
                f"({':'.join(map(str, doc['ratio']))}: fold 0 trains on "

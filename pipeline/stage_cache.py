@@ -18,7 +18,8 @@ from pathlib import Path
 from core.atomic import atomic_output
 from core.provenance import sha256_file
 
-PACKAGES = ("core", "data_schema", "ingest", "sync", "extract", "split", "sim", "train", "pipeline")
+PACKAGES = ("core", "data_schema", "ingest", "calib", "sync", "extract", "split", "sim", "train",
+            "pipeline")
 
 
 @lru_cache(maxsize=1)

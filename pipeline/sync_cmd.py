@@ -10,6 +10,9 @@ import click
 
 from core.text import count
 from pipeline.options import resolve_rrd, rrd_option
+from sync.sync_params import SyncParams
+
+D = SyncParams              # the option defaults are its fields'
 
 if TYPE_CHECKING:
     from sync.sync import SyncResult
@@ -19,16 +22,17 @@ if TYPE_CHECKING:
 @click.argument("mcap", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Synced HDF5 file to write (schema phantom.synced).")
-@click.option("--clock", type=click.Choice(["auto", "trigger", "data"]), default="auto",
+@click.option("--clock", type=click.Choice(["auto", "trigger", "data"]), default=D.clock,
               show_default=True,
               help="Clock alignment: trigger pulses, the tip motion against the force (data), "
                    "or trigger when recorded (auto).")
-@click.option("--max-gap-ms", type=click.FloatRange(min=0), default=20.0, show_default=True,
+@click.option("--max-gap-ms", type=click.FloatRange(min=0), default=D.max_gap_s * 1e3,
+              show_default=True,
               help="Fill marker gaps up to this long; longer ones stay NaN and flagged.")
-@click.option("--margin-s", type=click.FloatRange(min=0), default=0.5, show_default=True,
+@click.option("--margin-s", type=click.FloatRange(min=0), default=D.margin_s, show_default=True,
               help="Unloaded frames kept before contact onset and after release.")
 @click.option("--location-radius-mm", type=click.FloatRange(min=0, min_open=True),
-              default=10.0, show_default=True,
+              default=D.location_radius_m * 1e3, show_default=True,
               help="Presses whose contact points are closer share a location id.")
 @rrd_option
 def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
@@ -55,13 +59,12 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     (markers more than 1 mm RMS off their rest plane) is refused. Nothing is written on bad
     input.
     """
-    from sync.sync_params import SyncParams
     from sync.sync_stage import run_sync
 
     params = SyncParams(clock=clock, max_gap_s=max_gap_ms * 1e-3, margin_s=margin_s,
                         location_radius_m=location_radius_mm * 1e-3)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    r = run_sync(mcap, out, rrd_path, params)
+    r = run_sync(mcap, out, params, rrd_path)
     c = r.clock
     locations = len({p.press.location for p in r.presses})
     cut = f" ({r.presses_cut_off} cut off by a recording's end, left out)" if \

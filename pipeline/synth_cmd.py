@@ -8,48 +8,55 @@ from pathlib import Path
 import click
 
 from pipeline.options import resolve_rrd, rrd_option, seed_option
+from sim.twin.synth_params import SynthParams
+from sim.twin.twin_scene import PIVOT_SECONDS, PRESS_SECONDS
+
+D = SynthParams             # the option defaults are its fields'
 
 
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--locations", type=click.IntRange(1, 10), default=5, show_default=True,
+@click.option("--locations", type=click.IntRange(1, 10), default=D.locations, show_default=True,
               help="Indentation locations on the phantom.")
-@click.option("--repeats", type=click.IntRange(1, 50), default=4, show_default=True,
+@click.option("--repeats", type=click.IntRange(1, 50), default=D.repeats, show_default=True,
               help="Presses per location (in rounds over the locations).")
-@click.option("--press-seconds", type=click.FloatRange(2.0, 60.0), default=None,
+@click.option("--press-seconds", type=click.FloatRange(*PRESS_SECONDS), default=D.press_seconds,
               help="Mean duration of one press cycle in s (default about 6 s).")
-@click.option("--pivot-seconds", type=click.FloatRange(2.0, 600.0), default=20.0,
+@click.option("--pivot-seconds", type=click.FloatRange(*PIVOT_SECONDS),
+              default=D.pivot_seconds,
               show_default=True, help="Length of the pivot-calibration recording (s).")
-@click.option("--trigger/--no-trigger", default=True, show_default=True,
+@click.option("--trigger/--no-trigger", default=D.trigger, show_default=True,
               help="Record sync pulses (force-log column 'trigger', QTM EVENT 'Trigger').")
-@click.option("--offset", "offset_s", type=float, default=None,
+@click.option("--offset", "offset_s", type=float, default=D.offset_s,
               help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--drift", "drift_ppm", type=float, default=None,
+@click.option("--drift", "drift_ppm", type=float, default=D.drift_ppm,
               help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--force-via", type=click.Choice(["logger", "analog"]), default="logger",
+@click.option("--force-via", type=click.Choice(["logger", "analog"]), default=D.force_via,
               show_default=True,
               help="logger: the Speedgoat log on its own clock (force.csv, force.mat); "
                    "analog: the Nano17 through the mocap's analog board, on the mocap clock "
                    "(indentation.c3d with markers and analog channels, indentation_a.tsv).")
-@click.option("--force-file", type=click.Choice(["csv", "mat", "tsv", "c3d"]), default=None,
+@click.option("--force-file", type=click.Choice(["csv", "mat", "tsv", "c3d"]),
+              default=D.force_file,
               help="The force file session.toml names: csv (default) or mat with --force-via "
                    "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
                    "file) with --force-via analog. Both of a route are written.")
-@click.option("--markers", default="5x5", show_default=True,
+@click.option("--markers", default=D.markers, show_default=True,
               help="Phantom markers: a grid RxC (R rows along +x, C markers each, centred, "
                    "named row-major P00, P01, ...) or scattered:N (N markers at random "
                    "lattice nodes, at least 10 mm apart and 10 mm inside the edges; P00 -> P01 "
                    "along +x, written to session.toml as [phantom] x_axis and anchor).")
-@click.option("--marker-pitch", "marker_pitch_mm", type=float, default=20.0, show_default=True,
+@click.option("--marker-pitch", "marker_pitch_mm", type=float, default=D.marker_pitch_mm,
+              show_default=True,
               help="Distance between neighbouring grid markers in mm (at least 10).")
-@click.option("--size", default="100x100", show_default=True,
+@click.option("--size", default=D.size, show_default=True,
               help="The block's footprint LxW in mm (L along +x; 40 to 300 each; 32 mm thick).")
-@click.option("--mocap-rate", "rate_hz", type=float, default=500.0, show_default=True,
+@click.option("--mocap-rate", "rate_hz", type=float, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
                    "analog needs a rate that divides 1000).")
-@click.option("--view-press", type=click.IntRange(0), default=0, show_default=True,
+@click.option("--view-press", type=click.IntRange(0), default=D.view_press, show_default=True,
               help="Press shown in the rerun recording.")
 @seed_option
 @rrd_option
@@ -79,12 +86,12 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
 
     rrd_path = resolve_rrd(out_dir, rrd, no_rrd)
     start = time.perf_counter()
-    folder = run_synth(
-        out_dir, seed=seed, locations=locations, repeats=repeats, rrd=rrd_path,
-        view_press=view_press, press_seconds=press_seconds,
+    params = SynthParams(
+        seed=seed, locations=locations, repeats=repeats, press_seconds=press_seconds,
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
-        force_file=force_file, force_via=force_via, markers=markers,
-        marker_pitch_mm=marker_pitch_mm, size=size, rate_hz=rate_hz)
+        force_via=force_via, force_file=force_file, rate_hz=rate_hz, markers=markers,
+        marker_pitch_mm=marker_pitch_mm, size=size, view_press=view_press)
+    folder = run_synth(None, out_dir, params, rrd_path)
     click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, {markers} "
                f"markers on {size} mm at {rate_hz:g} Hz, seed {seed}, "
                f"in {time.perf_counter() - start:.1f} s"

@@ -25,13 +25,25 @@ DEFAULTS = {"lab": ("sequence", (12, 3, 5)), "msm": ("location", (7, 2, 1))}
 
 
 @dataclass(frozen=True)
-class SplitPlan:
-    """How to split: grouping, ratio, folds, seed."""
+class SplitParams:
+    """Every setting of ``pipeline split`` (the defaults are the command line's): None where
+    the data's default (:data:`DEFAULTS`, by the states file's source) applies."""
 
-    group_by: str = "sequence"
-    ratio: tuple[int, int, int] = (12, 3, 5)
+    group_by: str | None = None                     # sequence | location
+    ratio: tuple[int, int, int] | None = None       # train:val:test group counts
     folds: int = 5
     seed: int = 0
+
+
+@dataclass(frozen=True)
+class SplitPlan:
+    """How to split: grouping, ratio, folds, seed (:class:`SplitParams` with the data's
+    defaults filled in)."""
+
+    group_by: str
+    ratio: tuple[int, int, int]
+    folds: int = SplitParams.folds
+    seed: int = SplitParams.seed
 
 
 def parse_ratio(text: str) -> tuple[int, int, int]:

@@ -20,16 +20,17 @@ from core.provenance import make_provenance, sha256_file
 from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
 from data_schema.states import example_groups, validate_states
-from split.split import DEFAULTS, SplitPlan, examples_by_role, make_folds
+from split.split import DEFAULTS, SplitParams, SplitPlan, examples_by_role, make_folds
 from split.split_view import write_split_recording
 
 
-def run_split(states: str | Path, out: str | Path, rrd: str | Path | None = None,
-              group_by: str | None = None, ratio: tuple[int, int, int] | None = None,
-              folds: int = 5, seed: int = 0) -> dict:
-    """Split ``states`` (the data's defaults where ``group_by`` or ``ratio`` is None); write
-    the manifest ``out`` and the recording ``rrd`` atomically; returns the manifest."""
-    doc = build_manifest(states, default_plan(states, group_by, ratio, folds, seed))
+def run_split(inputs: str | Path, out: str | Path, params: SplitParams | None = None,
+              rrd: str | Path | None = None) -> dict:
+    """Split the states file ``inputs`` (the data's defaults where ``params.group_by`` or
+    ``params.ratio`` is None); write the manifest ``out`` and the recording ``rrd``
+    atomically; returns the manifest."""
+    states, p = inputs, params or SplitParams()
+    doc = build_manifest(states, default_plan(states, p.group_by, p.ratio, p.folds, p.seed))
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         write_manifest(tmp_out, doc)
         if tmp_rrd is not None:

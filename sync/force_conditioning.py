@@ -15,9 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import BadInput
-from core.series import RawSession
-from sync.force import (
+from calib.force_tare import (
     RestBaseline,
     Tare,
     apply_calibration,
@@ -25,6 +23,8 @@ from sync.force import (
     rest_baseline,
     unloaded_start,
 )
+from core.errors import BadInput
+from core.series import RawSession
 from sync.sync_params import SyncParams
 
 
@@ -155,7 +155,7 @@ def on_rail(raw: RawSession) -> np.ndarray:
     channel's own highest or lowest value, far (:data:`FLAT_SIGMAS` noise widths) from its
     median (an amplifier or converter that clips below the range the .cal states, or a .cal
     that does not state it; a noisy gauge never repeats its extreme). The flat-top rule
-    needs a channel whose noise width (:func:`sync.force.noise_sigma`) is at least
+    needs a channel whose noise width (:func:`calib.force_tare.noise_sigma`) is at least
     :data:`FLAT_MIN_STEPS` quantisation step (:func:`quantisation_step`), i.e. whose noise
     moves most consecutive samples (the width is then 1.05 steps or more; it is the 0.29-step
     rounding floor when most are equal). Where the noise is below that (a quiet 16-bit DAQ,

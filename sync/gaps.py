@@ -13,15 +13,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
+from core.runs import true_runs
+
 FILLED = np.uint8(1)   # quality bit: value interpolated across a short gap
 MISSING = np.uint8(2)  # quality bit: no value (gap too long, or at an end)
-
-
-def nan_runs(missing: np.ndarray) -> list[tuple[int, int]]:
-    """``(start, stop)`` index pairs (stop exclusive) of the True runs in a 1-D mask."""
-    m = np.concatenate([[False], np.asarray(missing, bool), [False]])
-    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def fill_gaps(
@@ -39,7 +34,7 @@ def fill_gaps(
     period = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     for p in range(out.shape[1]):
         missing = ~np.isfinite(out[:, p]).all(axis=1)
-        for a, b in nan_runs(missing):
+        for a, b in true_runs(missing):
             inner = a > 0 and b < len(t)
             if inner and (t[b] - t[a - 1]) - period <= max_gap_s + 1e-9:
                 ends = [a - 1, b]

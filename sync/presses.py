@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sync.gaps import nan_runs
+from core.runs import true_runs
 
 
 @dataclass
@@ -48,7 +48,7 @@ def segment_presses(
     known = np.isfinite(f)
     f = np.where(known, f, 0.0)
     spans: list[list[int]] = []
-    for a, b in nan_runs(f > contact_n):
+    for a, b in true_runs(f > contact_n):
         if spans and a - spans[-1][1] < merge_s * rate_hz:
             spans[-1][1] = b
         else:

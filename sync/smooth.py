@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import firwin, kaiserord
 
-from sync.gaps import nan_runs
+from core.runs import true_runs
 from sync.resample import lowpass_zero_phase
 
 
@@ -35,7 +35,7 @@ def lowpass_track(x: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray
         return out
     taps = smoothing_taps(rate_hz, cutoff_hz)
     finite = np.isfinite(x.reshape(len(x), -1)).all(axis=1)
-    for a, b in nan_runs(finite):
+    for a, b in true_runs(finite):
         if b - a > len(taps) // 2:
             out[a:b] = lowpass_zero_phase(x[a:b], taps)
     return out

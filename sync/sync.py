@@ -6,7 +6,7 @@ Steps, each in its own module of :mod:`sync`:
    in every trial frame and the tip it carries, the last point (:mod:`sync.tip_track`);
 2. short marker gaps filled, longer ones kept missing and flagged (:mod:`sync.gaps`); the tip
    track low-passed (zero phase) against the lever arm's noise (:mod:`sync.smooth`); the tip
-   depth below the phantom's rest plane (:mod:`sync.surface`);
+   depth below the phantom's rest plane (:mod:`calib.rest_plane`);
 3. the force tared from the unloaded start of the log, calibrated with the 6x6 matrix, and
    re-tared from the rest level next to every press (:mod:`sync.force_conditioning`);
 4. the clock: one shared clock when the force came through the mocap's analog board,
@@ -32,13 +32,15 @@ from typing import Any
 
 import numpy as np
 
+from calib.force_tare import Tare
+from calib.pivot import PivotResult
+from calib.rest_plane import rest_surface
 from core.errors import BadInput
 from core.series import RawSession
 from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
 from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
-from sync.force import Tare
 from sync.force_conditioning import (
     ConditionedForce,
     condition_force,
@@ -48,11 +50,10 @@ from sync.force_conditioning import (
     over_range,
 )
 from sync.gaps import fill_gaps
-from sync.pivot import PivotResult
 from sync.presses import PressRecord, assign_locations, cut_presses, segment_presses
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
-from sync.surface import contact_points, rest_surface, tip_depth
+from sync.surface import contact_points, tip_depth
 from sync.sync_params import SyncParams, check_params
 from sync.tip_track import check_cluster, track_tip
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.rigid import fit_rigid
 from data_schema.hdf5 import read_h5
 from data_schema.synced import SYNCED
 from data_schema.truth import TRUTH
-from sync.rigid import fit_rigid
 
 # The issue's accuracy targets (same keys as sync_errors' result).
 TARGETS = {"clock_offset_ms": 0.5, "clock_drift_ppm": 5.0, "tip_rms_mm": 0.25,

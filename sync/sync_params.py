@@ -1,4 +1,7 @@
-"""Every setting of the sync stage, and the check that each one has a meaning."""
+"""Every setting of the sync stage, and the check that each one has a meaning.
+
+The fields' defaults are the command line's: ``pipeline/sync_cmd.py`` reads them here.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +10,7 @@ from dataclasses import dataclass
 from core.errors import BadInput
 
 
-@dataclass
+@dataclass(frozen=True)
 class SyncParams:
     """Every setting of the sync stage (stored in the output's provenance)."""
 

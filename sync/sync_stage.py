@@ -20,10 +20,11 @@ from sync.sync_view import write_sync_recording
 from sync.synced_file import write_synced
 
 
-def run_sync(mcap: str | Path, out: str | Path, rrd: str | Path | None = None,
-             params: SyncParams | None = None) -> SyncResult:
-    """Read ingest's MCAP, synchronise it, write ``out`` (and the recording) atomically."""
-    p = params or SyncParams()
+def run_sync(inputs: str | Path, out: str | Path, params: SyncParams | None = None,
+             rrd: str | Path | None = None) -> SyncResult:
+    """Read ingest's MCAP ``inputs``, synchronise it, write ``out`` (and the recording)
+    atomically."""
+    mcap, p = inputs, params or SyncParams()
     check_params(p)
     finals = {Path(x).resolve() for x in (out, rrd) if x is not None}
     if Path(mcap).resolve() in finals:

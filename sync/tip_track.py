@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.pivot import PivotResult, pivot_calibrate
+from calib.rigid import RigidFit, cluster_reference, fit_rigid
 from core.errors import BadInput
 from core.series import RawSession
-from sync.pivot import PivotResult, pivot_calibrate
 from sync.presses import Press
-from sync.rigid import RigidFit, cluster_reference, fit_rigid
 from sync.sync_params import SyncParams
 
 MIN_TRACKED = 0.05               # least fraction of frames with a usable indenter pose

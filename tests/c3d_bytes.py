@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 
@@ -61,3 +62,20 @@ def float_frames(data: bytes, data_block: int, values_per_frame: int, frames: in
     start = (data_block - 1) * 512
     raw = np.frombuffer(data[start:start + 4 * values_per_frame * frames], dtype="<f4")
     return raw.reshape(frames, values_per_frame)
+
+
+# The real Qualisys C3D of ../shared/real_samples (relative to it), and what it holds.
+QUALISYS_C3D = Path("c3d") / "qualisys_55markers_200hz.c3d"
+POINTS, CHANNELS, PER_FRAME, FRAMES = 55, 69, 10, 340
+
+
+def qualisys_analog(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Raw analog samples (T, C), SCALE, OFFSET and GEN_SCALE of the real export, read straight
+    from its bytes: float data, each 3D frame's 4 x 55 point values then 10 x 69 samples."""
+    block = int(np.frombuffer(data, "<u2", 1, 16)[0])               # header word 9
+    frames = float_frames(data, block, 4 * POINTS + PER_FRAME * CHANNELS, FRAMES)
+    raw = frames[:, 4 * POINTS:].reshape(FRAMES * PER_FRAME, CHANNELS).astype(np.float64)
+    scale = np.frombuffer(data, "<f4", CHANNELS, c3d_parameter(data, "ANALOG", "SCALE")[0])
+    offset = np.frombuffer(data, "<i2", CHANNELS, c3d_parameter(data, "ANALOG", "OFFSET")[0])
+    gen = np.frombuffer(data, "<f4", 1, c3d_parameter(data, "ANALOG", "GEN_SCALE")[0])[0]
+    return raw, scale.astype(np.float64), offset.astype(np.float64), float(gen)

@@ -10,8 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-REAL_SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "real_samples"
+from paths import REAL_SAMPLES  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -13,6 +13,10 @@ Each command has one row in ARCHITECTURE.md's stage table: its math, its runner
 what it writes. Every path there exists, every runner and view in the tree is there, each
 command module calls its runner, and no command module writes, records provenance or logs to
 rerun itself.
+
+One runner contract: every ``run_*`` of a ``*_stage.py`` takes ``(inputs, out, params, rrd)``
+and nothing else, and only the runners open outputs (``core.atomic``) and record provenance
+(``core.provenance``); the math returns data or writes to the temporary paths it is given.
 """
 
 from __future__ import annotations
@@ -24,10 +28,11 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import COMMANDS
+from pipeline.stage_cache import PACKAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
-LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "sync": 2, "extract": 2, "split": 2,
+LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "calib": 2, "sync": 2, "extract": 2, "split": 2,
          "sim": 2, "sim.twin": 2, "sim.msm": 2, "train": 2, "pipeline": 3}
 # narrower than their layer allows: train/ is used without the lab stages; the twin checks
 # sync and extract against its truth, so it must not share their code
@@ -38,6 +43,23 @@ ONLY = {"train": {"core", "data_schema", "train"},
 LAZY = ("pipeline", "train")
 ORCHESTRATION = {"demo"}            # commands that run other commands: no stage of their own
 WRITERS = {"core.atomic", "core.provenance"}
+# what of the writers opens an output or records provenance (``same_path``, ``sha256_file`` and
+# ``code_version`` only read)
+WRITING = {"core.atomic": {"atomic_output", "atomic_outputs"},
+           "core.provenance": {"make_provenance"}}
+# Below the stage packages, or file-format writers that are atomic on their own: a runner
+# calls them on the temporary path it opened, tests call them to make lab files.
+WRITES_ALSO = {
+    "core": "the ground: core.recording writes a recording atomically, for the views",
+    "data_schema.hdf5": "write_h5, the one schema-driven HDF5 writer every runner uses",
+    "ingest.mcap_io": "write_raw_mcap: ingest's runner writes its temporary MCAP with it",
+    "ingest.ati_cal": "write_ati_cal: the twin's runner writes the .cal on its temporary path",
+    "ingest.qtm_mat": "write_qtm_mat / write_mat73: lab MAT files, for the twin and the tests",
+    "pipeline.stage_cache": "the demo's stamps beside its outputs: orchestration, no stage",
+}
+# Still to convert (issue 29): each must still import a writer, so the entry goes with the fix.
+PENDING_WRITERS: dict[str, str] = {}
+RUNNER_ARGS = ["inputs", "out", "params", "rrd"]
 
 
 def _modules() -> dict[str, Path]:
@@ -226,6 +248,69 @@ def test_commands_leave_writing_to_their_runner(module):
     assert not done_here, f"{module} writes itself through {sorted(done_here)}"
 
 
+def _writing(path: Path) -> set[str]:
+    """The writers (``core.atomic.atomic_outputs``, ``core.provenance.make_provenance``, ...)
+    that the module at ``path`` imports, anywhere in it."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module in WRITING:
+            found |= {f"{node.module}.{a.name}" for a in node.names
+                      if a.name in WRITING[node.module]}
+        elif isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name in WRITING}
+    return found
+
+
+def _allowed_to_write(module: str) -> bool:
+    return module.rpartition(".")[2].endswith("_stage") or any(
+        module == m or module.startswith(m + ".") for m in WRITES_ALSO)
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_only_runners_open_outputs_and_record_provenance(module):
+    writing = _writing(MODULES[module])
+    if module in PENDING_WRITERS:
+        assert writing, f"{module} writes no more: drop it from PENDING_WRITERS"
+        return
+    assert not writing or _allowed_to_write(module), (
+        f"{module} imports {sorted(writing)}: only a runner (*_stage.py) opens outputs and "
+        "records provenance; return the data, or write to the temporary path the runner gives")
+
+
+def _runners() -> list[tuple[str, ast.FunctionDef]]:
+    """Every ``run_*`` function at the top of a ``*_stage.py`` module."""
+    return [(f"{name}:{node.name}", node) for name, path in sorted(MODULES.items())
+            if path.stem.endswith("_stage")
+            for node in ast.parse(path.read_text()).body
+            if isinstance(node, ast.FunctionDef) and node.name.startswith("run_")]
+
+
+RUNNERS = _runners()
+
+
+@pytest.mark.parametrize("runner", [r for r, _ in RUNNERS])
+def test_runners_take_inputs_out_params_rrd(runner):
+    node = dict(RUNNERS)[runner]
+    a = node.args
+    names = [x.arg for x in a.posonlyargs + a.args]
+    assert names == RUNNER_ARGS and not a.kwonlyargs and not a.vararg and not a.kwarg, (
+        f"{runner}({', '.join(names)}): a runner takes ({', '.join(RUNNER_ARGS)}) and nothing "
+        "else; its settings are fields of one frozen <Command>Params")
+    rrd_default = a.defaults[-1] if a.defaults else None
+    assert isinstance(rrd_default, ast.Constant) and rrd_default.value is None, \
+        f"{runner}: rrd defaults to None"
+
+
+def test_every_package_is_packaged_linted_and_hashed():
+    """A package named in LAYER is installed, sorted as ours by ruff, and part of the code a
+    demo step's stamp hashes (a change in it reruns the steps)."""
+    tops = {p.split(".")[0] for p in LAYER}
+    project = (ROOT / "pyproject.toml").read_text()
+    for top in tops:
+        assert f'"{top}*"' in project and f'"{top}"' in project, top
+    assert set(PACKAGES) == tops
+
+
 def test_every_package_is_in_the_architecture():
     text = ARCHITECTURE.read_text()
     for package in LAYER:
@@ -239,6 +324,10 @@ def test_the_checks_can_fail():
     assert _find_cycle({"a": {"b"}, "b": set()}) is None
     assert "ingest.mcap_io" in GRAPH["sync.sync_stage"]
     assert _package("sim.twin.twin") == "sim.twin" and _package("sim.cone") == "sim"
+    assert "core.atomic.atomic_outputs" in _writing(MODULES["sync.sync_stage"])
+    assert not _writing(MODULES["pipeline.options"])           # same_path only reads
+    assert {r for r, _ in RUNNERS} >= {"sync.sync_stage:run_sync",
+                                       "sim.msm.simulate_stage:run_merge"}
     row = _stage_table("\n## Stages\n| `x` | `a.py`, `b.py` | `p/x_stage.py:run_x` | — | f |\n")
     assert row == {"x": {"math": ["a.py", "b.py"], "runner": ["p/x_stage.py:run_x"],
                          "view": [], "writes": []}}

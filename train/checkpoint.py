@@ -1,11 +1,16 @@
-"""Checkpoints: one dict of plain types and tensors, written atomically, read with weights_only.
+"""Checkpoints: one dict of plain types and tensors, read with weights_only (written atomically
+by the train runner).
 
 ``{"model": state_dict, "optimizer": state_dict, "epoch": int, "best_val": float,
 "config": CGNNConfig.to_dict(), "norm": Normaliser.to_dict(), "meta": {"options", "config",
-"data": {"file", "sha256"}, "splits", "init", "variant"}}``, and with ``--ema`` "trained": the
-weights the optimizer steps (``model`` is then their average): everything inference needs
-travels with the weights, and nothing needs unpickling, so a checkpoint from elsewhere cannot
-run code on load.
+"data": {"file", "sha256"}, "splits", "init", "variant"}, "provenance": {...}}``, and with
+``--ema`` "trained": the weights the optimizer steps (``model`` is then their average):
+everything inference needs travels with the weights, and nothing needs unpickling, so a
+checkpoint from elsewhere cannot run code on load. ``provenance`` (:data:`SCHEMA`, written by
+the train runner, :mod:`train.train_stage`) is how the file was made:
+:func:`core.provenance.make_provenance`'s record (the command, the run's settings, the sha256
+of the states file, the manifest and the --init checkpoint); a checkpoint from before it has
+none.
 :func:`load_checkpoint` checks what it reads (weights of the network its config describes, all
 finite; a usable normaliser; the run's meta) before any of it is used.
 """
@@ -22,22 +27,16 @@ from typing import Any
 
 import torch
 
-from core.atomic import atomic_output
 from core.errors import BadInput
 from data_schema.hdf5 import SCALED_UNIT
 from data_schema.states import PLAUSIBLE_M, PLAUSIBLE_N
 from train.model import CGNN, CGNNConfig
 from train.normalise import Normaliser
 
+SCHEMA = ("phantom.checkpoint", "1.0")     # the name and version its provenance records
 REQUIRED = ("model", "config", "norm", "meta")
 META_TYPES = {"options": dict, "config": dict, "data": dict, "splits": str,
               "init": (str, type(None))}
-
-
-def save_checkpoint(path: str | Path, state: dict[str, Any]) -> None:
-    """Write ``state`` to ``path`` under a temporary name, then rename it into place."""
-    with atomic_output(path) as tmp:
-        torch.save(state, tmp)
 
 
 def load_checkpoint(path: str | Path, device: str | torch.device = "cpu") -> dict[str, Any]:

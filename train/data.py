@@ -25,7 +25,7 @@ SETS = ("single", "multi")
 
 
 @dataclass
-class States:
+class StateTensors:
     """The states of a file, as tensors on one device."""
 
     points: torch.Tensor     # (S, N, 3) float32, zero where invalid
@@ -34,8 +34,8 @@ class States:
     force: torch.Tensor      # (S,)
     pairs: dict[str, torch.Tensor]   # set -> (E, 2) long: start, end
 
-    def to(self, device: torch.device) -> States:
-        return States(self.points.to(device), self.valid.to(device), self.tip.to(device),
+    def to(self, device: torch.device) -> StateTensors:
+        return StateTensors(self.points.to(device), self.valid.to(device), self.tip.to(device),
                       self.force.to(device), {k: v.to(device) for k, v in self.pairs.items()})
 
 
@@ -50,7 +50,7 @@ class Batch:
     dforce: torch.Tensor     # (B,) N
 
 
-def load_states(path: str | Path) -> States:
+def load_states(path: str | Path) -> StateTensors:
     """Read and check a ``phantom.states`` 2.0 file."""
     validate_states(path)
     with h5py.File(path, "r") as f:
@@ -60,7 +60,7 @@ def load_states(path: str | Path) -> States:
                                      .astype(np.int64)) for s in SETS}
         tip, force = f["states/tip"][()], f["states/force"][()]
     pts = np.where(valid[..., None], pts, 0.0).astype(np.float32)
-    return States(torch.from_numpy(pts), torch.from_numpy(valid), torch.from_numpy(tip),
+    return StateTensors(torch.from_numpy(pts), torch.from_numpy(valid), torch.from_numpy(tip),
                   torch.from_numpy(force.astype(np.float32)), pairs)
 
 
@@ -98,12 +98,12 @@ def role_examples(doc: dict, fold: int, role: str, data: str | Path | None = Non
     return {s: ids[s][np.isin(groups[s][ids[s]], keep)] for s in SETS}
 
 
-def example_pairs(states: States, ids: dict[str, np.ndarray]) -> torch.Tensor:
+def example_pairs(states: StateTensors, ids: dict[str, np.ndarray]) -> torch.Tensor:
     """(E, 2) start/end state indices of the given example ids, single then multi."""
     return torch.cat([states.pairs[s][torch.as_tensor(ids[s], dtype=torch.long)] for s in SETS])
 
 
-def make_batch(states: States, pairs: torch.Tensor,
+def make_batch(states: StateTensors, pairs: torch.Tensor,
                point_idx: torch.Tensor | None = None) -> Batch:
     """Gather a batch for (B, 2) ``pairs``; ``point_idx`` (B, n) keeps those points only."""
     s, e = pairs[:, 0], pairs[:, 1]

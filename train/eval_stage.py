@@ -3,52 +3,90 @@ when asked, the data-scarcity curve out.
 
 Scores every run on its fold's test examples beside the no-learning references
 (:mod:`train.evaluate`), retrains for the scarcity study when asked (:mod:`train.scarcity`),
-and writes the metrics document, its Table-2 Markdown and the recording
-(:mod:`train.eval_view`) atomically: nothing of them is written unless all succeed.
+and writes the metrics document (``phantom.metrics``, :data:`data_schema.json_docs.METRICS`,
+with its provenance: the command, the settings, the sha256 of every run's best.pt and of the
+states files and manifests they name), its Table-2 Markdown, the recording
+(:mod:`train.eval_view`) and the scarcity curve (CSV, PNG) atomically: nothing of them is
+written unless all succeed.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from core.atomic import atomic_outputs, same_path
 from core.errors import BadInput
+from core.provenance import make_provenance
+from data_schema.json_docs import METRICS, validate_metrics
+from train.checkpoint import load_checkpoint
 from train.eval_view import write_eval_recording
-from train.evaluate import evaluate_runs, table2, test_errors, write_json
+from train.evaluate import evaluate_runs, table2, test_errors
 from train.scarcity import plot, scarcity_rows, write_csv
 
 
-def run_eval(runs: Sequence[Path], out: Path, rrd: Path | None = None, device: str = "cpu",
-             scarcity: bool = False, scarcity_epochs: int | None = None,
-             scarcity_groups: int | None = None) -> tuple[dict, str]:
-    """Evaluate ``runs`` into ``out`` (JSON), ``out`` with .md (the table) and ``rrd`` (the
-    first run's test examples); returns the metrics document and the table."""
+@dataclass(frozen=True)
+class EvalParams:
+    """Every setting of an evaluation: the device, and the data-scarcity study (retrain on
+    1..``scarcity_groups`` training groups for ``scarcity_epochs``; None: all, the run's)."""
+
+    device: str = "cpu"
+    scarcity: bool = False
+    scarcity_epochs: int | None = None
+    scarcity_groups: int | None = None
+
+
+def run_eval(inputs: Sequence[Path], out: Path, params: EvalParams | None = None,
+             rrd: Path | None = None) -> tuple[dict, str]:
+    """Evaluate the run folders ``inputs`` into ``out`` (JSON), ``out`` with .md (the table)
+    and ``rrd`` (the first run's test examples); returns the metrics document and the
+    table."""
+    runs, params = list(inputs), params or EvalParams()
     table_path = out.with_suffix(".md")
     named = [p for p in (out, table_path, rrd) if p is not None]
     if any(same_path(a, b) for i, a in enumerate(named) for b in named[:i]):
         raise BadInput(out, "--out, its table (.md) and --rrd must be three different files")
-    result = evaluate_runs(list(runs), device)
-    if scarcity:
-        result["scarcity"] = _scarcity(runs, out, scarcity_epochs, scarcity_groups, device)
+    result = evaluate_runs(runs, params.device)
+    curve = (out.with_suffix(".scarcity.csv"), out.with_suffix(".scarcity.png")) \
+        if params.scarcity else (None, None)
+    if params.scarcity:
+        result["scarcity"] = _scarcity(runs, out, params)
     table = table2(result)
-    with atomic_outputs(out, table_path, rrd) as (tmp_json, tmp_table, tmp_rrd):
-        write_json(tmp_json, result)
+    doc = {"schema": METRICS.name, "schema_version": METRICS.version, **result,
+           "provenance": make_provenance("eval", asdict(params), _inputs(runs), METRICS.name,
+                                         METRICS.version)}
+    with atomic_outputs(out, table_path, rrd, *curve) as (tmp_json, tmp_table, tmp_rrd,
+                                                          tmp_csv, tmp_png):
+        tmp_json.write_text(json.dumps(doc, indent=1, allow_nan=False))
+        validate_metrics(tmp_json)
         tmp_table.write_text(table)
+        if tmp_csv is not None:
+            write_csv(tmp_csv, result["scarcity"])
+            plot(tmp_png, result["scarcity"])
         if tmp_rrd is not None:
             first = result["runs"][0]
-            write_eval_recording(tmp_rrd, test_errors(runs[0], device)[2],
+            write_eval_recording(tmp_rrd, test_errors(runs[0], params.device)[2],
                                  f"{first['label']}, fold {first['fold']}", table)
-    return result, table
+    return doc, table
 
 
-def _scarcity(runs: Sequence[Path], out: Path, epochs: int | None, most: int | None,
-              device: str) -> list:
-    """Each run's scarcity curve (retrained beside ``out``), written as CSV and PNG."""
+def _inputs(runs: Sequence[Path]) -> list[Path]:
+    """What an evaluation read: each run's best.pt, and the states file and manifest it
+    names (each once)."""
+    files: dict[Path, None] = {}
+    for run in runs:
+        meta = load_checkpoint(run / "best.pt")["meta"]
+        for path in (run / "best.pt", Path(meta["data"]["file"]), Path(meta["splits"])):
+            files[path] = None
+    return list(files)
+
+
+def _scarcity(runs: Sequence[Path], out: Path, params: EvalParams) -> list:
+    """Each run's scarcity curve (retrained beside ``out``)."""
     rows = []
     for run in runs:
-        rows += scarcity_rows(run, out.parent / f"{out.stem}.scarcity_runs", epochs, device,
-                              most)
-    write_csv(out.with_suffix(".scarcity.csv"), rows)
-    plot(out.with_suffix(".scarcity.png"), rows)
+        rows += scarcity_rows(run, out.parent / f"{out.stem}.scarcity_runs",
+                              params.scarcity_epochs, params.device, params.scarcity_groups)
     return rows

@@ -3,7 +3,8 @@
 Per example: L_d, the mean over points of the distance between predicted and true deformed
 points, and its max over points; the force error |dF_pred - dF|. Per run and set (single,
 multi, both): force MSE, force absolute error mean +- sd, mean L_d mean +- sd and max L_d mean
-+- sd over examples (mm). Runs of one variant (label) are pooled over their folds, and the
++- sd over examples (mm). Runs of one variant (all its fields, :class:`train.variant.Variant`,
+not its label) are pooled over their folds, and the
 spread of the per-fold means is given beside. Every run and label is scored beside the
 no-learning references (:mod:`train.references`) on the same test examples, with its gain over
 the best of them: a model that does not beat them has learned nothing worth shipping.
@@ -11,7 +12,6 @@ the best of them: a model that does not beat them has learned nothing worth ship
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,14 +19,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from core.atomic import atomic_output
 from core.errors import BadInput
-from data_schema.json_docs import validate_metrics
 from train.checkpoint import load_checkpoint, model_from
 from train.data import (
     SETS,
     Batch,
-    States,
+    StateTensors,
     example_pairs,
     load_manifest,
     load_states,
@@ -36,8 +34,7 @@ from train.data import (
 from train.normalise import Normaliser
 from train.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.si_model import Prediction, distances, predict
-from train.variant import label as variant_label
-from train.variant import recorded_variant, source_name
+from train.variant import Variant, recorded_variant, source_name
 
 
 @dataclass
@@ -56,7 +53,7 @@ class LoadedRun:
 
     model: torch.nn.Module
     norm: Normaliser
-    states: States
+    states: StateTensors
     test: dict[str, np.ndarray]      # set -> example ids
     meta: dict
     splits: Path
@@ -168,37 +165,49 @@ def gains(model: dict, refs: dict[str, dict]) -> dict:
 
 
 def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
-    """Metrics per run and per label (pooled over its folds, with the spread over folds),
+    """Metrics per run and per variant (pooled over its folds, with the spread over folds),
     each beside the no-learning references on the same test examples, and the gain over the
-    best of them."""
-    runs, by_label = [], {}
+    best of them. Runs are pooled only where their whole :class:`Variant` and test set are
+    the same (two variants may share a label)."""
+    runs, groups = [], {}
     for run_dir in run_dirs:
         run = load_run(run_dir, device)
         errs = example_errors(run)[0]
         refs = reference_errors(run)
         m = metrics(errs)
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
-        variant = recorded_variant(run.meta)
-        runs.append({"run": str(run_dir), "label": variant_label(variant), "variant": variant,
-                     "fold": run.meta["options"]["fold"],
-                     "test_set": source_name(run.meta["data"]["file"]), "metrics": m,
+        variant, test_set = recorded_variant(run.meta), source_name(run.meta["data"]["file"])
+        runs.append({"run": str(run_dir), "label": variant.label, "variant": variant.to_dict(),
+                     "fold": run.meta["options"]["fold"], "test_set": test_set, "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m)})
-        key = (runs[-1]["label"], runs[-1]["test_set"])
-        by_label.setdefault(key, []).append((errs, refs, runs[-1]))
-    overall = []
-    for (name, test_set), items in by_label.items():
-        pooled = metrics(pool([e for e, _, _ in items]))
-        ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
-        fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
-        fold_ld = [v for v in fold_ld if v is not None] or [0.0]
-        overall.append({"label": name, "variant": items[0][2]["variant"],
-                        "test_set": test_set, "folds": len(items),
-                        "fold_ids": [r["fold"] for _, _, r in items],
-                        "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
-                        "references": ref_m, "gain": gains(pooled["all"], ref_m),
-                        "folds_not_beating_references": [
-                            r["fold"] for _, _, r in items if not _beats(r["gain"]["ld_gain"])]})
-    return {"runs": runs, "overall": overall}
+        groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1]))
+    return {"runs": runs, "overall": [_pooled(v, test_set, items)
+                                      for (v, test_set), items in groups.items()]}
+
+
+def _pooled(variant: Variant, test_set: str,
+            items: list[tuple[ExampleErrors, dict[str, ExampleErrors], dict]]) -> dict:
+    """The overall row of one variant on one test set: its runs' (errors, reference errors,
+    run row) pooled over their folds."""
+    pooled = metrics(pool([e for e, _, _ in items]))
+    ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
+    fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
+    fold_ld = [v for v in fold_ld if v is not None] or [0.0]
+    return {"label": variant.label, "variant": variant.to_dict(),
+            "test_set": test_set, "folds": len(items),
+            "fold_ids": [r["fold"] for _, _, r in items],
+            "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
+            "references": ref_m, "gain": gains(pooled["all"], ref_m),
+            "folds_not_beating_references": [
+                r["fold"] for _, _, r in items if not _beats(r["gain"]["ld_gain"])]}
+
+
+def shown_name(row: dict, rows: list[dict]) -> str:
+    """A run's or variant's name as shown: its label, or its full name where another variant
+    among ``rows`` has the same label."""
+    if any(r["label"] == row["label"] and r["variant"] != row["variant"] for r in rows):
+        return Variant.from_dict(row["variant"]).full_name
+    return row["label"]
 
 
 def _beats(gain: float | None) -> bool:
@@ -215,7 +224,8 @@ def not_beating(result: dict) -> list[str]:
                                 ("force error", g["force_gain"], g["force_reference"])):
             if not _beats(gain):
                 worse = "not finite" if gain is None else f"{-gain:.0%} worse"
-                lines.append(f"{row['label']} on {row['test_set']}: {what} does not beat "
+                lines.append(f"{shown_name(row, result['overall'])} on {row['test_set']}: "
+                             f"{what} does not beat "
                              f"'{ref}' ({worse})")
     return lines
 
@@ -250,7 +260,8 @@ def table2(result: dict) -> str:
     shown = set()
     for row in result["overall"]:
         g = row["gain"]
-        lines.append(_row(row["label"], row["test_set"], row["metrics"]["all"],
+        lines.append(_row(shown_name(row, result["overall"]), row["test_set"],
+                          row["metrics"]["all"],
                           f"{_pct(g['ld_gain'])} / {_pct(g['force_gain'])}", str(row["folds"])))
         key = (row["test_set"], tuple(row["fold_ids"]))
         if key in shown:
@@ -266,36 +277,34 @@ def _fold_table(result: dict) -> str:
     """Per test set, the mean L_d per fold of every variant tested on more than one of its
     folds, beside the references of that fold (empty when no variant has several folds).
     Runs on files that each call their one fold 0 (one MSM set per lab fold) are left out."""
-    multi = [(r["label"], r["test_set"]) for r in result["overall"]
-             if len(set(r["fold_ids"])) > 1]
-    tables = [_one_fold_table(result["runs"], ts, [lb for lb, t in multi if t == ts])
-              for ts in dict.fromkeys(t for _, t in multi)]
+    multi = [r for r in result["overall"] if len(set(r["fold_ids"])) > 1]
+    tables = [_one_fold_table(result["runs"], ts, [r for r in multi if r["test_set"] == ts],
+                              result["overall"])
+              for ts in dict.fromkeys(r["test_set"] for r in multi)]
     return "".join(tables)
 
 
-def _one_fold_table(runs: list[dict], test_set: str, labels: list[str]) -> str:
-    """The per-fold table of ``labels`` on ``test_set``."""
+def _one_fold_table(runs: list[dict], test_set: str, columns: list[dict],
+                    overall: list[dict]) -> str:
+    """The per-fold table on ``test_set`` of the variants of the overall rows ``columns``."""
     by_fold: dict[int, dict] = {}
+    shown = [c["variant"] for c in columns]
     for run in runs:
-        if run["label"] in labels and run["test_set"] == test_set:
-            by_fold.setdefault(run["fold"], {"refs": run["references"]})[run["label"]] = run
-    head = ["fold", *labels, *(f"*{n}*" for n in DISPLACEMENT)]
+        if run["test_set"] == test_set and run["variant"] in shown:
+            by_fold.setdefault(run["fold"], {"refs": run["references"], "runs": []})
+            by_fold[run["fold"]]["runs"].append(run)
+    head = ["fold", *(shown_name(c, overall) for c in columns),
+            *(f"*{n}*" for n in DISPLACEMENT)]
     lines = ["", f"Mean L_d per fold on {test_set} [mm] (in brackets: gain over the best "
                  "reference)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for fold in sorted(by_fold):
         cells = [str(fold)]
-        for label in labels:
-            run = by_fold[fold].get(label)
+        for column in columns:
+            run = next((r for r in reversed(by_fold[fold]["runs"])
+                        if r["variant"] == column["variant"]), None)
             cells.append("–" if run is None else f"{_num(run['metrics']['all']['ld_mean_mm'])} "
                                                  f"({_pct(run['gain']['ld_gain'])})")
         refs = by_fold[fold]["refs"]
         cells += [f"{refs[n]['ld_mean_mm']:.3f}" for n in DISPLACEMENT]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def write_json(path: Path, doc: dict) -> None:
-    """Write a metrics document atomically, checked before it takes its name."""
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(json.dumps(doc, indent=1, allow_nan=False))
-        validate_metrics(tmp)

@@ -9,37 +9,45 @@ change: :func:`train.si_model.press_gate`), a noCond model's too.
 What the graph carries: the no-motion gate and neighbour selection that does not depend on the
 order of the points. What it cannot carry (an ONNX graph cannot refuse an input) is written
 into the file's ``metadata_props`` (:func:`guards`), with the training envelope as JSON, so
-that a runtime can check inputs as :class:`train.Predictor` does.
+that a runtime can check inputs as :class:`train.Predictor` does; and ``provenance`` (JSON:
+:func:`core.provenance.make_provenance`'s record, schema ``phantom.onnx`` 1.0, written by the
+export runner :mod:`train.export_stage`: the command and the sha256 of the checkpoint).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 import onnx
 
-from core.atomic import atomic_output
 from train.checkpoint import load_checkpoint, model_from
 from train.edgeconv import EXTRA
 from train.predictor import EXTRAPOLATION_FACTOR, LARGE, UNIT_FACTOR
 from train.si_model import GATE_SHARE, SIModel, to_onnx
 
 
-def export_onnx(run: str | Path, out: str | Path) -> None:
-    """Write ``out`` (ONNX) from a run folder or checkpoint, N a dynamic axis, with the
-    guards it lacks and the training envelope in its metadata."""
+def checkpoint_of(run: str | Path) -> Path:
+    """The checkpoint a run names: a run folder's best.pt, or the checkpoint file itself."""
     run = Path(run)
-    state = load_checkpoint(run / "best.pt" if run.is_dir() else run)
+    return run / "best.pt" if run.is_dir() else run
+
+
+def export_onnx(run: str | Path, out: str | Path, props: Mapping[str, str] | None = None
+                ) -> None:
+    """Write ``out`` (ONNX) from a run folder or checkpoint, N a dynamic axis, with the
+    guards it lacks, the training envelope and ``props`` (the runner's provenance) in its
+    metadata."""
+    state = load_checkpoint(checkpoint_of(run))
     si = SIModel(*model_from(state))
     names = state["meta"]["data"].get("point_names")      # the points it was trained on
-    with atomic_output(out) as tmp:
-        to_onnx(si, tmp)
-        graph = onnx.load(str(tmp))
-        for key, value in {**guards(si), "point_names": json.dumps(names)}.items():
-            entry = graph.metadata_props.add()
-            entry.key, entry.value = key, value
-        onnx.save(graph, str(tmp))
+    to_onnx(si, out)
+    graph = onnx.load(str(out))
+    for key, value in {**guards(si), "point_names": json.dumps(names), **(props or {})}.items():
+        entry = graph.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.save(graph, str(out))
 
 
 def guards(si: SIModel) -> dict[str, str]:

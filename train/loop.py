@@ -17,6 +17,10 @@ Training that cannot learn says so: a fold without validation examples is refuse
 force not by a millinewton: below any lab's noise) are refused before training; a training
 loss that does not move over the first epochs is a warning, kept in the checkpoints' meta
 ("notes") and the recording.
+
+The runner names the files (:class:`RunFiles`) and writes the checkpoints (``save``: atomically,
+with their provenance, :mod:`train.train_stage`); this module only appends ``log.csv``. The
+defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
 """
 
 from __future__ import annotations
@@ -25,8 +29,10 @@ import copy
 import csv
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -35,11 +41,12 @@ from torch.nn.parallel import DistributedDataParallel
 from core.errors import BadInput
 from core.progress import say, warn
 from data_schema.states import point_names
+from train import paper
 from train.augment import about_normal, move_batch
-from train.checkpoint import load_checkpoint, save_checkpoint
+from train.checkpoint import load_checkpoint
 from train.data import (
     Batch,
-    States,
+    StateTensors,
     example_pairs,
     load_manifest,
     load_states,
@@ -60,12 +67,29 @@ STILL_N = 1e-3
 # A loss that does not move: the loss of a fixed probe of training examples (all points, no
 # augmentation: no sampling noise) changed by less than STALL_REL of itself from before
 # training to the end of the first STALL_EPOCHS epochs (or of the run, when shorter). A run
-# that learns moves it by percents there (see README for the figures).
+# that learns moves it by percents there.
 STALL_EPOCHS = 3
 STALL_REL = 1e-4
 STALL_PROBE = 64       # training examples in the probe
 LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
               "samples_per_s")
+Save = Callable[[Path, dict[str, Any]], None]    # writes a checkpoint (state) to a path
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """Where a run's files go, named by its runner: the checkpoints ``best`` (the kept epoch)
+    and ``last`` (each epoch; a killed run resumes from it), and the per-epoch ``log`` (CSV,
+    appended)."""
+
+    best: Path
+    last: Path
+    log: Path
+
+    @classmethod
+    def in_folder(cls, out: Path) -> RunFiles:
+        """A run folder's files: best.pt, last.pt, log.csv."""
+        return cls(out / "best.pt", out / "last.pt", out / "log.csv")
 
 
 @dataclass(frozen=True)
@@ -73,16 +97,16 @@ class TrainOptions:
     """Everything that decides what a run learns (a resumed run must match it)."""
 
     fold: int = 0
-    epochs: int = 250
-    batch: int = 32
-    lr: float = 1e-4
-    alpha: float = 88.0
+    epochs: int = paper.EPOCHS
+    batch: int = paper.BATCH
+    lr: float = paper.LR
+    alpha: float = paper.ALPHA
     point_fraction: float | None = None
     train_groups: int | None = None
     seed: int = 0
     rotate: bool = False
-    loss: str = "paper"              # "paper": alpha L_d + MSE; "balanced": each in its scale
-    schedule: str = "constant"       # "constant" or "cosine" (to 1 % of lr at the last epoch)
+    loss: str = paper.LOSS           # "paper": alpha L_d + MSE; "balanced": each in its scale
+    schedule: str = paper.SCHEDULE   # "constant" or "cosine" (to 1 % of lr at the last epoch)
     patience: int | None = None      # stop after this many epochs without a better validation
     ema: float | None = None         # validate and keep an exponential average of the weights
     no_val: bool = False             # train without validation: best.pt is the last epoch
@@ -111,7 +135,7 @@ def check_options(opts: TrainOptions) -> None:
                                  "positive number")
 
 
-def check_learnable(states: States, pairs: torch.Tensor, data: Path, fold: int,
+def check_learnable(states: StateTensors, pairs: torch.Tensor, data: Path, fold: int,
                     chunk: int = 256) -> None:
     """Refuse training examples in which nothing moves: no point by ``STILL_M`` and the force
     not by ``STILL_N`` (a model trained on them learns "nothing moves", silently)."""
@@ -152,7 +176,7 @@ def note_warning(run: Run, text: str) -> None:
     run.meta.setdefault("notes", []).append(f"warning: {text}")
 
 
-def fit_normaliser(states: States, pairs: torch.Tensor, seed: int, most: int = 2000
+def fit_normaliser(states: StateTensors, pairs: torch.Tensor, seed: int, most: int = 2000
                    ) -> Normaliser:
     """Statistics of (at most ``most``, seeded) training examples, with the training envelope
     (:func:`training_envelope`)."""
@@ -164,7 +188,7 @@ def fit_normaliser(states: States, pairs: torch.Tensor, seed: int, most: int = 2
     return replace(norm, envelope=training_envelope(states, pairs, b))
 
 
-def training_envelope(states: States, pairs: torch.Tensor, sample: Batch) -> Envelope:
+def training_envelope(states: StateTensors, pairs: torch.Tensor, sample: Batch) -> Envelope:
     """What the training examples span: press lengths, tip depths and forces of every one
     (the no-motion gate's shortest press must leave each of them whole), the tip's height
     above the surface of ``sample``'s, and the highest point of every start state."""
@@ -191,7 +215,7 @@ class Run:
     model: CGNN
     norm: Normaliser
     optimizer: torch.optim.Optimizer
-    states: States
+    states: StateTensors
     train: torch.Tensor        # (E, 2) pairs
     val: torch.Tensor
     start_epoch: int
@@ -206,8 +230,8 @@ class Run:
         return self.averaged if self.averaged is not None else self.model
 
 
-def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGNNConfig,
-            init: Path | None, device: torch.device) -> Run:
+def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
+            config: CGNNConfig, init: Path | None, device: torch.device) -> Run:
     """Load data and fold, build or resume the model and optimizer."""
     check_options(opts)
     doc = load_manifest(splits, data)
@@ -246,7 +270,7 @@ def prepare(data: Path, splits: Path, out: Path, opts: TrainOptions, config: CGN
     averaged = copy.deepcopy(model).requires_grad_(False) if opts.ema is not None else None
     optimizer = torch.optim.Adam(model.parameters(), lr=opts.lr)
     start, best, best_epoch = 0, math.inf, -1
-    last = out / "last.pt"
+    last = files.last
     if last.is_file():
         state = load_checkpoint(last, device)
         if _resumable(state["meta"]) != _resumable(meta):
@@ -333,7 +357,7 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
 
 
 @torch.no_grad()
-def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: States,
+def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: StateTensors,
                    pairs: torch.Tensor, alpha: float, batch: int = 64,
                    balanced: bool = False) -> dict[str, float]:
     """Mean loss, L_d (mm) and force error (N) over ``pairs`` (all points)."""
@@ -350,17 +374,18 @@ def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: States,
             "val_force_abs_n": float(sums[2]) / n}
 
 
-def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
-              config: CGNNConfig | None = None, init: Path | None = None,
-              device: str = "auto") -> Path:
-    """Train (or resume) one fold into ``out`` (best.pt, last.pt, log.csv); returns best.pt."""
-    config = config or CGNNConfig()
+def train_run(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
+              config: CGNNConfig, init: Path | None, device: str, save: Save) -> Path:
+    """Train (or resume from ``files.last``) one fold: ``save`` writes the checkpoints
+    ``files.best`` and ``files.last`` each epoch, and each epoch's row is appended to
+    ``files.log`` (only the main process writes); returns ``files.best``."""
     dev = resolve_device(device)
     ctx = from_env(dev)
-    run = prepare(data, splits, out, opts, config, init, dev)
+    run = prepare(data, splits, files, opts, config, init, dev)
     net = DistributedDataParallel(run.model) if ctx.world > 1 else run.model
     if ctx.main:
-        out.mkdir(parents=True, exist_ok=True)
+        for path in {files.best.parent, files.last.parent, files.log.parent}:
+            path.mkdir(parents=True, exist_ok=True)
     if opts.no_val:
         _note(run, "no validation (--no-val): best.pt is the last epoch", ctx.main)
     first = None
@@ -383,9 +408,9 @@ def train_run(data: Path, splits: Path, out: Path, opts: TrainOptions,
                "samples_per_s": len(run.train) / secs}
         _track_best(run, epoch, row["val_loss"], last=opts.no_val)
         if ctx.main:
-            _checkpoint(run, out, epoch, row)
+            _checkpoint(run, files, save, epoch, row)
             say(_epoch_line(row, opts.epochs, validated=len(run.val) > 0))
-    return out / "best.pt"
+    return files.best
 
 
 def _validate(run: Run, opts: TrainOptions) -> dict[str, float]:
@@ -412,9 +437,8 @@ def _note(run: Run, text: str, main: bool) -> None:
         say(text)
 
 
-def run_notes(out: Path) -> list[str]:
-    """The notes (choices, warnings) kept in a run folder's last checkpoint."""
-    last = out / "last.pt"
+def run_notes(last: Path) -> list[str]:
+    """The notes (choices, warnings) kept in a run's last checkpoint (none when absent)."""
     return list(load_checkpoint(last)["meta"].get("notes", [])) if last.is_file() else []
 
 
@@ -433,17 +457,17 @@ def _track_best(run: Run, epoch: int, val_loss: float, last: bool = False) -> No
         run.best_val, run.best_epoch = min(run.best_val, val_loss), epoch
 
 
-def _checkpoint(run: Run, out: Path, epoch: int, row: dict) -> None:
+def _checkpoint(run: Run, files: RunFiles, save: Save, epoch: int, row: dict) -> None:
     """Append the log row; write last.pt, and best.pt when validation improved."""
     state = {"model": run.kept.state_dict(), "optimizer": run.optimizer.state_dict(),
              "epoch": epoch, "best_val": run.best_val, "best_epoch": run.best_epoch,
              "config": run.meta["config"], "norm": run.norm.to_dict(), "meta": run.meta}
     if run.averaged is not None:
         state["trained"] = run.model.state_dict()     # what the optimizer steps, for resume
-    if run.best_epoch == epoch or not (out / "best.pt").exists():
-        save_checkpoint(out / "best.pt", state)
-    save_checkpoint(out / "last.pt", state)
-    log = out / "log.csv"
+    if run.best_epoch == epoch or not files.best.exists():
+        save(files.best, state)
+    save(files.last, state)
+    log = files.log
     new = not log.exists() or epoch == 0
     with open(log, "w" if new else "a", newline="") as f:
         w = csv.DictWriter(f, fieldnames=LOG_FIELDS)

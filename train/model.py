@@ -18,22 +18,22 @@ tie between neighbours by the points' own coordinates (:func:`train.edgeconv.knn
 output does not depend on the order of the points, even on a regular grid. A caller that already
 has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
 
-Each head's first layer is split in two, ``W [features, C] + b = (W_f features + b) + W_C C``
-(:meth:`CGNN.scene_terms`, then :meth:`CGNN.heads`): the same function, with no per-point copy
-of C; and without tip offsets the first part does not depend on the press, so a surface pressed
-again needs only the second (``press_independent``; :class:`train.Predictor` caches it).
+The heads are plain layers on the concatenated input, as the paper draws them. Without
+tip offsets the graph layers never read C (``press_independent``), so a surface pressed again
+needs only the heads: the predictor's cache of each head's first layer, split into the
+surface's part and the press's, lives beside it (:mod:`train.head_split`), not here.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-from itertools import islice
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
 from torch import nn
 
 from train.edgeconv import DynamicEdgeConv, tiebreak
+from train.paper import K as PAPER_K
 
 CONDITION = 6
 
@@ -42,7 +42,7 @@ CONDITION = 6
 class CGNNConfig:
     """Widths of the network (the paper gives none; these are ours) and its variant."""
 
-    k: int = 5
+    k: int = PAPER_K
     edge_widths: tuple[tuple[int, int], ...] = ((64, 64), (64, 64), (64, 64))
     disp_widths: tuple[int, ...] = (256, 128)
     force_widths: tuple[int, ...] = (128, 64, 32)
@@ -78,24 +78,6 @@ def mlp(widths: list[int]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
-@dataclass
-class Features:
-    """The layers' outputs a head reads: local features, the condition, the valid points."""
-
-    local: torch.Tensor                  # (B, N, F) concatenated layer outputs
-    cond: torch.Tensor | None            # (B, 6) or None (noCond)
-    mask: torch.Tensor | None = field(default=None)
-
-
-@dataclass
-class HeadTerms:
-    """What a surface gives each head's first layer before the press is added: (B, N, H) for
-    the displacement head (None when only the force is asked), (B, H) for the force head."""
-
-    disp: torch.Tensor | None
-    force: torch.Tensor
-
-
 class CGNN(nn.Module):
     """Predicts each point's displacement and the change of force (normalised units)."""
 
@@ -122,79 +104,58 @@ class CGNN(nn.Module):
 
     def features(self, points: torch.Tensor, cond: torch.Tensor | None,
                  mask: torch.Tensor | None = None,
-                 neighbours: torch.Tensor | None = None) -> Features:
-        """The three edge convolutions' outputs, concatenated (``neighbours``: the points'
-        kNN (B, N, k), if known; ``cond`` may be None when ``press_independent``)."""
+                 neighbours: torch.Tensor | None = None) -> torch.Tensor:
+        """The three edge convolutions' outputs, concatenated (B, N, F) (``neighbours``: the
+        points' kNN (B, N, k), if known; ``cond`` may be None when ``press_independent``)."""
         x, outs, key = self.inputs(points, cond), [], tiebreak(points)   # key: ties' breaker
         for i, conv in enumerate(self.convs):
             x = torch.relu(conv(x, mask, neighbours if i == 0 else None, key))  # (B, N, O)
             outs.append(x)
-        return Features(torch.cat(outs, dim=-1),
-                         cond if self.config.use_condition else None, mask)
+        return torch.cat(outs, dim=-1)
 
     @property
     def press_independent(self) -> bool:
         """True when the graph layers never read C (the paper's network, without tip
         offsets): a surface's features are then the same for every press, and a caller
-        pressing one surface again computes them once (:meth:`scene_terms`)."""
+        pressing one surface again computes them once (:mod:`train.head_split`)."""
         return not self.config.tip_offsets
 
-    def scene_terms(self, f: Features, displacement: bool = True) -> HeadTerms:
-        """Each head's first linear layer on what the press does not change (bias in): the
-        local features, and the max- and mean-pooled ones. ``displacement=False``: force only."""
-        x = f.local
-        if f.mask is None:
-            pooled = [x.amax(dim=1), x.mean(dim=1)]
-        else:
-            m = f.mask.unsqueeze(-1)
-            count = m.sum(dim=1).clamp(min=1)
-            pooled = [x.masked_fill(~m, float("-inf")).amax(dim=1),
-                      x.masked_fill(~m, 0.0).sum(dim=1) / count]
-        g = torch.cat(pooled, dim=-1)
-        return HeadTerms(_leading(self.disp_head[0], x) if displacement else None,
-                         _leading(self.force_head[0], g))
+    def with_condition(self, x: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        """A head's input: ``x`` (B, ..., F) with C (B, 6) appended to every row, or ``x``
+        alone for noCond."""
+        if not self.config.use_condition:
+            return x
+        return torch.cat([x, cond.view(cond.shape[0], *[1] * (x.dim() - 2), -1)
+                          .expand(*x.shape[:-1], -1)], dim=-1)
 
-    def heads(self, terms: HeadTerms, cond: torch.Tensor | None
-              ) -> tuple[torch.Tensor | None, torch.Tensor]:
-        """(displacement (B, N, 3) or None, change of force (B,)): C's part of each head's
-        first layer added to the scene's, then the rest of the head."""
-        force = _rest(self.force_head, self._add_press(self.force_head[0], terms.force, cond))
-        if terms.disp is None:
-            return None, force.squeeze(-1)
-        disp = _rest(self.disp_head, self._add_press(self.disp_head[0], terms.disp, cond))
-        return disp, force.squeeze(-1)
+    def force(self, local: torch.Tensor, cond: torch.Tensor | None,
+              mask: torch.Tensor | None = None) -> torch.Tensor:
+        """The force head (B,) on the pooled features and C."""
+        return self.force_head(self.with_condition(pool(local, mask), cond)).squeeze(-1)
 
-    def _add_press(self, first: nn.Linear, scene: torch.Tensor, cond: torch.Tensor | None
-                 ) -> torch.Tensor:
-        """``first([features, C])`` from ``scene`` = its features' part: adds C's part."""
-        if cond is None or not self.config.use_condition:
-            return scene
-        press = cond @ first.weight[:, -CONDITION:].T                        # (B, H)
-        return scene + press.view(press.shape[0], *[1] * (scene.dim() - 2), -1)
+    def heads(self, local: torch.Tensor, cond: torch.Tensor | None,
+              mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(displacement (B, N, 3), change of force (B,)) from the features (B, N, F)."""
+        return self.disp_head(self.with_condition(local, cond)), self.force(local, cond, mask)
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor,
                 mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor]:
         """(displacement (B, N, 3), change of force (B,)), normalised."""
-        f = self.features(points, cond, mask, neighbours)
-        return self.heads(self.scene_terms(f), f.cond)
+        return self.heads(self.features(points, cond, mask, neighbours), cond, mask)
 
     def forward_force(self, points: torch.Tensor, cond: torch.Tensor,
                       mask: torch.Tensor | None = None,
                       neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """Only the change of force (B,): the displacement head is skipped."""
-        f = self.features(points, cond, mask, neighbours)
-        return self.heads(self.scene_terms(f, displacement=False), f.cond)[1]
+        return self.force(self.features(points, cond, mask, neighbours), cond, mask)
 
 
-def _rest(head: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
-    """``head`` after its first layer."""
-    for layer in islice(head, 1, None):
-        x = layer(x)
-    return x
-
-
-def _leading(first: nn.Linear, x: torch.Tensor) -> torch.Tensor:
-    """``first`` on the leading ``x.shape[-1]`` inputs of its own (bias in, C's columns left
-    out): the head's input ``[x, C]`` is never built, so no (B, N, F + 6) copy is made."""
-    return nn.functional.linear(x, first.weight[:, :x.shape[-1]], first.bias)
+def pool(local: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """[max, mean] over the valid points of the features (B, N, F): (B, 2F)."""
+    if mask is None:
+        return torch.cat([local.amax(dim=1), local.mean(dim=1)], dim=-1)
+    m = mask.unsqueeze(-1)
+    count = m.sum(dim=1).clamp(min=1)
+    return torch.cat([local.masked_fill(~m, float("-inf")).amax(dim=1),
+                      local.masked_fill(~m, 0.0).sum(dim=1) / count], dim=-1)

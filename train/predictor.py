@@ -64,6 +64,7 @@ from scipy.spatial import cKDTree
 
 from train.backends import TorchBackend, make_backend
 from train.checkpoint import load_checkpoint, model_from
+from train.head_split import check_split
 from train.normalise import tip_height
 from train.region import near_path, neighbour_table, region
 from train.si_model import SIModel
@@ -116,6 +117,8 @@ class Predictor:
         self.norm, self.k = si.norm, si.model.config.k
         self.hops = len(si.model.convs)
         self.press_independent = si.model.press_independent
+        if self.press_independent:      # a known scene runs its cached head terms
+            check_split(si.model)
         self.backend = make_backend(si, device, backend)
         self.large = self.backend if self.backend.name == "torch" else TorchBackend(si, device)
         self.extrapolating = False

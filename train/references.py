@@ -19,12 +19,13 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from train.data import Batch, States, make_batch
+from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, REFERENCES
+from train.data import Batch, StateTensors, make_batch
 from train.si_model import Prediction
 
-NAMES = ("nothing moves", "nearest press", "force, linear")
-DISPLACEMENT = ("nothing moves", "nearest press")       # the references that move points
-FORCE = ("nothing moves", "nearest press", "force, linear")
+NAMES = REFERENCES                                       # each reference's name, as shown
+DISPLACEMENT = (NOTHING_MOVES, NEAREST_PRESS)            # the references that move points
+FORCE = NAMES                                            # the references that predict a force
 TIP_MATCH = 1e-7      # m: a point this close to the tip's start is the tip
 
 
@@ -42,7 +43,7 @@ def with_tip(b: Batch, deformed: torch.Tensor) -> torch.Tensor:
 class References:
     """The three references, fitted on one fold's training examples."""
 
-    def __init__(self, states: States, train_pairs: torch.Tensor) -> None:
+    def __init__(self, states: StateTensors, train_pairs: torch.Tensor) -> None:
         train = make_batch(states, train_pairs)
         self.cond = train.cond.double()                                      # (T, 6)
         self.disp = torch.where(train.mask[..., None], train.target - train.points, 0.0)
@@ -55,13 +56,13 @@ class References:
         self.coef = torch.from_numpy(coef).to(self.cond.device)
 
     def predict(self, name: str, b: Batch) -> Prediction:
-        """One reference's prediction for a batch (points NaN for 'force, linear')."""
-        if name == "nothing moves":
+        """One reference's prediction for a batch (points NaN for :data:`FORCE_LINEAR`)."""
+        if name == NOTHING_MOVES:
             return Prediction(with_tip(b, b.points), torch.zeros_like(b.dforce))
-        if name == "nearest press":
+        if name == NEAREST_PRESS:
             near = torch.cdist(b.cond.double(), self.cond).argmin(dim=1)     # (B,)
             return Prediction(with_tip(b, b.points + self.disp[near]), self.dforce[near])
-        if name == "force, linear":
+        if name == FORCE_LINEAR:
             step = (b.cond[:, 3:] - b.cond[:, :3]).double()
             df = step @ self.coef[:3] + self.coef[3]
             return Prediction(torch.full_like(b.points, float("nan")), df.to(b.dforce.dtype))

@@ -18,12 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from core.atomic import atomic_output
 from core.progress import say
 from train.checkpoint import load_checkpoint
 from train.evaluate import ExampleErrors, example_errors, load_run, metrics, reference_errors
-from train.loop import TrainOptions, train_run
+from train.loop import TrainOptions
 from train.model import CGNNConfig
+from train.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from train.train_stage import TrainInputs, TrainParams, run_train
 
 FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n")
 MODELS = {False: "no TL", True: "TL"}
@@ -46,7 +47,8 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
             tag = f"fold{opts.fold}_n{n:02d}_{'tl' if init else 'notl'}"
             say(f"scarcity: {tag}")
             sub = dataclasses.replace(opts, train_groups=n)
-            train_run(data, splits, out_dir / tag, sub, config, init, device)
+            run_train(TrainInputs(data, splits, init), out_dir / tag,
+                      TrainParams(sub, config, device))
             run = load_run(out_dir / tag, device)
             rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0]))
         rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
@@ -68,13 +70,13 @@ def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[f
 
 
 LINES = (("no TL", "tab:red", "o-"), ("TL", "tab:blue", "o-"),
-         ("nothing moves", "tab:gray", "s--"), ("nearest press", "tab:green", "^--"),
-         ("force, linear", "tab:olive", "v--"))
+         (NOTHING_MOVES, "tab:gray", "s--"), (NEAREST_PRESS, "tab:green", "^--"),
+         (FORCE_LINEAR, "tab:olive", "v--"))
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
-    """The curve as CSV, written atomically."""
-    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+    """The curve as CSV, written to ``path`` (the runner's temporary file)."""
+    with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
         w.writerows(rows)
@@ -82,7 +84,8 @@ def write_csv(path: Path, rows: list[dict]) -> None:
 
 def plot(path: Path, rows: list[dict]) -> None:
     """Three panels like the paper's figure: mean L_d, max L_d, force error over groups (log
-    scale: a linear fit to one press can be off by newtons), one legend for all."""
+    scale: a linear fit to one press can be off by newtons), one legend for all; written to
+    ``path`` (the runner's temporary file)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -105,6 +108,5 @@ def plot(path: Path, rows: list[dict]) -> None:
     handles, labels = axes[2].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", ncol=len(labels), fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 0.9))
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
+    fig.savefig(path, dpi=120, format="png")
     plt.close(fig)

@@ -24,7 +24,8 @@ import torch
 from torch import nn
 
 from train.data import Batch
-from train.model import CGNN, HeadTerms
+from train.head_split import HeadTerms, check_split, pressed_heads, scene_terms
+from train.model import CGNN
 from train.normalise import Normaliser
 
 OPSET = 17
@@ -73,9 +74,23 @@ def in_metres(norm: Normaliser, points: torch.Tensor, disp: torch.Tensor | None,
     """The network's normalised outputs as deformed points (B, N, 3) m (None when ``disp``
     is) and the change of force (B,) N, gated by the press (:func:`press_gate`)."""
     gate = press_gate(norm, condition)
-    deformed = None if disp is None else \
-        points + disp * (gate.view(-1, 1, 1) * norm.disp_scale)
-    return deformed, df * (gate * norm.force_scale)
+    return (None if disp is None else deformed(points, disp, norm, gate),
+            newtons(df, norm, gate))
+
+
+def deformed(points: torch.Tensor, disp: torch.Tensor, norm: Normaliser,
+             gate: torch.Tensor | None = None) -> torch.Tensor:
+    """The deformed points (B, N, 3) m: ``points`` moved by the network's normalised
+    displacement ``disp`` (B, N, 3), scaled by ``norm`` and by ``gate`` (B,) where given."""
+    scale = norm.disp_scale if gate is None else gate.view(-1, 1, 1) * norm.disp_scale
+    return points + disp * scale
+
+
+def newtons(df: torch.Tensor, norm: Normaliser, gate: torch.Tensor | None = None
+            ) -> torch.Tensor:
+    """The change of force (B,) N from the network's normalised one, scaled by ``norm`` and
+    by ``gate`` (B,) where given."""
+    return df * (norm.force_scale if gate is None else gate * norm.force_scale)
 
 
 def predict(model: nn.Module, norm: Normaliser, b: Batch) -> Prediction:
@@ -135,12 +150,11 @@ class SIModel(nn.Module):
     def scene(self, points: torch.Tensor, neighbours: torch.Tensor
               ) -> tuple[torch.Tensor, torch.Tensor]:
         """A surface's head terms, (B, N, H) and (B, H): all a press-independent model
-        computes that does not depend on the press (refused for one that reads C earlier)."""
-        if not self.model.press_independent:
-            raise ValueError("this model's graph layers read the press (tip offsets): "
-                             "a surface's features are not the same for every press")
-        terms = self.model.scene_terms(self.model.features(self.norm.points(points), None,
-                                                           None, neighbours))
+        computes that does not depend on the press (:mod:`train.head_split`; refused for a
+        model the split does not hold for)."""
+        check_split(self.model)
+        terms = scene_terms(self.model, self.model.features(self.norm.points(points), None,
+                                                            None, neighbours))
         return terms.disp, terms.force
 
     def scene_and_press(self, points: torch.Tensor, neighbours: torch.Tensor,
@@ -155,15 +169,16 @@ class SIModel(nn.Module):
                 ) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` from the scene's head terms (of ``points``, or of a subset of them
         in the same order): deformed points (B, N, 3) m and the change of force (B,) N."""
-        disp, df = self.model.heads(HeadTerms(disp_terms, force_terms),
-                                    self.norm.condition(condition))
+        disp, df = pressed_heads(self.model, HeadTerms(disp_terms, force_terms),
+                                 self.norm.condition(condition))
         return in_metres(self.norm, points, disp, df, condition)
 
     def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor
                       ) -> torch.Tensor:
         """:meth:`force` from the scene's force terms: the change of force (B,) N."""
-        _, df = self.model.heads(HeadTerms(None, force_terms), self.norm.condition(condition))
-        return df * (press_gate(self.norm, condition) * self.norm.force_scale)
+        _, df = pressed_heads(self.model, HeadTerms(None, force_terms),
+                              self.norm.condition(condition))
+        return newtons(df, self.norm, press_gate(self.norm, condition))
 
 
 @dataclass(frozen=True)

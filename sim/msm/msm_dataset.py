@@ -10,27 +10,27 @@ surface [L, W] (m); with a lab's layout, ``layout`` its markers' rest positions 
 ``point_names`` their names then "tip" (where the lab's states name them).
 
 A shard's file (``shard=(i, count)``) is a complete states file of its block of locations;
-:mod:`sim.msm.msm_shards` joins them.
+:mod:`sim.msm.msm_shards` joins them. The runner (:mod:`sim.msm.simulate_stage`) records the
+provenance and writes the file (:func:`write_states`).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from core.protocol import THICKNESS_M
-from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES, validate_states
 from sim.msm.msm import MSM, MSMError, MSMParams
 from sim.msm.msm_depth import check_depth, check_states_depth
 from sim.msm.msm_layout import footprint
 from sim.msm.msm_protocol import Plan, Protocol, draw_plan, shard_locations
-from sim.msm.msm_simulate import Simulated, simulate
+from sim.msm.msm_simulate import Simulated, simulate_plan
 from sim.msm.msm_static import DEFAULT_TOL, check_tol
 
 RESIDUAL_ATTRS = ("max_residual_N", "stored_residual_N")     # merged: the largest of any shard
@@ -79,7 +79,14 @@ def write_states(path: str | Path, arrays: dict[str, np.ndarray], attrs: dict) -
 
 def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
                shard: tuple[int, int] | None, sim: Simulated | None = None) -> dict:
-    """Root attributes of an MSM states file (shards add ``shard = "I/N"``).
+    """Root attributes of an MSM states file: ``provenance`` first, then :func:`data_attrs`."""
+    return {"provenance": json.dumps(provenance), **data_attrs(plan, params, tol, shard, sim)}
+
+
+def data_attrs(plan: Plan, params: MSMParams, tol: float, shard: tuple[int, int] | None,
+               sim: Simulated | None = None) -> dict:
+    """Root attributes of an MSM states file but the provenance (shards add
+    ``shard = "I/N"``).
 
     With ``sim``: ``max_residual_N``, the largest force left on any mass of any state as
     solved (float64, below ``tol``), and ``stored_residual_N``, the same of the states as
@@ -87,7 +94,6 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
     of spring force whatever ``tol`` was.
     """
     attrs = {
-        "provenance": json.dumps(provenance),
         "source": "msm",
         "units_length": "m",
         "units_force": "N",
@@ -110,14 +116,21 @@ def file_attrs(plan: Plan, params: MSMParams, tol: float, provenance: dict,
     return attrs
 
 
-def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
-             tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
-             command_params: dict | None = None, layout: np.ndarray | None = None,
-             inputs: Sequence[Path] = (), thickness: float = THICKNESS_M,
-             point_names: Sequence[str] | None = None
-             ) -> tuple[Simulated, dict[str, np.ndarray]]:
-    """Simulate ``protocol`` (or one shard of it), write the states file ``out``; returns the
-    simulation and the arrays written.
+@dataclass
+class MSMData:
+    """A simulated block of locations, with everything its states file holds but the
+    provenance (which the runner records)."""
+
+    sim: Simulated
+    arrays: dict[str, np.ndarray]
+    attrs: dict               # root attributes but ``provenance`` (:func:`data_attrs`)
+
+
+def simulate_data(protocol: Protocol, params: MSMParams, *, tol: float = DEFAULT_TOL,
+                  workers: int = 1, shard: tuple[int, int] | None = None,
+                  layout: np.ndarray | None = None, thickness: float = THICKNESS_M,
+                  point_names: Sequence[str] | None = None) -> MSMData:
+    """Simulate ``protocol`` (or one shard of it): the states file's arrays and attributes.
 
     With ``layout`` (a lab's rest points, :func:`sim.msm.msm_layout.lab_layout`) the states
     are the MSM sampled at those points plus the tip, and the loads fall inside the layout's
@@ -131,13 +144,10 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
     plan = draw_plan(protocol, model.N, None if layout is None else footprint(model, layout))
     locs = shard_locations(protocol.locations, shard)
     check_depth(plan, params, locs, thickness)
-    sim = simulate(plan, params, locs, tol, workers, layout)
+    sim = simulate_plan(plan, params, locs, tol, workers, layout)
     check_states_depth(plan, params, sim.tips, thickness)
-    prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
-                           inputs=list(inputs), schema=STATES.name,
-                           schema_version=STATES.version)
     arrays = states_arrays(plan, sim)
-    attrs = file_attrs(plan, params, tol, prov, shard, sim)
+    attrs = data_attrs(plan, params, tol, shard, sim)
     if layout is not None:
         attrs["layout"] = json.dumps(np.asarray(layout, dtype=float).round(9).tolist())
         if point_names is not None:
@@ -145,5 +155,4 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
                 raise MSMError(f"{len(point_names)} point names for {len(layout)} layout "
                                "points and the tip")
             attrs["point_names"] = json.dumps(list(point_names))
-    write_states(out, arrays, attrs)
-    return sim, arrays
+    return MSMData(sim, arrays, attrs)

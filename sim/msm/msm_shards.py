@@ -3,32 +3,42 @@
 Each shard (``simulate --shard I/N``) is a complete states file of a contiguous block of
 locations; joined in shard order, with the example indices shifted by the states before them,
 they give the arrays a one-process run writes, byte for byte. Shards of different runs
-(another protocol, model or solver), missing or repeated shards are refused.
+(another protocol, model or solver), missing or repeated shards are refused. The runner
+(:func:`sim.msm.simulate_stage.run_merge`) records the provenance and writes the file.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from core.errors import BadInput
-from core.provenance import make_provenance
 from data_schema.hdf5 import attr_text
-from data_schema.states import STATES, validate_states
-from sim.msm.msm_dataset import RESIDUAL_ATTRS, write_states
+from data_schema.states import validate_states
+from sim.msm.msm_dataset import RESIDUAL_ATTRS
 from sim.msm.msm_protocol import parse_shard
 
 SAME_ATTRS = ("msm_params", "protocol", "solver")
 
 
-def merge_shards(paths: Sequence[str | Path], out: str | Path
-                 ) -> tuple[dict[str, np.ndarray], dict]:
-    """Join the shard files of one run into the states file ``out`` a one-process run writes;
-    returns its arrays and root attributes."""
+@dataclass
+class Merged:
+    """The shards of one run joined: what a one-process run writes, but the provenance."""
+
+    arrays: dict[str, np.ndarray]
+    attrs: dict               # root attributes but ``provenance`` (to be set last)
+    shards: list[Path]        # the shard files, in shard order
+    protocol: dict            # the run's protocol, as its shards record it
+
+
+def merge_shards(paths: Sequence[str | Path]) -> Merged:
+    """Join the shard files of one run into the arrays and root attributes of the states file
+    a one-process run writes."""
     if not paths:
         raise BadInput(None, "--merge needs the shard files")
     shards: dict[int, Path] = {}
@@ -66,19 +76,13 @@ def merge_shards(paths: Sequence[str | Path], out: str | Path
         else:
             chunks = [p[name] for p in parts]
         arrays[name] = np.concatenate(chunks).astype(parts[0][name].dtype)
-    protocol = json.loads(first["protocol"])
-    prov = make_provenance("simulate --merge", {"shards": count, **protocol},
-                           inputs=[shards[i] for i in range(count)],
-                           schema=STATES.name, schema_version=STATES.version)
     attrs = {k: v for k, v in _root_attrs(shards[0]).items()
              if k not in ("shard", "provenance", "schema", "schema_version")}
     for key in RESIDUAL_ATTRS:
         values = [_root_attrs(shards[i]).get(key) for i in range(count)]
         if all(v is not None for v in values):
             attrs[key] = float(max(values))
-    attrs["provenance"] = json.dumps(prov)
-    write_states(out, arrays, attrs)
-    return arrays, attrs
+    return Merged(arrays, attrs, [shards[i] for i in range(count)], json.loads(first["protocol"]))
 
 
 def _dataset_names(f: h5py.File) -> list[str]:

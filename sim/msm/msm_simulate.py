@@ -71,7 +71,7 @@ def _simulate_location(args: tuple) -> tuple[np.ndarray, np.ndarray, float, floa
             time.process_time() - cpu)
 
 
-def simulate(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
+def simulate_plan(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
              tol: float = DEFAULT_TOL, workers: int = 1, layout: np.ndarray | None = None
              ) -> Simulated:
     """Simulate ``locations`` (default: all) of ``plan`` with the fast static path.

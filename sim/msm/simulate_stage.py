@@ -3,7 +3,7 @@
 Reads what the run needs (fit-msm's constants, a lab's marker layout, or the shard files),
 simulates (:mod:`sim.msm.msm_dataset`) or joins (:mod:`sim.msm.msm_shards`), and writes the
 states file and the recording (:mod:`sim.msm.simulate_view`) atomically, with the provenance:
-nothing is written unless everything succeeds.
+nothing is written unless everything succeeds. Its settings: :mod:`sim.msm.simulate_params`.
 """
 
 from __future__ import annotations
@@ -18,9 +18,11 @@ import numpy as np
 
 from core.atomic import atomic_outputs
 from core.protocol import THICKNESS_M
+from core.provenance import make_provenance
 from data_schema.json_docs import MSM_PARAMS, validate_json_doc
+from data_schema.states import STATES
 from sim.msm.msm import MSM, MSMParams
-from sim.msm.msm_dataset import generate
+from sim.msm.msm_dataset import simulate_data, write_states
 from sim.msm.msm_depth import beyond
 from sim.msm.msm_grid import GRID_KEYS, check_same_grid, grid_params, recorded_grid
 from sim.msm.msm_layout import LabLayout, check_inside, read_layout
@@ -28,7 +30,9 @@ from sim.msm.msm_protocol import Protocol, parse_shard
 from sim.msm.msm_shards import merge_shards
 from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL
+from sim.msm.simulate_params import SimulateInputs, SimulateParams
 from sim.msm.simulate_view import write_simulate_recording
+from sim.msm.workers import default_workers
 
 
 @dataclass
@@ -39,6 +43,7 @@ class Simulation:
     seconds: float
     sim: Simulated | None = None          # None: joined from shards
     thickness: float = THICKNESS_M        # m, the phantom's
+    workers: int = 1                      # processes that simulated
 
     @property
     def beyond_thickness(self) -> tuple[int, float]:
@@ -46,59 +51,86 @@ class Simulation:
         return beyond(self.arrays["states/tip"], self.thickness)
 
 
-def run_simulate(out: str | Path, rrd: str | Path | None = None,
-                 protocol: Protocol | None = None, params: MSMParams | None = None, *,
-                 tol: float = DEFAULT_TOL, workers: int = 1, shard: str | None = None,
-                 layout: str | Path | None = None, params_file: str | Path | None = None,
-                 rrd_sequences: int = 4, thickness: float = THICKNESS_M,
-                 size: tuple[float, float] | None = None, spacing: float | None = None
+def run_simulate(inputs: SimulateInputs | None, out: str | Path,
+                 params: SimulateParams | None = None, rrd: str | Path | None = None
                  ) -> Simulation:
-    """Simulate ``protocol`` (or shard ``"I/N"`` of it) into ``out`` and the recording ``rrd``.
+    """Simulate the protocol of ``params`` (or its shard ``"I/N"``) into ``out`` and the
+    recording ``rrd``.
 
-    The surface covers ``size`` (L, W) m, else the ``layout``'s ``footprint_m``, else the fit's
-    grid, else ``params``' (the paper's square), its masses about ``spacing`` m apart (default
-    the paper's). ``params_file`` (fit-msm's JSON) overrides the spring constants and the
-    contact radius and brings the grid they were fitted on (a size or spacing asking for
-    another is refused); ``layout`` (a lab states file) samples the MSM at its markers.
-    ``thickness`` (m, the phantom's): states deeper are counted
-    (:attr:`Simulation.beyond_thickness`).
+    The surface covers ``params.size`` (L, W) m, else the ``inputs.layout``'s
+    ``footprint_m``, else the fit's grid, else the paper's square, its masses about
+    ``params.spacing`` m apart (default the paper's). ``inputs.params_file`` (fit-msm's JSON)
+    overrides the spring constants and the contact radius and brings the grid they were
+    fitted on (a size or spacing asking for another is refused); ``inputs.layout`` (a lab
+    states file) samples the MSM at its markers. States deeper than ``params.thickness`` (m,
+    the phantom's) are counted (:attr:`Simulation.beyond_thickness`).
     """
-    protocol, params = protocol or Protocol(), params or MSMParams()
+    inputs, p = inputs or SimulateInputs(), params or SimulateParams()
+    layout, params_file = inputs.layout, inputs.params_file
+    protocol, msm = p.protocol(), MSMParams(k_between=p.k_between, k_fixed=p.k_fixed)
     lab = read_layout(layout) if layout is not None else None
     fitted = False
     if params_file is not None:
-        params, protocol, fitted = _fitted(params_file, params, protocol)
-    params = _sized(params, size, spacing, lab, layout, params_file if fitted else None)
+        msm, protocol, fitted = _fitted(params_file, msm, protocol)
+    msm = _sized(msm, p.size, p.spacing, lab, layout, params_file if fitted else None)
     if lab is not None:
-        check_inside(lab.points, params, layout, lab.names)
-    shard_ij = parse_shard(shard) if shard else None
-    command = {**asdict(protocol), "k_between": params.k_between, "k_fixed": params.k_fixed,
-               "tol": tol, "shard": shard, "layout": str(layout) if layout else None,
-               "thickness": thickness, "footprint_m": list(params.footprint),
-               "grid": [params.n, params.n_y]}
-    inputs = [Path(p) for p in (params_file, layout) if p is not None]
+        check_inside(lab.points, msm, layout, lab.names)
+    command = {**asdict(protocol), "k_between": msm.k_between, "k_fixed": msm.k_fixed,
+               "tol": p.tol, "shard": p.shard, "layout": str(layout) if layout else None,
+               "thickness": p.thickness, "footprint_m": list(msm.footprint),
+               "grid": [msm.n, msm.n_y]}
+    shard = parse_shard(p.shard) if p.shard else None
+    workers = p.workers or default_workers()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
-        sim, arrays = generate(tmp_out, protocol, params, tol=tol, workers=workers,
-                               shard=shard_ij, command_params=command,
-                               layout=None if lab is None else lab.points, inputs=inputs,
-                               thickness=thickness,
+        sim, arrays = generate(tmp_out, protocol, msm, tol=p.tol, workers=workers,
+                               shard=shard, command_params=command,
+                               layout=None if lab is None else lab.points,
+                               inputs=[Path(f) for f in (params_file, layout) if f is not None],
+                               thickness=p.thickness,
                                point_names=None if lab is None else lab.point_names)
         seconds = time.perf_counter() - started
-        _record(tmp_rrd, arrays, params, protocol.step_n, rrd_sequences)
-    return Simulation(arrays, seconds, sim, thickness)
+        _record(tmp_rrd, arrays, msm, protocol.step_n, p.rrd_sequences)
+    return Simulation(arrays, seconds, sim, p.thickness, workers)
 
 
-def run_merge(shards: Sequence[str | Path], out: str | Path, rrd: str | Path | None = None,
-              rrd_sequences: int = 4, thickness: float = THICKNESS_M) -> Simulation:
-    """Join the shard files of one run into ``out`` (and the recording ``rrd``)."""
+def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
+             tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
+             command_params: dict | None = None, layout: np.ndarray | None = None,
+             inputs: Sequence[Path] = (), thickness: float = THICKNESS_M,
+             point_names: Sequence[str] | None = None
+             ) -> tuple[Simulated, dict[str, np.ndarray]]:
+    """Simulate ``protocol`` (or one shard of it, :func:`sim.msm.msm_dataset.simulate_data`)
+    and write the states file ``out`` with its provenance (``command_params``, the hashes of
+    ``inputs``); returns the simulation and the arrays written."""
+    data = simulate_data(protocol, params, tol=tol, workers=workers, shard=shard,
+                         layout=layout, thickness=thickness, point_names=point_names)
+    prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
+                           inputs=list(inputs), schema=STATES.name,
+                           schema_version=STATES.version)
+    write_states(out, data.arrays, {"provenance": json.dumps(prov), **data.attrs})
+    return data.sim, data.arrays
+
+
+def run_merge(inputs: Sequence[str | Path], out: str | Path,
+              params: SimulateParams | None = None, rrd: str | Path | None = None
+              ) -> Simulation:
+    """Join the shard files ``inputs`` of one run into ``out`` (and the recording ``rrd``);
+    of ``params`` only the recording's ``rrd_sequences`` and the ``thickness`` apply."""
+    p = params or SimulateParams()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
-        arrays, attrs = merge_shards(shards, tmp_out)
+        merged = merge_shards(inputs)
+        prov = make_provenance("simulate --merge",
+                               {"shards": len(merged.shards), **merged.protocol},
+                               inputs=merged.shards, schema=STATES.name,
+                               schema_version=STATES.version)
+        attrs = {**merged.attrs, "provenance": json.dumps(prov)}
+        write_states(tmp_out, merged.arrays, attrs)
         seconds = time.perf_counter() - started
-        params = MSMParams(**json.loads(attrs["msm_params"]))
-        _record(tmp_rrd, arrays, params, float(attrs["step_n"]), rrd_sequences)
-    return Simulation(arrays, seconds, thickness=thickness)
+        msm = MSMParams(**json.loads(attrs["msm_params"]))
+        _record(tmp_rrd, merged.arrays, msm, float(attrs["step_n"]), p.rrd_sequences)
+    return Simulation(merged.arrays, seconds, thickness=p.thickness)
 
 
 def _sized(params: MSMParams, size: tuple[float, float] | None, spacing: float | None,

@@ -1,10 +1,11 @@
 """The synth stage runner: the phantom twin's session folder, what the lab would hand over,
 plus the truth.
 
-``run_synth`` plays a session (:func:`sim.twin.twin.simulate`) and writes it in the lab's
-formats (:mod:`sim.twin.lab_writers`, :mod:`ingest.ati_cal`) with ``truth.h5``
-(:mod:`sim.twin.twin_truth`) and, when asked, a rerun recording (:mod:`sim.twin.synth_view`).
-The same seed gives the same bytes of every data file.
+``run_synth`` plays a session (:func:`sim.twin.twin.simulate_twin`) and writes it in the
+lab's formats (:mod:`sim.twin.lab_writers`, :mod:`ingest.ati_cal`) with ``truth.h5``
+(:mod:`sim.twin.twin_truth`, its provenance recorded here) and, when asked, a rerun recording
+(:mod:`sim.twin.synth_view`). The same seed gives the same bytes of every data file. Its
+settings: :mod:`sim.twin.synth_params`.
 
 Writing over an earlier session removes its files that the new one does not write (another
 sensor's ``FT<serial>.cal``, a recording) and leaves every other file alone.
@@ -13,44 +14,47 @@ sensor's ``FT<serial>.cal``, a recording) and leaves every other file alone.
 from __future__ import annotations
 
 import re
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from core.atomic import atomic_outputs
 from core.errors import BadInput
+from core.provenance import make_provenance
+from data_schema.truth import TRUTH
 from sim.twin.marker_layout import parse_layout, parse_size
 from sim.twin.phantom import PhantomSpec
+from sim.twin.synth_params import SynthParams
 from sim.twin.synth_view import write_twin_recording
-from sim.twin.twin import Twin, simulate
+from sim.twin.twin import Twin, simulate_twin
 from sim.twin.twin_files import FILES, RECORDING, calibration_name, file_keys, write_lab_files
 from sim.twin.twin_scene import TwinParams
 from sim.twin.twin_truth import write_truth
 
 
-def run_synth(out_dir: str | Path, seed: int = 0, locations: int = 5, repeats: int = 4,
-              rrd: str | Path | None = None, view_press: int = 0, markers: str = "5x5",
-              marker_pitch_mm: float = 20.0, size: str = "100x100",
-              **params: object) -> Path:
-    """Simulate a session and write its folder (see the module docstring); returns the folder.
+def run_synth(inputs: None, out: str | Path, params: SynthParams | None = None,
+              rrd: str | Path | None = None) -> Path:
+    """Simulate a session and write its folder ``out`` (see the module docstring); returns
+    the folder. Reads nothing (``inputs`` is None).
 
-    ``markers`` (``RxC`` or ``scattered:N``), ``marker_pitch_mm`` and ``size`` (``LxW`` mm)
-    lay out the phantom (:mod:`sim.twin.marker_layout`); ``params`` are further
-    :class:`TwinParams` fields (``rate_hz``: the mocap's frame rate); ``rrd`` also writes a
-    rerun recording of press ``view_press``.
+    ``params.markers`` (``RxC`` or ``scattered:N``), ``marker_pitch_mm`` and ``size``
+    (``LxW`` mm) lay out the phantom (:mod:`sim.twin.marker_layout`); ``rrd`` also writes a
+    rerun recording of press ``params.view_press``.
     """
-    spec = phantom_spec(markers, marker_pitch_mm, size, seed)
-    p = TwinParams(seed=seed, locations=locations, repeats=repeats, phantom=spec, **params)
-    folder = _output_folder(out_dir)
-    if rrd is not None and not 0 <= view_press < locations * repeats:
+    s = params or SynthParams()
+    spec = phantom_spec(s.markers, s.marker_pitch_mm, s.size, s.seed)
+    p = TwinParams(**s.session_fields(), phantom=spec)
+    folder = _output_folder(out)
+    if rrd is not None and not 0 <= s.view_press < s.locations * s.repeats:
         raise BadInput("--view-press",
-                       f"press {view_press} does not exist (0..{locations * repeats - 1})")
-    twin = simulate(p)
-    write_twin(twin, folder, rrd, view_press)
+                       f"press {s.view_press} does not exist (0..{s.locations * s.repeats - 1})")
+    twin = simulate_twin(p)
+    write_twin(twin, folder, rrd, s.view_press)
     return folder
 
 
-def phantom_spec(markers: str = "5x5", marker_pitch_mm: float = 20.0, size: str = "100x100",
-                 seed: int = 0) -> PhantomSpec:
+def phantom_spec(markers: str = SynthParams.markers,
+                 marker_pitch_mm: float = SynthParams.marker_pitch_mm,
+                 size: str = SynthParams.size, seed: int = SynthParams.seed) -> PhantomSpec:
     """The block of ``--markers``, ``--marker-pitch`` and ``--size`` (thickness as default)."""
     base = PhantomSpec()
     footprint = parse_size(size)
@@ -84,10 +88,12 @@ def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
     finals = [folder / FILES[k] for k in keys] + [folder / calibration_name(twin)]
     if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
         raise BadInput(rrd, "--rrd names one of the session files synth writes")
+    provenance = make_provenance("synth", _twin_record(twin.params), [], TRUTH.name,
+                                 TRUTH.version)
     with atomic_outputs(*finals, rrd) as tmps:
         out = dict(zip([*keys, "cal", "rrd"], tmps, strict=True))
         write_lab_files(twin, out)
-        write_truth(out["truth"], twin)
+        write_truth(out["truth"], twin, provenance)
         if out["rrd"] is not None:
             write_twin_recording(twin, out["rrd"], view_press)
     if earlier:
@@ -106,3 +112,11 @@ def _twin_file(name: str) -> bool:
     """Whether a session folder's file named ``name`` is one the twin writes."""
     return (name in FILES.values() or name == RECORDING
             or re.fullmatch(r"FT\d{5}\.cal", name) is not None)
+
+
+def _twin_record(p: TwinParams) -> dict[str, object]:
+    """The twin's parameters as truth.h5's provenance records them."""
+    record = asdict(p)
+    record["errors"] = asdict(p.errors)
+    record["phantom"] = asdict(p.phantom)
+    return record

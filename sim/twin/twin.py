@@ -1,4 +1,4 @@
-"""The phantom twin: a whole lab session simulated in memory (:func:`simulate`).
+"""The phantom twin: a whole lab session simulated in memory (:func:`simulate_twin`).
 
 A volumetric silicone block (:mod:`sim.twin.phantom`) on the table, markers on its top (5 x 5
 20 mm apart by default; any grid, a scattered layout, any footprint:
@@ -33,7 +33,7 @@ from sim.twin.twin_scene import (
     solve_presses,
     to_lab_frame,
 )
-from sim.twin.twin_states import States, true_states
+from sim.twin.twin_states import TrueStates, true_states
 
 ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (analog route)
 
@@ -54,7 +54,7 @@ class Twin:
     mocap: Mocap
     log: ForceLog
     pivot: Pivot
-    states: States
+    states: TrueStates
 
     def lab(self, p: np.ndarray) -> np.ndarray:
         """Phantom-frame points (..., 3) in the lab."""
@@ -70,7 +70,7 @@ def _lead_in(p: TwinParams) -> float:
     return ANALOG_LEAD_IN_S if p.force_via == "analog" else 1.0
 
 
-def simulate(p: TwinParams) -> Twin:
+def simulate_twin(p: TwinParams) -> Twin:
     """Play the whole session in memory."""
     check_params(p)
     rng = [np.random.default_rng(s) for s in np.random.SeedSequence(p.seed).spawn(8)]

@@ -17,13 +17,15 @@ import numpy as np
 
 from core.errors import BadInput
 from core.progress import progress
-from core.protocol import STEP_N
+from core.protocol import STEP_N, top_level
 from sim.twin.indenter import Hand
 from sim.twin.mocap_errors import MocapErrors
 from sim.twin.phantom import LoadPath, Phantom, PhantomSpec
 
 TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
 FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
+PRESS_SECONDS = (2.0, 60.0)         # s, the range of --press-seconds
+PIVOT_SECONDS = (2.0, 600.0)        # s, the range of --pivot-seconds
 
 Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab
 
@@ -70,9 +72,11 @@ def check_params(p: TwinParams) -> None:
          "analog board (--force-via analog) the force has a whole number of samples per frame"),
         ("--offset", p.force_via != "analog" or (p.offset_s is None and p.drift_ppm is None),
          "--offset and --drift are the logger's clock; through the analog board there is one"),
-        ("--press-seconds", p.press_seconds is None or 2.0 <= p.press_seconds <= 60.0,
-         "must be between 2 and 60 s"),
-        ("--pivot-seconds", 2.0 <= p.pivot_seconds <= 600.0, "must be between 2 and 600 s"),
+        ("--press-seconds", p.press_seconds is None
+         or PRESS_SECONDS[0] <= p.press_seconds <= PRESS_SECONDS[1],
+         "must be between {:g} and {:g} s".format(*PRESS_SECONDS)),
+        ("--pivot-seconds", PIVOT_SECONDS[0] <= p.pivot_seconds <= PIVOT_SECONDS[1],
+         "must be between {:g} and {:g} s".format(*PIVOT_SECONDS)),
         ("--drift", p.drift_ppm is None or abs(p.drift_ppm) <= 1000.0,
          "beyond 1000 ppm is not a clock"),
         ("--offset", p.offset_s is None or abs(p.offset_s) <= 3600.0,
@@ -116,7 +120,7 @@ def choose_locations(rng: np.random.Generator, phantom: Phantom, n: int,
 
 def force_levels(fmax: float, top: float) -> np.ndarray:
     """Force levels to solve: every 0.5 N up to fmax, 0.25 N, fmax and a margin above it."""
-    steps = STEP_N * np.arange(1, int(np.floor(fmax / STEP_N + 1e-9)) + 1)
+    steps = STEP_N * np.arange(1, top_level(fmax, STEP_N) + 1)
     extra = [f for f in (0.25, fmax, top) if np.all(np.abs(steps - f) > 0.01)]
     return np.unique(np.concatenate([steps, extra]))
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.protocol import STEP_N
+from core.protocol import STEP_N, top_level
 from sim.twin.indenter import Hand
 from sim.twin.phantom import LoadPath
 from sim.twin.twin_mocap import Mocap
@@ -15,7 +15,7 @@ from sim.twin.twin_scene import Lab
 
 
 @dataclass
-class States:
+class TrueStates:
     """True static states every 0.5 N of each press's loading phase."""
 
     points: np.ndarray          # (S, N + 1, 3): the N phantom markers, then the tip
@@ -27,7 +27,7 @@ class States:
     time_s: np.ndarray
 
 
-def true_states(hand: Hand, paths: list[LoadPath], lab: Lab, mocap: Mocap) -> States:
+def true_states(hand: Hand, paths: list[LoadPath], lab: Lab, mocap: Mocap) -> TrueStates:
     """The static state at every level of each press, from the solved load paths."""
     rows: dict[str, list] = {k: [] for k in ("points", "force", "vector", "step", "press",
                                              "location", "time")}
@@ -35,7 +35,7 @@ def true_states(hand: Hand, paths: list[LoadPath], lab: Lab, mocap: Mocap) -> St
         frames = np.flatnonzero(mocap.press == k)
         loading = frames[mocap.time_s[frames] <= press.times[4] + 1e-9]
         f, t = mocap.force[loading], mocap.time_s[loading]
-        for step in range(int(np.floor(press.fmax / STEP_N + 1e-9)) + 1):
+        for step in range(top_level(press.fmax, STEP_N) + 1):
             level = step * STEP_N
             i = int(np.flatnonzero(np.isclose(path.forces, level, atol=1e-9))[0])
             rows["points"].append(np.concatenate([lab(path.markers[i]), lab(path.tip[i])[None]]))
@@ -45,7 +45,7 @@ def true_states(hand: Hand, paths: list[LoadPath], lab: Lab, mocap: Mocap) -> St
             rows["press"].append(k)
             rows["location"].append(press.location)
             rows["time"].append(press.times[3] if step == 0 else _crossing(t, f, level))
-    return States(points=np.array(rows["points"]), force=np.array(rows["force"]),
+    return TrueStates(points=np.array(rows["points"]), force=np.array(rows["force"]),
                   force_vector=np.array(rows["vector"]), step=np.array(rows["step"]),
                   press=np.array(rows["press"]), location=np.array(rows["location"]),
                   time_s=np.array(rows["time"], dtype=np.float64))

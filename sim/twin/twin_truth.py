@@ -1,29 +1,25 @@
 """``truth.h5`` of a synthetic session (:data:`data_schema.truth.TRUTH`): what really happened.
 
 Names, dtypes and units are the schema's; this module only says which array goes where.
+The provenance is the runner's (:mod:`sim.twin.synth_stage`).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.truth import CLOCK_DOC, TRUTH
 from sim.twin.twin import Twin
-from sim.twin.twin_scene import TwinParams
 
 GZIP = dict.fromkeys((d.path for d in TRUTH.datasets), 1)   # the large series, fast and small
 
 
-def write_truth(path: str | Path, twin: Twin) -> None:
-    """``truth.h5`` (atomically, validated against the schema)."""
-    provenance = make_provenance("synth", _params_record(twin.params), [], TRUTH.name,
-                                 TRUTH.version)
+def write_truth(path: str | Path, twin: Twin, provenance: dict) -> None:
+    """``truth.h5`` with its ``provenance`` (validated against the schema)."""
     write_h5(path, TRUTH, truth_arrays(twin), {"provenance": provenance, **_root_attrs(twin)},
              gzip=GZIP, track_order=True)
 
@@ -82,9 +78,3 @@ def _root_attrs(twin: Twin) -> dict[str, Any]:
             "units_length": "m", "units_force": "N", "units_time": "s", "noise_model": noise,
             "clock/offset_s/doc": CLOCK_DOC, "clock/drift_ppm/doc": CLOCK_DOC}
 
-
-def _params_record(p: TwinParams) -> dict[str, object]:
-    record = asdict(p)
-    record["errors"] = asdict(p.errors)
-    record["phantom"] = asdict(p.phantom)
-    return record

@@ -1,0 +1,111 @@
+"""The ``phantom.metrics`` document (``pipeline eval --out``): every field is checked,
+``references`` and ``gain`` among them."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from core.errors import BadInput
+from data_schema.json_docs import METRICS, validate_metrics
+
+
+def _values(ld: float | None = 0.3) -> dict[str, Any]:
+    return {"n": 4, "force_mse_n2": 0.1, "force_abs_n": 0.2, "force_abs_sd_n": 0.1,
+            "ld_mean_mm": ld, "ld_mean_sd_mm": None if ld is None else 0.1,
+            "ld_max_mm": None if ld is None else 0.9, "ld_max_sd_mm": None if ld is None else 0.2}
+
+
+VARIANT = {"model": "cGNN", "train_data": "Exp", "rotate": True, "aug": False,
+           "pretrained": {"model": "cGNN", "train_data": "MSM", "rotate": True, "aug": False,
+                          "pretrained": None}}
+REFERENCES = {"nothing moves": _values(0.5), "nearest press": _values(0.4),
+              "force, linear": _values(None)}
+GAIN = {"ld_reference": "nearest press", "ld_reference_mm": 0.4, "ld_gain": 0.25,
+        "force_reference": "force, linear", "force_reference_n": 0.2, "force_gain": -0.5}
+
+
+def _doc() -> dict[str, Any]:
+    row = {"label": "cGNN/MSM (TL)", "variant": VARIANT, "test_set": "Exp",
+           "metrics": {"single": _values(), "all": _values()}, "references": REFERENCES,
+           "gain": GAIN}
+    return {"schema": METRICS.name, "schema_version": METRICS.version,
+            "runs": [{**row, "run": "runs/a", "fold": 0}],
+            "overall": [{**row, "folds": 2, "fold_ids": [0, 1], "fold_ld_mean_sd_mm": 0.01,
+                         "folds_not_beating_references": [1]}],
+            "scarcity": [{"fold": 0, "groups": 1, "predictor": "force, linear",
+                          "ld_mean_mm": None, "ld_max_mm": None, "force_abs_n": 0.3}],
+            "provenance": {"stage": "eval"}}
+
+
+def _write(tmp_path: Path, doc: dict) -> Path:
+    path = tmp_path / "metrics.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_whole_document_is_valid(tmp_path) -> None:
+    assert validate_metrics(_write(tmp_path, _doc()))["schema"] == "phantom.metrics"
+
+
+def _set(doc: dict, keys: tuple, value: Any) -> dict:
+    doc = copy.deepcopy(doc)
+    obj = doc
+    for k in keys[:-1]:
+        obj = obj[k]
+    if value is _DROP:
+        del obj[keys[-1]]
+    else:
+        obj[keys[-1]] = value
+    return doc
+
+
+_DROP = object()
+CASES = [
+    (("runs", 0, "references"), _DROP, "runs[0].references missing"),
+    (("overall", 0, "references"), [], "overall[0].references missing"),
+    (("runs", 0, "references"), {}, "references is empty"),
+    (("runs", 0, "references", "a guess"), _values(), "names no reference: ['a guess']"),
+    (("runs", 0, "references", "nearest press", "force_abs_n"), float("nan"), "not a finite"),
+    (("runs", 0, "references", "nothing moves", "n"), 0, "at least one example"),
+    (("runs", 0, "references", "nothing moves", "ld_mean_mm"), _DROP, "lacks"),
+    (("runs", 0, "references", "nothing moves", "force_abs_n"), None, "not a finite"),
+    (("runs", 0, "gain"), _DROP, "runs[0].gain missing"),
+    (("overall", 0, "gain"), "0.25", "overall[0].gain missing"),
+    (("runs", 0, "gain", "ld_gain"), _DROP, "gain.ld_gain missing"),
+    (("runs", 0, "gain", "ld_gain"), "0.25", "gain.ld_gain missing"),
+    (("runs", 0, "gain", "ld_gain"), 1.5, "<= 1"),
+    (("runs", 0, "gain", "force_reference"), "a guess", "not one of the row's references"),
+    (("runs", 0, "gain", "ld_reference_mm"), -1.0, "not a finite"),
+    (("runs", 0, "variant", "rotate"), "yes", "variant.rotate"),
+    (("runs", 0, "variant", "pretrained", "model"), _DROP, "variant.pretrained.model"),
+    (("overall", 0, "fold_ids"), [0], "fold_ids must list"),
+    (("overall", 0, "folds_not_beating_references"), [3], "only folds of them"),
+    (("scarcity", 0, "force_abs_n"), None, "scarcity[0].force_abs_n"),
+    (("provenance",), _DROP, "'provenance' missing"),
+    (("schema_version",), "2.0", "not compatible"),
+    (("schema",), "phantom.folds", "not a phantom.metrics document"),
+]
+
+
+@pytest.mark.parametrize(("keys", "value", "words"), CASES,
+                         ids=[".".join(map(str, k)) + f"={'dropped' if v is _DROP else v!r}"
+                              for k, v, _ in CASES])
+def test_a_wrong_field_is_refused_by_name(tmp_path, keys, value, words) -> None:
+    with pytest.raises(BadInput, match=words.replace("[", r"\[").replace("]", r"\]")):
+        validate_metrics(_write(tmp_path, _set(_doc(), keys, value)))
+
+
+def test_a_document_from_before_the_schema_says_so(tmp_path) -> None:
+    doc = {k: v for k, v in _doc().items() if k not in ("schema", "schema_version")}
+    with pytest.raises(BadInput, match="before phantom.metrics 1.0"):
+        validate_metrics(_write(tmp_path, doc))
+
+
+def test_a_key_added_by_hand_is_left_alone(tmp_path) -> None:
+    doc = _set(_set(_doc(), ("comment",), "by hand"), ("runs", 0, "note"), "x")
+    validate_metrics(_write(tmp_path, doc))

@@ -1,0 +1,103 @@
+"""Named training recipes (``pipeline train --recipe``): the paper's settings stated once, and
+ours by name; options given on the command line override a recipe's values."""
+
+from __future__ import annotations
+
+import pytest
+from click.testing import CliRunner
+
+import train.train_stage
+from pipeline.cli import cli
+from train import paper
+from train.loop import TrainOptions
+from train.model import CGNNConfig
+from train.recipes import OURS, PAPER, recipe
+
+OURS_FLAGS = ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99", "--lr", "2e-3")
+
+
+@pytest.fixture
+def resolved(monkeypatch, tmp_path):
+    """``pipeline train ARGS`` up to the runner: the TrainParams it would run."""
+    for name in ("states.h5", "splits.json"):
+        (tmp_path / name).touch()
+    seen = []
+
+    def fake_run_train(inputs, out, params, rrd=None):
+        seen.append(params)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(train.train_stage, "run_train", fake_run_train)
+
+    def run(*args: str) -> train.train_stage.TrainParams:
+        seen.clear()
+        res = CliRunner().invoke(cli, ["train", "--data", str(tmp_path / "states.h5"),
+                                       "--splits", str(tmp_path / "splits.json"), "--out",
+                                       str(tmp_path / "run"), *args])
+        assert seen, res.output
+        return seen[0]
+    return run
+
+
+def test_the_paper_recipe_is_the_papers_settings() -> None:
+    opts, config = PAPER.settings()
+    assert (opts.epochs, opts.batch, opts.lr, opts.alpha, config.k) == \
+        (250, 32, 1e-4, 88.0, 5) == (paper.EPOCHS, paper.BATCH, paper.LR, paper.ALPHA, paper.K)
+    assert (opts, config) == (TrainOptions(), CGNNConfig())
+
+
+def test_plain_train_runs_the_paper_recipe(resolved) -> None:
+    assert resolved() == resolved("--recipe", "paper")
+    params = resolved()
+    assert (params.options, params.config) == PAPER.settings()
+
+
+def test_recipe_ours_is_the_explicit_flags(resolved) -> None:
+    ours = resolved("--recipe", "ours")
+    assert ours == resolved(*OURS_FLAGS)
+    assert (ours.options, ours.config) == OURS.settings()
+    assert ours.config.tip_offsets and ours.options.rotate and ours.options.ema == 0.99
+    assert (ours.options.loss, ours.options.lr) == ("balanced", 2e-3)
+    assert OURS.flags() == ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99",
+                            "--lr", "0.002")
+
+
+def test_a_flag_given_overrides_the_recipe(resolved) -> None:
+    ours = resolved("--recipe", "ours")
+    mine = resolved("--recipe", "ours", "--lr", "1e-3", "--no-tip-offsets", "--epochs", "7")
+    assert (mine.options.lr, mine.config.tip_offsets, mine.options.epochs) == (1e-3, False, 7)
+    assert mine.options == TrainOptions(**{**vars(ours.options), "lr": 1e-3, "epochs": 7})
+    # a value given equal to the paper's default still overrides the recipe's
+    assert resolved("--recipe", "ours", "--lr", "1e-4").options.lr == 1e-4
+    assert not resolved("--recipe", "ours", "--no-rotate").options.rotate
+
+
+def test_the_demo_trains_with_recipe_ours(resolved, tmp_path) -> None:
+    from pipeline.demo_plan import PAPER_NETWORK, QUICK, RECIPE, demo_steps
+
+    for flags, tip in ((RECIPE, True), (PAPER_NETWORK, False)):
+        train = next(s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags)
+                     if s.args[0] == "train")
+        got = resolved(*train.args[train.args.index("--epochs"):])
+        want = OURS.settings(epochs=QUICK.pretrain_epochs, lr=QUICK.lr, batch=QUICK.batch,
+                             tip_offsets=tip)
+        assert (got.options, got.config, got.device) == (*want, "cpu")
+
+
+def test_tip_offsets_without_the_condition_is_refused(resolved, tmp_path) -> None:
+    res = CliRunner().invoke(cli, ["train", "--data", str(tmp_path / "states.h5"), "--splits",
+                                   str(tmp_path / "splits.json"), "--out", str(tmp_path / "r"),
+                                   "--recipe", "ours", "--no-cond"])
+    assert res.exit_code == 2 and "--no-tip-offsets" in res.output
+    assert resolved("--recipe", "ours", "--no-cond", "--no-tip-offsets").config.use_condition \
+        is False
+
+
+def test_an_unknown_recipe_is_bad_input() -> None:
+    from core.errors import BadInput
+
+    with pytest.raises(BadInput, match="not one of paper, ours"):
+        recipe("fast")
+    with pytest.raises(TypeError, match="not a training setting"):
+        OURS.settings(learning_rate=1.0)
+
