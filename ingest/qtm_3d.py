@@ -22,16 +22,14 @@ from ingest.qtm_scan import (
     export_meta,
     file_length_scale,
     is_value,
-    scan,
+    scan_export,
 )
 from ingest.qtm_timing import events, frame_times
 
 
 def read_qtm_3d(path: str | Path) -> MarkerSeries:
     """Read a QTM TSV 3D export: marker positions in metres, NaN where missing."""
-    head = scan(path)
-    if "MARKER_NAMES" not in head.keys:
-        raise head.bad("not a QTM 3D export: no MARKER_NAMES in the header")
+    head = scan_export(path, "MARKER_NAMES", "3D")
     return read_3d(head)
 
 

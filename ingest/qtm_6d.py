@@ -21,7 +21,7 @@ from ingest.qtm_scan import (
     check_row_width,
     export_meta,
     file_length_scale,
-    scan,
+    scan_export,
 )
 from ingest.qtm_timing import events, frame_times
 
@@ -32,9 +32,7 @@ _BODY_DEFAULT = {"X": 0, "Y": 1, "Z": 2, "Residual": 6, **{f"Rot[{k}]": 7 + k fo
 
 def read_qtm_6d(path: str | Path) -> BodySeries:
     """Read a QTM TSV 6D export: body positions (m), rotation matrices, residuals (m)."""
-    head = scan(path)
-    if "BODY_NAMES" not in head.keys:
-        raise head.bad("not a QTM 6D export: no BODY_NAMES in the header")
+    head = scan_export(path, "BODY_NAMES", "6D")
     return read_6d(head)
 
 

@@ -12,7 +12,7 @@ from core.errors import BadInput
 from ingest.analog import AnalogExport, check_scales
 from ingest.qtm_block import parse_block, require_data
 from ingest.qtm_header import count, finite, rate_problem
-from ingest.qtm_scan import QtmHead, export_meta, key_line, scan
+from ingest.qtm_scan import QtmHead, export_meta, key_line, scan_export
 
 _ANALOG_LEAD = ("SAMPLE", "TIME")        # the analog export's leading columns
 
@@ -26,9 +26,7 @@ def read_qtm_analog(path: str | Path) -> AnalogExport:
     then an optional ``SAMPLE TIME <names>`` column line and the samples. The first sample is at
     the first 3D frame of the same capture.
     """
-    head = scan(path)
-    if "CHANNEL_NAMES" not in head.keys:
-        raise head.bad("not a QTM analog export: no CHANNEL_NAMES in the header")
+    head = scan_export(path, "CHANNEL_NAMES", "analog")
     names = [n.strip() for n in head.keys["CHANNEL_NAMES"]]
     n = len(names)
     problem = _analog_header_problem(head, names)

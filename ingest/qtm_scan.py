@@ -108,6 +108,14 @@ def is_value(token: str) -> bool:
     return True
 
 
+def scan_export(path: str | Path, key: str, kind: str) -> QtmHead:
+    """:func:`scan` a file that must be a QTM ``kind`` export: its header lists ``key``."""
+    head = scan(path)
+    if key not in head.keys:
+        raise head.bad(f"not a QTM {kind} export: no {key} in the header")
+    return head
+
+
 def scan(path: str | Path) -> QtmHead:
     """Read the header keys, the optional label line and the first data row."""
     head = QtmHead(Path(path))
