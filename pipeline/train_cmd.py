@@ -103,7 +103,8 @@ def train(ctx: click.Context, recipe_name: str, data: Path, splits: Path, out: P
     if opts.no_val and opts.patience is not None:
         raise BadInput(None, "--patience counts epochs without a better validation loss: "
                              "not with --no-val")
-    run = run_train(TrainInputs(data, splits, init), out, TrainParams(opts, config, device),
+    params = TrainParams(opts, config, device, recipe_name)
+    run = run_train(TrainInputs(data, splits, init), out, params,
                     out / "train.rrd" if rrd else None)
     best = f"{run.best} (the last epoch: --no-val, no validation)" if opts.no_val \
         else str(run.best)
@@ -120,10 +121,10 @@ def _settings(ctx: click.Context, recipe_name: str) -> tuple[TrainOptions, CGNNC
              and ctx.get_parameter_source(name) is not ParameterSource.DEFAULT}
     if "no_cond" in given:
         given["use_condition"] = not given.pop("no_cond")
-    try:
-        return recipe(recipe_name).settings(**given)
-    except ValueError:
+    chosen = recipe(recipe_name)
+    network = {**chosen.network, **given}
+    if network.get("tip_offsets") and not network.get("use_condition", True):
         raise click.UsageError("--tip-offsets are the condition C: not with --no-cond"
                                + (f" (the {recipe_name} recipe has them: add "
-                                  "--no-tip-offsets)" if "tip_offsets" not in given else "")
-                               ) from None
+                                  "--no-tip-offsets)" if "tip_offsets" not in given else ""))
+    return chosen.settings(**given)

@@ -23,7 +23,7 @@ from core.provenance import make_provenance
 from data_schema.json_docs import METRICS, validate_metrics
 from train.checkpoint import load_checkpoint
 from train.eval_view import write_eval_recording
-from train.evaluate import evaluate_runs, table2, test_errors
+from train.evaluate import evaluate_runs, shown_name, table2, test_errors
 from train.scarcity import plot, scarcity_rows, write_csv
 
 
@@ -67,8 +67,8 @@ def run_eval(inputs: Sequence[Path], out: Path, params: EvalParams | None = None
             plot(tmp_png, result["scarcity"])
         if tmp_rrd is not None:
             first = result["runs"][0]
-            write_eval_recording(tmp_rrd, test_errors(runs[0], params.device)[2],
-                                 f"{first['label']}, fold {first['fold']}", table)
+            title = f"{shown_name(first, result['runs'])}, fold {first['fold']}"
+            write_eval_recording(tmp_rrd, test_errors(runs[0], params.device)[2], title, table)
     return doc, table
 
 

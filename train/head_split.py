@@ -62,8 +62,8 @@ def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = No
 def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor
                   ) -> tuple[torch.Tensor | None, torch.Tensor]:
     """(displacement (B, N, 3) or None, change of force (B,)): C's part of each head's first
-    layer added to the surface's terms, then the rest of the head."""
-    check_split(model)
+    layer added to the surface's terms, then the rest of the head. ``terms`` come from
+    :func:`scene_terms`, which checked the model: nothing is checked here, per press."""
     force = _rest(model.force_head, _add_press(model, model.force_head[0], terms.force, cond))
     if terms.disp is None:
         return None, force.squeeze(-1)

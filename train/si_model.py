@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from train.data import Batch
-from train.head_split import HeadTerms, check_split, pressed_heads, scene_terms
+from train.head_split import HeadTerms, pressed_heads, scene_terms
 from train.model import CGNN
 from train.normalise import Normaliser
 
@@ -152,7 +152,6 @@ class SIModel(nn.Module):
         """A surface's head terms, (B, N, H) and (B, H): all a press-independent model
         computes that does not depend on the press (:mod:`train.head_split`; refused for a
         model the split does not hold for)."""
-        check_split(self.model)
         terms = scene_terms(self.model, self.model.features(self.norm.points(points), None,
                                                             None, neighbours))
         return terms.disp, terms.force

@@ -42,11 +42,13 @@ class TrainInputs:
 
 @dataclass(frozen=True)
 class TrainParams:
-    """Every setting of a run: the training options, the network, the device."""
+    """Every setting of a run: the training options, the network, the device, and the name of
+    the recipe they came from (recorded in the provenance; the settings are what count)."""
 
     options: TrainOptions = field(default_factory=TrainOptions)
     config: CGNNConfig = field(default_factory=CGNNConfig)
     device: str = "auto"
+    recipe: str | None = None
 
 
 @dataclass
@@ -68,7 +70,7 @@ def run_train(inputs: TrainInputs, out: Path, params: TrainParams | None = None,
     best = train_run(inputs.data, inputs.splits, files, params.options, params.config,
                      inputs.init, params.device, saver)
     notes = run_notes(files.last)
-    if files.log.is_file():
+    if saver.saved:          # the process that wrote the checkpoints (torchrun: rank 0 alone)
         with atomic_output(files.log.parent / PROVENANCE) as tmp:
             tmp.write_text(to_json(saver.record(), indent=1) + "\n")
         if rrd is not None:
@@ -90,6 +92,11 @@ class _Saver:
             self._record = make_provenance("train", asdict(self.params), self.inputs.files(),
                                            *SCHEMA)
         return self._record
+
+    @property
+    def saved(self) -> bool:
+        """Whether this process wrote a checkpoint (and so made the run's provenance)."""
+        return self._record is not None
 
     def __call__(self, path: Path, state: dict[str, Any]) -> None:
         with atomic_output(path) as tmp:

@@ -54,7 +54,9 @@ def test_plain_train_runs_the_paper_recipe(resolved) -> None:
 
 def test_recipe_ours_is_the_explicit_flags(resolved) -> None:
     ours = resolved("--recipe", "ours")
-    assert ours == resolved(*OURS_FLAGS)
+    spelt = resolved(*OURS_FLAGS)
+    assert (ours.options, ours.config, ours.device) == (spelt.options, spelt.config, spelt.device)
+    assert (ours.recipe, spelt.recipe) == ("ours", "paper")       # the name, for provenance
     assert (ours.options, ours.config) == OURS.settings()
     assert ours.config.tip_offsets and ours.options.rotate and ours.options.ema == 0.99
     assert (ours.options.loss, ours.options.lr) == ("balanced", 2e-3)
