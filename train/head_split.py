@@ -15,12 +15,10 @@ head that starts with a Linear layer on ``[features, C]``; any other head is ref
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import islice
 
 import torch
-from torch import nn
 
-from train.model import CGNN, CONDITION, pool
+from train.model import CGNN, ConditionedLinear, ConditionedMLP, pool
 
 
 @dataclass
@@ -34,20 +32,16 @@ class HeadTerms:
 
 def check_split(model: CGNN) -> None:
     """Refuse (ValueError) a model the split does not hold for: graph layers that read the
-    press (tip offsets), or a head that does not start with a Linear layer."""
+    press (tip offsets), or a head that does not start with a :class:`ConditionedLinear`."""
     if not model.press_independent:
         raise ValueError("this model's graph layers read the press (tip offsets): "
                          "a surface's features are not the same for every press")
-    local = sum(out for _, out in model.config.edge_widths)
-    cond = CONDITION if model.config.use_condition else 0
-    for name, width in (("disp_head", local + cond), ("force_head", 2 * local + cond)):
+    for name in ("disp_head", "force_head"):
         head = getattr(model, name)
-        if not isinstance(head, nn.Sequential) or not isinstance(head[0], nn.Linear):
-            raise ValueError(f"{name} does not start with a Linear layer: its first layer "
-                             "cannot be split into the surface's part and the press's")
-        if head[0].in_features != width:
-            raise ValueError(f"{name}'s first layer reads {head[0].in_features} inputs, not "
-                             f"the features and C ({width}): it cannot be split")
+        if not isinstance(head, ConditionedMLP) or not isinstance(head[0], ConditionedLinear):
+            raise ValueError(f"{name} does not start with a Linear layer on [features, C]: "
+                             "its first layer cannot be split into the surface's part and "
+                             "the press's")
 
 
 def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = None,
@@ -55,8 +49,8 @@ def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = No
     """Each head's first layer on what the press does not change (bias in): the features
     (B, N, F), and their max- and mean-pooled ones. ``displacement=False``: force only."""
     check_split(model)
-    return HeadTerms(_leading(model.disp_head[0], local) if displacement else None,
-                     _leading(model.force_head[0], pool(local, mask)))
+    return HeadTerms(model.disp_head[0].leading(local) if displacement else None,
+                     model.force_head[0].leading(pool(local, mask)))
 
 
 def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor
@@ -64,30 +58,12 @@ def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor
     """(displacement (B, N, 3) or None, change of force (B,)): C's part of each head's first
     layer added to the surface's terms, then the rest of the head. ``terms`` come from
     :func:`scene_terms`, which checked the model: nothing is checked here, per press."""
-    force = _rest(model.force_head, _add_press(model, model.force_head[0], terms.force, cond))
+    force = _after(model.force_head, terms.force, cond)
     if terms.disp is None:
         return None, force.squeeze(-1)
-    disp = _rest(model.disp_head, _add_press(model, model.disp_head[0], terms.disp, cond))
-    return disp, force.squeeze(-1)
+    return _after(model.disp_head, terms.disp, cond), force.squeeze(-1)
 
 
-def _add_press(model: CGNN, first: nn.Linear, scene: torch.Tensor, cond: torch.Tensor
-               ) -> torch.Tensor:
-    """``first([features, C])`` from ``scene`` = its features' part: adds C's part."""
-    if not model.config.use_condition:
-        return scene
-    press = cond @ first.weight[:, -CONDITION:].T                        # (B, H)
-    return scene + press.view(press.shape[0], *[1] * (scene.dim() - 2), -1)
-
-
-def _rest(head: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
-    """``head`` after its first layer."""
-    for layer in islice(head, 1, None):
-        x = layer(x)
-    return x
-
-
-def _leading(first: nn.Linear, x: torch.Tensor) -> torch.Tensor:
-    """``first`` on the leading ``x.shape[-1]`` inputs of its own (bias in, C's columns left
-    out): the head's input ``[x, C]`` is never built, so no (B, N, F + 6) copy is made."""
-    return nn.functional.linear(x, first.weight[:, :x.shape[-1]], first.bias)
+def _after(head: ConditionedMLP, part: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    """The head's output from its first layer's surface part: C's part added, then the rest."""
+    return head.after_first(head[0].press(part, cond))

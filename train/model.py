@@ -18,10 +18,11 @@ tie between neighbours by the points' own coordinates (:func:`train.edgeconv.knn
 output does not depend on the order of the points, even on a regular grid. A caller that already
 has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
 
-The heads are plain layers on the concatenated input, as the paper draws them. Without
-tip offsets the graph layers never read C (``press_independent``), so a surface pressed again
-needs only the heads: the predictor's cache of each head's first layer, split into the
-surface's part and the press's, lives beside it (:mod:`train.head_split`), not here.
+The heads are MLPs on [features, C], as the paper draws them; their first layer
+(:class:`ConditionedLinear`) adds C's part to the features' part instead of copying C to every
+point. Without tip offsets the graph layers never read C (``press_independent``), so a surface
+pressed again needs only the heads: the predictor keeps each head's first part per surface and
+adds the press's (:mod:`train.head_split`).
 """
 
 from __future__ import annotations
@@ -78,6 +79,52 @@ def mlp(widths: list[int]) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+class ConditionedLinear(nn.Linear):
+    """A Linear layer on ``[x, C]``, C (B, 6) appended to every row of x (B, ..., F), computed
+    as ``(W_x x + b) + W_C C`` so that the (B, N, F + 6) copy of C is never built. One weight,
+    as an ``nn.Linear(F + 6, H)`` has: ``leading`` is the first part, ``press`` the second."""
+
+    def __init__(self, inputs: int, outputs: int, conditioned: bool) -> None:
+        super().__init__(inputs, outputs)
+        self.conditioned = conditioned
+
+    def leading(self, x: torch.Tensor) -> torch.Tensor:
+        """``W_x x + b``: the part of the layer that C does not change."""
+        return nn.functional.linear(x, self.weight[:, :x.shape[-1]], self.bias)
+
+    def press(self, part: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        """``part`` (B, ..., H) from :meth:`leading` with C's part ``W_C C`` added."""
+        if not self.conditioned:
+            return part
+        add = cond @ self.weight[:, -CONDITION:].T                          # (B, H)
+        return part + add.view(add.shape[0], *[1] * (part.dim() - 2), -1)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        """On ``x`` and ``cond``; without ``cond``, a plain Linear on an ``x`` that holds C."""
+        if cond is None:
+            return super().forward(x)
+        return self.press(self.leading(x), cond)
+
+
+class ConditionedMLP(nn.Sequential):
+    """An MLP on ``[x, C]``: a :class:`ConditionedLinear`, then ReLU and Linear layers."""
+
+    def __init__(self, widths: list[int], conditioned: bool) -> None:
+        first = ConditionedLinear(widths[0] + (CONDITION if conditioned else 0), widths[1],
+                                  conditioned)                  # made first: the seed's order
+        rest = [nn.ReLU(), *mlp(widths[1:])] if len(widths) > 2 else []
+        super().__init__(first, *rest)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        return self.after_first(self[0](x, cond))
+
+    def after_first(self, x: torch.Tensor) -> torch.Tensor:
+        """The layers after the first on its output."""
+        for layer in list(self)[1:]:
+            x = layer(x)
+        return x
+
+
 class CGNN(nn.Module):
     """Predicts each point's displacement and the change of force (normalised units)."""
 
@@ -89,10 +136,9 @@ class CGNN(nn.Module):
             convs.append(DynamicEdgeConv(width, hidden, out, config.k))
             width = out
         self.convs = nn.ModuleList(convs)
-        local = sum(out for _, out in config.edge_widths)
-        cond = CONDITION if config.use_condition else 0
-        self.disp_head = mlp([local + cond, *config.disp_widths, 3])
-        self.force_head = mlp([2 * local + cond, *config.force_widths, 1])
+        local, conditioned = sum(out for _, out in config.edge_widths), config.use_condition
+        self.disp_head = ConditionedMLP([local, *config.disp_widths, 3], conditioned)
+        self.force_head = ConditionedMLP([2 * local, *config.force_widths, 1], conditioned)
 
     def inputs(self, points: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
         """The first layer's input: the points (B, N, 3), or with tip offsets
@@ -120,23 +166,16 @@ class CGNN(nn.Module):
         pressing one surface again computes them once (:mod:`train.head_split`)."""
         return not self.config.tip_offsets
 
-    def with_condition(self, x: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
-        """A head's input: ``x`` (B, ..., F) with C (B, 6) appended to every row, or ``x``
-        alone for noCond."""
-        if not self.config.use_condition:
-            return x
-        return torch.cat([x, cond.view(cond.shape[0], *[1] * (x.dim() - 2), -1)
-                          .expand(*x.shape[:-1], -1)], dim=-1)
-
     def force(self, local: torch.Tensor, cond: torch.Tensor | None,
               mask: torch.Tensor | None = None) -> torch.Tensor:
         """The force head (B,) on the pooled features and C."""
-        return self.force_head(self.with_condition(pool(local, mask), cond)).squeeze(-1)
+        return self.force_head(pool(local, mask), cond).squeeze(-1)
 
     def heads(self, local: torch.Tensor, cond: torch.Tensor | None,
               mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """(displacement (B, N, 3), change of force (B,)) from the features (B, N, F)."""
-        return self.disp_head(self.with_condition(local, cond)), self.force(local, cond, mask)
+        force = self.force(local, cond, mask)     # first: the gradients then sum in the order
+        return self.disp_head(local, cond), force  # they always have (runs train bit-alike)
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor,
                 mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
