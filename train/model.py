@@ -28,6 +28,7 @@ adds the press's (:mod:`train.head_split`).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from itertools import islice
 from typing import Any
 
 import torch
@@ -90,7 +91,10 @@ class ConditionedLinear(nn.Linear):
 
     def leading(self, x: torch.Tensor) -> torch.Tensor:
         """``W_x x + b``: the part of the layer that C does not change."""
-        return nn.functional.linear(x, self.weight[:, :x.shape[-1]], self.bias)
+        width = self.in_features - (CONDITION if self.conditioned else 0)
+        if x.shape[-1] != width:          # C given twice, or features of another network
+            raise ValueError(f"the layer reads {width} features before C, not {x.shape[-1]}")
+        return nn.functional.linear(x, self.weight[:, :width], self.bias)
 
     def press(self, part: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
         """``part`` (B, ..., H) from :meth:`leading` with C's part ``W_C C`` added."""
@@ -120,7 +124,7 @@ class ConditionedMLP(nn.Sequential):
 
     def after_first(self, x: torch.Tensor) -> torch.Tensor:
         """The layers after the first on its output."""
-        for layer in list(self)[1:]:
+        for layer in islice(self, 1, None):
             x = layer(x)
         return x
 

@@ -126,3 +126,14 @@ def test_heads_are_the_paper_heads_on_the_concatenated_input(kw: dict) -> None:
     torch.testing.assert_close(disp, m.disp_head(local), atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(force, m.force_head(torch.cat(pooled, -1))[:, 0],
                                atol=1e-5, rtol=1e-5)
+
+
+def test_the_conditioned_layer_refuses_features_of_another_width() -> None:
+    """[features, C] passed beside C would add C twice: refused, never summed silently."""
+    m = _model()
+    x, c = torch.randn(2, 30, 3), torch.randn(2, 6)
+    local = m.features(x, c)
+    both = torch.cat([local, c[:, None].expand(-1, 30, -1)], -1)
+    torch.testing.assert_close(m.disp_head[0](both), m.disp_head[0](local, c))
+    with pytest.raises(ValueError, match="features before C"):
+        m.disp_head[0](both, c)
