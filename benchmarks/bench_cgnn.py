@@ -44,6 +44,7 @@ from torch import nn
 from train.model import CGNN, CGNNConfig
 from train.normalise import Normaliser
 from train.predictor import DEFAULT_REGION, Predictor
+from train.recipes import HEAD_OFFSETS
 from train.si_model import ENTRIES, SIModel, deformed, newtons, to_onnx
 
 
@@ -75,7 +76,8 @@ class PygPeer(nn.Module):
             edges = pyg_knn_edges(x.detach(), self.model.config.k)
             x = torch.relu(conv(x.reshape(b * n, -1), edges)).reshape(b, n, -1)
             outs.append(x)
-        return self.model.heads(torch.cat(outs, -1), cond)
+        return self.model.heads(torch.cat(outs, -1), cond, None,
+                                self.model.encoded(points, cond))
 
 
 def median_ms(fn: Callable[[], object], repeats: int, sync: Callable[[], None]) -> float:
@@ -124,21 +126,30 @@ class PeerPredictor:
         return deformed(p, disp[0], NORM).cpu().numpy(), float(newtons(df[0], NORM))
 
 
+# The networks timed: the tip's offsets nowhere, in the heads, in the first layer
+NETWORKS = {"the paper's network": CGNNConfig(),
+            "head offsets": CGNNConfig(head_offsets=HEAD_OFFSETS),
+            "tip offsets": CGNNConfig(tip_offsets=True)}
+
+
+READS = {True: "its graph layers read the press: every press runs them",
+         False: "its graph layers do not read the press: a known mesh runs the heads alone"}
+
+
 def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> None:
-    """Batch-1 latency through the predictor, for the paper's network and ours with tip
-    offsets (a mesh pressed again: the scene is reused; and a new mesh every call)."""
+    """Batch-1 latency through the predictor, for each of :data:`NETWORKS` (a mesh pressed
+    again: the scene is reused; and a new mesh every call)."""
     backends = ("onnx", "torch") if device.type == "cpu" else ("torch",)
     print(f"batch-1 latency through Predictor [ms] (median of >= 30); ratio = PyG peer / "
           f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; 'new' = a new mesh "
           "every call (nothing cached):")
-    for cfg in (CGNNConfig(), CGNNConfig(tip_offsets=True)):     # the last is profiled below
+    for name, cfg in NETWORKS.items():     # the last (tip offsets) is profiled below
         torch.manual_seed(0)
         model = CGNN(cfg).to(device).eval()
         si = SIModel(model, NORM)
         ours = {b: Predictor(si, device, b) for b in backends}
         them = PeerPredictor(PygPeer(model).to(device).eval(), device)
-        print(f" {'tip offsets (our recipe)' if cfg.tip_offsets else 'the paper network'}"
-              f" ({'press-dependent' if cfg.tip_offsets else 'press-independent'}):")
+        print(f" {name} ({READS[cfg.tip_offsets]}):")
         for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
             row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
             ratio = {what: row["PyG peer"] / row[f"{backends[0]} {what}"]
@@ -235,8 +246,19 @@ def cuda_graph_latency(model: CGNN, repeats: int) -> None:
         print(f"  N={n:5d}: {t:7.3f}")
 
 
-def training(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
-             sync: Callable[[], None], batch: int = 32, n: int = 1024) -> None:
+def training(device: torch.device, steps: int, sync: Callable[[], None]) -> None:
+    """Training speed of each of :data:`NETWORKS` against its peer; where the time of the
+    last one's step goes."""
+    print("training samples/s at batch 32 x 1024 points (forward + backward + Adam):")
+    for name, cfg in NETWORKS.items():
+        torch.manual_seed(0)
+        model = CGNN(cfg).to(device).train()
+        print(f" {name}:")
+        training_row(model, PygPeer(model).to(device).train(), device, steps, sync)
+
+
+def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
+                 sync: Callable[[], None], batch: int = 32, n: int = 1024) -> None:
     """Samples/s of ours and the peer, and what the two share: the heads, the loss and Adam
     (timed on fixed features), which bounds the ratio even if graph layers cost nothing."""
     x = torch.rand(batch, n, 3, device=device)
@@ -244,7 +266,6 @@ def training(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
     f = torch.rand(batch, device=device)
     local = torch.rand(batch, n, sum(o for _, o in model.config.edge_widths), device=device,
                        requires_grad=True)
-    print(f"training samples/s at batch {batch} x {n} points (forward + backward + Adam):")
     opt = torch.optim.Adam(model.parameters(), lr=1e-4)
 
     def step(forward: Callable[[], tuple[torch.Tensor, torch.Tensor]]) -> None:
@@ -256,12 +277,12 @@ def training(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
 
     ms = {name: median_ms(partial(step, fn), steps, sync) for name, fn in (
         ("ours", partial(model, x, c)), ("PyG peer", partial(peer, x, c)),
-        ("shared", lambda: model.heads(local, c)))}
+        ("shared", lambda: model.heads(local, c, None, model.encoded(x, c))))}
     print(f"  ours {batch / ms['ours'] * 1e3:8.1f}  PyG peer {batch / ms['PyG peer'] * 1e3:8.1f}"
           f"  ratio {ms['PyG peer'] / ms['ours']:5.2f}x; per step: ours {ms['ours']:.0f} ms, "
           f"peer {ms['PyG peer']:.0f} ms, shared by both (heads, loss, Adam) {ms['shared']:.0f}"
           f" ms: with free graph layers the ratio could reach {ms['PyG peer'] / ms['shared']:.1f}x")
-    if device.type == "cpu":
+    if device.type == "cpu" and model.config.head_offsets:     # the recipe's network
         profile_step(model, x, c, y, f)
 
 
@@ -292,16 +313,14 @@ def main() -> None:
     torch.set_num_threads(a.threads)
     device = torch.device(a.device)
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
-    torch.manual_seed(0)
-    model = CGNN(CGNNConfig()).to(device).eval()
-    peer = PygPeer(model).to(device).eval()
     print(f"device {device}"
           + (f" ({torch.cuda.get_device_name()})" if device.type == "cuda" else
              f", {torch.get_num_threads()} threads") + f", torch {torch.__version__}")
     latency(device, a.repeats, sync)
     if device.type == "cuda":
-        cuda_graph_latency(model, a.repeats)
-    training(model.train(), peer.train(), device, a.train_steps, sync)
+        torch.manual_seed(0)
+        cuda_graph_latency(CGNN(CGNNConfig()).to(device).eval(), a.repeats)
+    training(device, a.train_steps, sync)
 
 
 if __name__ == "__main__":

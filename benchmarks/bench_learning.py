@@ -2,12 +2,13 @@
 predictors that learn nothing (issue 16's table), so anyone can re-measure it.
 
     python benchmarks/bench_learning.py --seeds 0 1 2 [--out /tmp/bench_learning] [--jobs 2]
-    python benchmarks/bench_learning.py --no-tip-offsets --out /tmp/bench_paper_network
+    python benchmarks/bench_learning.py --network paper --out /tmp/bench_paper_network
+    python benchmarks/bench_learning.py --networks head-offsets tip-offsets paper --seeds 0 1 2
 
 The demo trains with the recipe ``ours`` (:mod:`train.recipes`, ``pipeline train --recipe
-ours``). ``--no-tip-offsets`` runs the paper's network instead of the recipe's (``pipeline demo
---no-tip-offsets``: ``--recipe ours --no-tip-offsets``): what the speed of a mesh pressed again
-costs in accuracy (docs/results.md).
+ours``). ``--network`` runs another network with the rest of the recipe (``pipeline demo
+--network``: the tip's offsets in the heads or in the first layer, or the paper's network):
+what each costs in accuracy beside what it costs in time (docs/results.md).
 
 Per seed it runs ``pipeline demo --quick --seed S`` (each seed its own phantom session and
 calibration presses; unchanged steps are skipped on a second run) and prints, from its
@@ -18,6 +19,11 @@ metrics.json and scarcity study:
   moves" and than "nearest press", the force absolute error;
 - TL against scratch (pooled mean L_d, folds better) and the scarcity curve;
 - the demo's wall time.
+
+``--networks`` runs the demo for each network into ``OUT/<network>/seed<S>`` and ends with the
+networks side by side, like for like: per seed, scratch and TL mean L_d, each fold's worst gain
+over the best reference, TL's force error, and each network's L_d against the first one named
+(``--table-only``: that table from the folders a former run left).
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from pipeline.demo_plan import NETWORKS  # noqa: E402
 from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
 from train.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
 from train.scarcity import curve  # noqa: E402
@@ -96,20 +103,57 @@ def report(out: Path, seed: int, seconds: float) -> None:
                                                     zip(groups, ld, strict=True)) + " mm")
 
 
+def fold_means(out: Path) -> dict[str, list[dict]]:
+    """A demo folder's runs by variant ("notl", "tl"), in fold order."""
+    doc = json.loads((out / "metrics.json").read_text())
+    return {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
+            for v in ("notl", "tl")}
+
+
+def compare(root: Path, networks: list[str], seeds: list[int]) -> None:
+    """The networks side by side on the same seeds: L_d, worst fold's gain, TL's force."""
+    print("\n## The networks, like for like (mean of the 5 folds' mean L_d; worst fold's gain "
+          f"over the best reference; L_d against {networks[0]})\n")
+    print("| network | seed | scratch L_d [mm] | TL L_d [mm] | worst gain, scratch / TL | "
+          f"TL force error [N] | scratch / TL against {networks[0]} |")
+    print("|---|---|---|---|---|---|---|")
+    first: dict[int, tuple[float, float]] = {}
+    for net in networks:
+        for seed in seeds:
+            by = fold_means(root / net / f"seed{seed}")
+            ld = {v: float(np.mean([r["metrics"]["all"]["ld_mean_mm"] for r in by[v]]))
+                  for v in by}
+            worst = {v: min(r["gain"]["ld_gain"] for r in by[v]) for v in by}
+            force = np.mean([r["metrics"]["all"]["force_abs_n"] for r in by["tl"]])
+            base = first.setdefault(seed, (ld["notl"], ld["tl"]))
+            print(f"| {net} | {seed} | {ld['notl']:.3f} | {ld['tl']:.3f} | "
+                  f"{worst['notl']:+.0%} / {worst['tl']:+.0%} | {force:.3f} | "
+                  f"{ld['notl'] / base[0] - 1:+.1%} / {ld['tl'] / base[1] - 1:+.1%} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_learning"))
     ap.add_argument("--jobs", type=int, default=None)
-    ap.add_argument("--no-tip-offsets", action="store_true",
-                    help="the paper's network (demo --no-tip-offsets): what its speed costs in "
-                         "accuracy; use another --out")
+    ap.add_argument("--network", choices=NETWORKS, default=None,
+                    help="another network than the recipe's (demo --network); use another --out")
+    ap.add_argument("--networks", choices=NETWORKS, nargs="+", default=None,
+                    help="each of these networks, then side by side (OUT/<network>/seed<S>)")
+    ap.add_argument("--table-only", action="store_true",
+                    help="with --networks: only the side-by-side table, from a former run")
     a = ap.parse_args()
-    extra = ("--no-tip-offsets",) if a.no_tip_offsets else ()
-    for seed in a.seeds:
-        out = a.out / f"seed{seed}"
-        report(out, seed, run_demo(out, seed, a.jobs, extra))
+    for net in a.networks or [a.network]:
+        if a.table_only:
+            break
+        extra = ("--network", net) if net else ()
+        root = a.out / net if a.networks else a.out
+        for seed in a.seeds:
+            out = root / f"seed{seed}"
+            report(out, seed, run_demo(out, seed, a.jobs, extra))
+    if a.networks:
+        compare(a.out, a.networks, a.seeds)
 
 
 if __name__ == "__main__":

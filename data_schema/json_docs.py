@@ -9,7 +9,7 @@
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
   ``{"groups": [...], "single": [example ids], "multi": [example ids]}`` plus
   ``train_subsets`` (nested lists of 1..n training groups, for the data-scarcity study).
-- ``phantom.metrics`` 1.0 (``pipeline eval --out``): ``runs`` (one row per run: run, label,
+- ``phantom.metrics`` 1.1 (``pipeline eval --out``): ``runs`` (one row per run: run, label,
   variant, fold, test_set, metrics, references, gain) and ``overall`` (one row per label and
   test set: label, variant, test_set, folds, fold_ids, metrics, fold_ld_mean_sd_mm,
   references, gain, folds_not_beating_references), optionally ``scarcity`` rows (fold,
@@ -18,8 +18,10 @@
   numbers in mm, N and N^2; ``references`` maps each no-learning reference to its ``all``
   metrics (L_d null for one that moves no point); ``gain`` names the best reference of L_d
   and of force with its value and the model's relative gain over it; ``variant`` the run's
-  model, training data, rotation, aug and the variant it was fine-tuned from (or null).
-  A document from before 1.0 (no ``schema``) is refused: re-run ``pipeline eval``.
+  model, training data, rotation, aug, the variant it was fine-tuned from (or null) and
+  where its network reads the tip's offsets (1.1: ``offsets``, one of :data:`OFFSETS`; a 1.0
+  document has none). A document from before 1.0 (no ``schema``) is refused: re-run
+  ``pipeline eval``.
 """
 
 from __future__ import annotations
@@ -123,7 +125,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
-METRICS = JsonSchema("phantom.metrics", "1.0", {
+METRICS = JsonSchema("phantom.metrics", "1.1", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
@@ -142,6 +144,10 @@ METRIC_ROWS = {
 }
 VARIANT = {"model": str, "train_data": str, "rotate": bool, "aug": bool,
            "pretrained": (dict, type(None))}
+VARIANT_OPTIONAL = {"offsets": str}      # 1.1: where the network reads the tip's offsets
+# Where a network reads each point's offsets from the tip: nowhere (the paper's network), in
+# its first graph layer (tip offsets: every graph layer then reads the press), in its heads
+OFFSETS = ("none", "graph", "heads")
 GAIN = {"ld_reference": _TEXT_OR_NONE, "ld_reference_mm": _NUMBER_OR_NONE,
         "ld_gain": _NUMBER_OR_NONE, "force_reference": _TEXT_OR_NONE,
         "force_reference_n": _NUMBER_OR_NONE, "force_gain": _NUMBER_OR_NONE}
@@ -222,7 +228,11 @@ def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) 
 def _check_variant(path: str | Path, variant: Any, where: str) -> None:
     """A run's variant: model, training data, rotation, aug, and the variant it was
     fine-tuned from (null, or a variant)."""
-    _typed_keys(path, variant, VARIANT, where)
+    _typed_keys(path, variant, {**VARIANT, **VARIANT_OPTIONAL}, where,
+                optional=VARIANT_OPTIONAL)
+    if variant.get("offsets", "none") not in OFFSETS:
+        raise BadInput(path, f"{where}.offsets is {variant['offsets']!r}, not one of "
+                             f"{list(OFFSETS)}")
     if variant["pretrained"] is not None:
         _check_variant(path, variant["pretrained"], f"{where}.pretrained")
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import click
 
-from pipeline.demo_plan import PAPER, PAPER_NETWORK, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
+from pipeline.demo_plan import NETWORKS, PAPER, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
 from pipeline.options import SIZE_MM, finite_float, seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
 
@@ -39,10 +39,10 @@ from pipeline.stage_cache import is_fresh, write_stamp
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Independent training runs side by side [default: the CPU cores; 1 on a "
                    "GPU].")
-@click.option("--no-tip-offsets", is_flag=True,
-              help="Train the paper's network (the recipe without --tip-offsets): much faster "
-                   "for a predictor pressing one mesh again, less accurate "
-                   "(docs/model.md, Latency).")
+@click.option("--network", type=click.Choice(list(NETWORKS)), default=None,
+              help="Train this network with the rest of the recipe [default: the recipe's]: "
+                   "the tip's offsets in the heads or in the first layer, or the paper's "
+                   "(docs/results.md compares them; docs/model.md, Latency).")
 @click.option("--markers", default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
 @click.option("--marker-pitch", type=finite_float(0, min_open=True, unit="mm"),
@@ -54,7 +54,7 @@ from pipeline.stage_cache import is_fresh, write_stamp
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
-         device: str, jobs: int | None, no_tip_offsets: bool, markers: str,
+         device: str, jobs: int | None, network: str | None, markers: str,
          marker_pitch: float, size: tuple[float, float], mocap_rate: float, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
@@ -76,7 +76,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     started = time.perf_counter()
     lab = Lab(markers, marker_pitch, "x".join(f"{v * 1e3:g}" for v in size), mocap_rate)
     steps = demo_steps(out, seed, settings, device,
-                       PAPER_NETWORK if no_tip_offsets else RECIPE, lab)
+                       NETWORKS[network] if network else RECIPE, lab)
     for batch in _batches(steps):
         _run_batch(ctx, batch, force, jobs)
     missed = summary(out, time.perf_counter() - started, quick=quick)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sim.msm import paper
+from train.recipes import HEAD_OFFSETS
 
 
 @dataclass(frozen=True)
@@ -61,9 +62,15 @@ class Settings:
 # tip offsets, the balanced loss, rotation augmentation, the weights' average; its step size
 # is the settings' (--lr below overrides the recipe's).
 RECIPE = ("--recipe", "ours")
-# The same without tip offsets: the paper's network, which a predictor pressing one mesh again
-# runs far faster (its graph layers do not read the press), for some accuracy (docs/results.md).
-PAPER_NETWORK = (*RECIPE, "--no-tip-offsets")
+# The networks the demo can train, each with the rest of the recipe (docs/results.md compares
+# them): the tip's offsets in the heads (graph layers that do not read the press: a mesh
+# pressed again runs the heads alone), in the first layer (every layer reads the press), or
+# nowhere (the paper's network: fast as the first, less accurate).
+NETWORKS = {
+    "head-offsets": (*RECIPE, "--no-tip-offsets", "--head-offsets", str(HEAD_OFFSETS)),
+    "tip-offsets": (*RECIPE, "--tip-offsets", "--head-offsets", "0"),
+    "paper": (*RECIPE, "--no-tip-offsets", "--head-offsets", "0"),
+}
 # quick: per fold a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on
 # 3 training presses: five folds' fits, MSM sets and pre-training cost about twice what the
 # former single calibration fit did (measured: docs/results.md, "Learning")
@@ -131,7 +138,7 @@ def pretrain_dir(out: Path, fold: int) -> Path:
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab()) -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping).
-    ``recipe``: the training flags every run shares (``RECIPE`` or ``PAPER_NETWORK``)."""
+    ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``)."""
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
     steps = session_steps(out, "session", seed, 5, 4, lab) + [

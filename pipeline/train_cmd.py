@@ -20,6 +20,8 @@ if TYPE_CHECKING:
 EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 # the options that are no training setting (TrainOptions, CGNNConfig): a recipe sets none
 NOT_SETTINGS = ("data", "splits", "out", "init", "device", "rrd", "recipe_name")
+# how to turn off each place a recipe may give the tip's offsets
+OFFSET_FLAGS = {"tip_offsets": "--no-tip-offsets", "head_offsets": "--head-offsets 0"}
 
 
 @click.command()
@@ -45,6 +47,11 @@ NOT_SETTINGS = ("data", "splits", "out", "init", "device", "rrd", "recipe_name")
 @click.option("--tip-offsets/--no-tip-offsets", default=False,
               help="Also give the first layer each point's offset from the tip's start and end "
                    "(ours, not the paper's; see docs/model.md, 'Training that learns').")
+@click.option("--head-offsets", type=bounded_int(0), default=0, show_default=True,
+              help="Give the heads each point's offsets from the tip's start and end, encoded "
+                   "in this many numbers (ours; 0: none): the graph layers stay "
+                   "press-independent, so a mesh pressed again runs the heads alone "
+                   "(docs/model.md, 'Latency').")
 @click.option("--loss", type=click.Choice(["paper", "balanced"]), default=paper.LOSS,
               show_default=True,
               help="paper: alpha x mean distance (m) + force MSE (N^2); balanced: each term "
@@ -123,8 +130,15 @@ def _settings(ctx: click.Context, recipe_name: str) -> tuple[TrainOptions, CGNNC
         given["use_condition"] = not given.pop("no_cond")
     chosen = recipe(recipe_name)
     network = {**chosen.network, **given}
-    if network.get("tip_offsets") and not network.get("use_condition", True):
-        raise click.UsageError("--tip-offsets are the condition C: not with --no-cond"
-                               + (f" (the {recipe_name} recipe has them: add "
-                                  "--no-tip-offsets)" if "tip_offsets" not in given else ""))
+    if (network.get("tip_offsets") or network.get("head_offsets")) and \
+            not network.get("use_condition", True):
+        off = [flag for name, flag in OFFSET_FLAGS.items()
+               if chosen.network.get(name) and name not in given]
+        raise click.UsageError("the tip's offsets are the condition C: not with --no-cond"
+                               + (f" (the {recipe_name} recipe has them: add {off[0]})"
+                                  if off else ""))
+    if network.get("tip_offsets") and network.get("head_offsets"):
+        raise click.UsageError("--tip-offsets and --head-offsets: the tip's offsets go to the "
+                               f"first layer or to the heads, not both (recipe {recipe_name}: "
+                               f"{' '.join(chosen.flags())})")
     return chosen.settings(**given)

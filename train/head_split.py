@@ -1,15 +1,18 @@
-"""The predictor's cache of a surface: each head's first layer split into the surface's part
-and the press's, for a network whose graph layers never read the press.
+"""The predictor's cache of a surface: each head's first layer split into the surface's part and
+the press's, for a network whose graph layers never read the press.
 
-A head's first layer on ``[features, C]`` is ``W [features, C] + b = (W_f features + b) +
-W_C C``. Without tip offsets (:attr:`train.model.CGNN.press_independent`) the features do not
+A head's first layer on ``[features, C]`` is ``W [features, C] + b = (W_f features + b) + W_C
+C``. Without tip offsets (:attr:`train.model.CGNN.press_independent`) the features do not
 depend on the press, so a surface pressed again keeps the first part (its head terms:
 :func:`scene_terms`, once per surface) and adds only C's part before the rest of each head
 (:func:`pressed_heads`, per press): the network's answer, at a fraction of the time, and no
-per-point copy of C. The split reads the first layer's weight columns, so it holds only for a
-head that starts with a Linear layer on ``[features, C]``; any other head is refused
-(:func:`check_split`), never silently mis-split. The SI model's ``scene``, ``pressed`` and
-``pressed_force`` entries (:class:`train.si_model.SIModel`) run these.
+per-point copy of C. A network with head offsets (:attr:`train.model.CGNNConfig.head_offsets`)
+also adds, per press, its first layers' part of each point's offset encoding: the displacement
+head's on the points it moves, the force head's pooled over the whole surface. The split reads
+the first layer's weight columns, so it holds only for a head that starts with a Linear layer
+on ``[features, C]``; any other head is refused (:func:`check_split`), never silently
+mis-split. The SI model's ``scene``, ``pressed`` and ``pressed_force`` entries
+(:class:`train.si_model.SIModel`) run these.
 """
 
 from __future__ import annotations
@@ -53,17 +56,26 @@ def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = No
                      model.force_head[0].leading(pool(local, mask)))
 
 
-def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor
+def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor,
+                  points: torch.Tensor | None = None, surface: torch.Tensor | None = None
                   ) -> tuple[torch.Tensor | None, torch.Tensor]:
-    """(displacement (B, N, 3) or None, change of force (B,)): C's part of each head's first
-    layer added to the surface's terms, then the rest of the head. ``terms`` come from
-    :func:`scene_terms`, which checked the model: nothing is checked here, per press."""
-    force = _after(model.force_head, terms.force, cond)
+    """(displacement (B, n, 3) or None, change of force (B,)): the press's part of each head's
+    first layer added to the surface's terms, then the rest of the head. ``terms`` come from
+    :func:`scene_terms`, which checked the model: nothing is checked here, per press. With
+    head offsets the press's part reads ``points`` (B, n, 3), those of ``terms.disp`` (the
+    surface's or some of them, in its order), and ``surface`` (B, N, 3), every point (the
+    force head pools over them); normalised, as ``cond`` is."""
+    encode = model.offsets is not None
+    pooled = pool(model.encoded(surface, cond), None) if encode else None
+    force = _after(model.force_head, terms.force, cond, pooled)
     if terms.disp is None:
         return None, force.squeeze(-1)
-    return _after(model.disp_head, terms.disp, cond), force.squeeze(-1)
+    enc = model.encoded(points, cond) if encode else None
+    return _after(model.disp_head, terms.disp, cond, enc), force.squeeze(-1)
 
 
-def _after(head: ConditionedMLP, part: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-    """The head's output from its first layer's surface part: C's part added, then the rest."""
-    return head.after_first(head[0].press(part, cond))
+def _after(head: ConditionedMLP, part: torch.Tensor, cond: torch.Tensor,
+           enc: torch.Tensor | None) -> torch.Tensor:
+    """The head's output from its first layer's surface part: the press's part added, then
+    the rest."""
+    return head.after_first(head[0].press(part, cond, enc))

@@ -11,6 +11,11 @@ are never neighbours and never pooled. ``tip_offsets`` (ours, not the paper's) a
 first layer each point's offset from the tip's start and end, [p, p - c_start, p - c_end]
 (B, N, 9): how a point moves depends mostly on where it is relative to the tip, which the
 paper's network has to learn from absolute positions (the follow-up cEGCL feeds the same).
+``head_offsets`` W (ours) gives the same to the heads instead, so the graph layers stay
+press-independent: each point's offsets from the tip's start and end and their lengths,
+r = [p - c_start, p - c_end, |p - c_start|, |p - c_end|] (B, N, 8), encoded per point as
+e = ReLU(Linear(8, W) r), join the heads: the displacement head reads [x1, x2, x3, e, C], the
+force head [pooled x, max and mean of e over the points, C].
 
 The first layer's graph is the kNN of the points themselves (with tip offsets the distance of
 two inputs is sqrt(3) times that of their points: the same neighbours). Every layer breaks a
@@ -22,7 +27,7 @@ The heads are MLPs on [features, C], as the paper draws them; their first layer
 (:class:`ConditionedLinear`) adds C's part to the features' part instead of copying C to every
 point. Without tip offsets the graph layers never read C (``press_independent``), so a surface
 pressed again needs only the heads: the predictor keeps each head's first part per surface and
-adds the press's (:mod:`train.head_split`).
+adds the press's (:mod:`train.head_split`); with head offsets the press's part includes e's.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from train.edgeconv import DynamicEdgeConv, tiebreak
 from train.paper import K as PAPER_K
 
 CONDITION = 6
+OFFSETS = 8               # a point's offsets from the tip's start and end, and their lengths
 
 
 @dataclass(frozen=True)
@@ -50,10 +56,15 @@ class CGNNConfig:
     force_widths: tuple[int, ...] = (128, 64, 32)
     use_condition: bool = True
     tip_offsets: bool = False
+    head_offsets: int = 0      # the width W of the heads' offset encoding e (0: none)
 
     def __post_init__(self) -> None:
-        if self.tip_offsets and not self.use_condition:
+        if (self.tip_offsets or self.head_offsets) and not self.use_condition:
             raise ValueError("tip offsets are the condition C: noCond cannot have them")
+        if self.tip_offsets and self.head_offsets:
+            raise ValueError("tip offsets in the first layer or in the heads, not both")
+        if self.head_offsets < 0:
+            raise ValueError(f"head offsets' width must be >= 0, got {self.head_offsets}")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for a checkpoint loaded with ``weights_only``."""
@@ -67,7 +78,8 @@ class CGNNConfig:
         return cls(k=int(d["k"]), edge_widths=tuple(tuple(w) for w in d["edge_widths"]),
                    disp_widths=tuple(d["disp_widths"]), force_widths=tuple(d["force_widths"]),
                    use_condition=bool(d["use_condition"]),
-                   tip_offsets=bool(d.get("tip_offsets", False)))
+                   tip_offsets=bool(d.get("tip_offsets", False)),
+                   head_offsets=int(d.get("head_offsets", 0)))
 
 
 def mlp(widths: list[int]) -> nn.Sequential:
@@ -81,46 +93,61 @@ def mlp(widths: list[int]) -> nn.Sequential:
 
 
 class ConditionedLinear(nn.Linear):
-    """A Linear layer on ``[x, C]``, C (B, 6) appended to every row of x (B, ..., F), computed
-    as ``(W_x x + b) + W_C C`` so that the (B, N, F + 6) copy of C is never built. One weight,
-    as an ``nn.Linear(F + 6, H)`` has: ``leading`` is the first part, ``press`` the second."""
+    """A Linear layer on ``[x, e, C]``, C (B, 6) appended to every row of x (B, ..., F) and e
+    (B, ..., E; the head offsets' encoding, E = ``offsets``, 0 without), computed as
+    ``(W_x x + b) + W_e e + W_C C`` so that the (B, N, F + E + 6) copy of C is never built. One
+    weight, as an ``nn.Linear(F + E + 6, H)`` has: ``leading`` is the first part, ``press`` the
+    rest, what the press changes."""
 
-    def __init__(self, inputs: int, outputs: int, conditioned: bool) -> None:
+    def __init__(self, inputs: int, outputs: int, conditioned: bool, offsets: int = 0) -> None:
         super().__init__(inputs, outputs)
-        self.conditioned = conditioned
+        self.conditioned, self.offsets = conditioned, offsets
+
+    @property
+    def width(self) -> int:
+        """F: how many inputs come before e and C."""
+        return self.in_features - self.offsets - (CONDITION if self.conditioned else 0)
 
     def leading(self, x: torch.Tensor) -> torch.Tensor:
-        """``W_x x + b``: the part of the layer that C does not change."""
-        width = self.in_features - (CONDITION if self.conditioned else 0)
-        if x.shape[-1] != width:          # C given twice, or features of another network
+        """``W_x x + b``: the part of the layer that the press does not change."""
+        width = self.width
+        if not torch.jit.is_tracing() and x.shape[-1] != width:   # C given twice, or
+            #                      features of another network (a trace's widths are fixed)
             raise ValueError(f"the layer reads {width} features before C, not {x.shape[-1]}")
         return nn.functional.linear(x, self.weight[:, :width], self.bias)
 
-    def press(self, part: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
-        """``part`` (B, ..., H) from :meth:`leading` with C's part ``W_C C`` added."""
+    def press(self, part: torch.Tensor, cond: torch.Tensor | None,
+              enc: torch.Tensor | None = None) -> torch.Tensor:
+        """``part`` (B, ..., H) from :meth:`leading` with the press's part added: ``W_e e``
+        (``enc`` (B, ..., E), where the layer reads one) and ``W_C C``."""
         if not self.conditioned:
             return part
+        if self.offsets:
+            part = part + enc @ self.weight[:, self.width:self.width + self.offsets].T
         add = cond @ self.weight[:, -CONDITION:].T                          # (B, H)
         return part + add.view(add.shape[0], *[1] * (part.dim() - 2), -1)
 
-    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
-        """On ``x`` and ``cond``; without ``cond``, a plain Linear on an ``x`` that holds C."""
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None,
+                enc: torch.Tensor | None = None) -> torch.Tensor:
+        """On ``x``, ``enc`` and ``cond``; without ``cond``, a plain Linear on an ``x`` that
+        holds them."""
         if cond is None:
             return super().forward(x)
-        return self.press(self.leading(x), cond)
+        return self.press(self.leading(x), cond, enc)
 
 
 class ConditionedMLP(nn.Sequential):
-    """An MLP on ``[x, C]``: a :class:`ConditionedLinear`, then ReLU and Linear layers."""
+    """An MLP on ``[x, e, C]``: a :class:`ConditionedLinear`, then ReLU and Linear layers."""
 
-    def __init__(self, widths: list[int], conditioned: bool) -> None:
-        first = ConditionedLinear(widths[0] + (CONDITION if conditioned else 0), widths[1],
-                                  conditioned)                  # made first: the seed's order
+    def __init__(self, widths: list[int], conditioned: bool, offsets: int = 0) -> None:
+        first = ConditionedLinear(widths[0] + offsets + (CONDITION if conditioned else 0),
+                                  widths[1], conditioned, offsets)  # made first: seed's order
         rest = [nn.ReLU(), *mlp(widths[1:])] if len(widths) > 2 else []
         super().__init__(first, *rest)
 
-    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
-        return self.after_first(self[0](x, cond))
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None,
+                enc: torch.Tensor | None = None) -> torch.Tensor:
+        return self.after_first(self[0](x, cond, enc))
 
     def after_first(self, x: torch.Tensor) -> torch.Tensor:
         """The layers after the first on its output."""
@@ -141,8 +168,11 @@ class CGNN(nn.Module):
             width = out
         self.convs = nn.ModuleList(convs)
         local, conditioned = sum(out for _, out in config.edge_widths), config.use_condition
-        self.disp_head = ConditionedMLP([local, *config.disp_widths, 3], conditioned)
-        self.force_head = ConditionedMLP([2 * local, *config.force_widths, 1], conditioned)
+        width = config.head_offsets
+        self.disp_head = ConditionedMLP([local, *config.disp_widths, 3], conditioned, width)
+        self.force_head = ConditionedMLP([2 * local, *config.force_widths, 1], conditioned,
+                                         2 * width)
+        self.offsets = nn.Linear(OFFSETS, width) if width else None
 
     def inputs(self, points: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
         """The first layer's input: the points (B, N, 3), or with tip offsets
@@ -151,6 +181,15 @@ class CGNN(nn.Module):
             return points
         tips = cond.reshape(-1, 1, 2, 3)
         return torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
+
+    def encoded(self, points: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor | None:
+        """The heads' encoding of each point's offsets from the tip, e (B, N, W); None for a
+        network without head offsets."""
+        if self.offsets is None:
+            return None
+        d = points.unsqueeze(2) - cond.reshape(-1, 1, 2, 3)             # (B, N, 2, 3)
+        r = torch.cat([d.flatten(2), torch.linalg.vector_norm(d, dim=-1)], dim=-1)
+        return torch.relu(self.offsets(r))
 
     def features(self, points: torch.Tensor, cond: torch.Tensor | None,
                  mask: torch.Tensor | None = None,
@@ -165,33 +204,40 @@ class CGNN(nn.Module):
 
     @property
     def press_independent(self) -> bool:
-        """True when the graph layers never read C (the paper's network, without tip
-        offsets): a surface's features are then the same for every press, and a caller
-        pressing one surface again computes them once (:mod:`train.head_split`)."""
+        """True when the graph layers never read C (without tip offsets: the paper's network,
+        or head offsets): a surface's features are then the same for every press, and a
+        caller pressing one surface again computes them once (:mod:`train.head_split`)."""
         return not self.config.tip_offsets
 
     def force(self, local: torch.Tensor, cond: torch.Tensor | None,
-              mask: torch.Tensor | None = None) -> torch.Tensor:
-        """The force head (B,) on the pooled features and C."""
-        return self.force_head(pool(local, mask), cond).squeeze(-1)
+              mask: torch.Tensor | None = None, enc: torch.Tensor | None = None
+              ) -> torch.Tensor:
+        """The force head (B,) on the pooled features, the pooled offsets' encoding (where
+        the network has one) and C."""
+        pooled = None if enc is None else pool(enc, mask)
+        return self.force_head(pool(local, mask), cond, pooled).squeeze(-1)
 
     def heads(self, local: torch.Tensor, cond: torch.Tensor | None,
-              mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        """(displacement (B, N, 3), change of force (B,)) from the features (B, N, F)."""
-        force = self.force(local, cond, mask)     # first: the gradients then sum in the order
-        return self.disp_head(local, cond), force  # they always have (runs train bit-alike)
+              mask: torch.Tensor | None = None, enc: torch.Tensor | None = None
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(displacement (B, N, 3), change of force (B,)) from the features (B, N, F) and
+        the offsets' encoding (B, N, W) or None."""
+        force = self.force(local, cond, mask, enc)     # first: the gradients then sum in the
+        return self.disp_head(local, cond, enc), force  # order they always had (bit-alike)
 
     def forward(self, points: torch.Tensor, cond: torch.Tensor,
                 mask: torch.Tensor | None = None, neighbours: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor]:
         """(displacement (B, N, 3), change of force (B,)), normalised."""
-        return self.heads(self.features(points, cond, mask, neighbours), cond, mask)
+        return self.heads(self.features(points, cond, mask, neighbours), cond, mask,
+                          self.encoded(points, cond))
 
     def forward_force(self, points: torch.Tensor, cond: torch.Tensor,
                       mask: torch.Tensor | None = None,
                       neighbours: torch.Tensor | None = None) -> torch.Tensor:
         """Only the change of force (B,): the displacement head is skipped."""
-        return self.force(self.features(points, cond, mask, neighbours), cond, mask)
+        return self.force(self.features(points, cond, mask, neighbours), cond, mask,
+                          self.encoded(points, cond))
 
 
 def pool(local: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:

@@ -67,7 +67,7 @@ from train.checkpoint import load_checkpoint, model_from
 from train.head_split import check_split
 from train.normalise import tip_height
 from train.region import near_path, neighbour_table, region
-from train.si_model import SIModel
+from train.si_model import SIModel, press_entries
 
 UNIT_FACTOR = 20.0
 EXTRAPOLATION_FACTOR = 1.5
@@ -119,6 +119,8 @@ class Predictor:
         self.press_independent = si.model.press_independent
         if self.press_independent:      # a known scene runs its cached head terms
             check_split(si.model)
+            self._press, self._press_force = press_entries(si)
+            self._offsets = si.model.offsets is not None   # the press reads every point
         self.backend = make_backend(si, device, backend)
         self.large = self.backend if self.backend.name == "torch" else TorchBackend(si, device)
         self.extrapolating = False
@@ -166,7 +168,8 @@ class Predictor:
             self._check_radius(region)
             if scene.terms is None:
                 return self._flag(self._pressed(scene, c, None)[1])
-            return self._flag(float(self._run("pressed_force", scene.terms[1], c)[0][0]))
+            return self._flag(float(self._run(self._press_force, scene.terms[1], c,
+                                              *self._surface(scene))[0][0]))
         if region is None:
             return self._flag(float(self._run("force", scene.points[None], c,
                                               scene.neighbours[None])[0][0]))
@@ -194,13 +197,17 @@ class Predictor:
             moved = moved[:, core]
         else:
             disp_terms, force_terms = scene.terms
-            moved, df = self._run("pressed", scene.points[None, core],
-                                  disp_terms[:, core], force_terms, c)
+            moved, df = self._run(self._press, scene.points[None, core],
+                                  disp_terms[:, core], force_terms, c, *self._surface(scene))
         if radius is None:
             return moved[0], float(df[0])
         deformed = scene.points.copy()
         deformed[core] = moved[0]
         return deformed, float(df[0])
+
+    def _surface(self, scene: Scene) -> tuple[np.ndarray, ...]:
+        """The scene's points, where a press on it reads them (head offsets); else nothing."""
+        return (scene.points[None],) if self._offsets else ()
 
     def _region(self, scene: Scene, c: np.ndarray, radius: float
                 ) -> tuple[np.ndarray, np.ndarray]:

@@ -65,6 +65,7 @@ class Recipe:
         return tuple(out)
 
 
+HEAD_OFFSETS = 32        # the width of the heads' offset encoding (train/model.py)
 PAPER = Recipe("paper")
 OURS = Recipe("ours", options=_frozen(loss="balanced", rotate=True, ema=0.99, lr=2e-3),
               network=_frozen(tip_offsets=True))

@@ -161,23 +161,39 @@ class SIModel(nn.Module):
         """A new surface's head terms and its first press's answer, in one run:
         (disp terms, force terms, deformed points, change of force)."""
         disp_terms, force_terms = self.scene(points, neighbours)
-        return disp_terms, force_terms, *self.pressed(points, disp_terms, force_terms, condition)
+        return disp_terms, force_terms, *self.pressed(points, disp_terms, force_terms, condition,
+                                                      points)
 
     def pressed(self, points: torch.Tensor, disp_terms: torch.Tensor,
-                force_terms: torch.Tensor, condition: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor]:
+                force_terms: torch.Tensor, condition: torch.Tensor,
+                surface: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` from the scene's head terms (of ``points``, or of a subset of them
-        in the same order): deformed points (B, N, 3) m and the change of force (B,) N."""
+        in the same order): deformed points (B, N, 3) m and the change of force (B,) N.
+        ``surface``: all the scene's points (read by a network with head offsets only)."""
+        n = self.norm
         disp, df = pressed_heads(self.model, HeadTerms(disp_terms, force_terms),
-                                 self.norm.condition(condition))
-        return in_metres(self.norm, points, disp, df, condition)
+                                 n.condition(condition), *self._offset_points(points, surface))
+        return in_metres(n, points, disp, df, condition)
 
-    def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor
-                      ) -> torch.Tensor:
-        """:meth:`force` from the scene's force terms: the change of force (B,) N."""
+    def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor,
+                      surface: torch.Tensor | None = None) -> torch.Tensor:
+        """:meth:`force` from the scene's force terms: the change of force (B,) N
+        (``surface``: the scene's points, read by a network with head offsets only)."""
         _, df = pressed_heads(self.model, HeadTerms(None, force_terms),
-                              self.norm.condition(condition))
+                              self.norm.condition(condition),
+                              *self._offset_points(None, surface))
         return newtons(df, self.norm, press_gate(self.norm, condition))
+
+    def _offset_points(self, points: torch.Tensor | None, surface: torch.Tensor | None
+                       ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """``points`` and ``surface`` normalised, for a network with head offsets (the only
+        one that reads them); (None, None) otherwise."""
+        if self.model.offsets is None:
+            return None, None
+        if surface is None:
+            raise ValueError("a network with head offsets reads the scene's points per press")
+        return (None if points is None else self.norm.points(points),
+                self.norm.points(surface))
 
 
 @dataclass(frozen=True)
@@ -199,17 +215,31 @@ ENTRIES = {
     "pressed": Entry("pressed", ("points", "disp_terms", "force_terms", "condition"),
                      ("deformed", "dforce")),
     "pressed_force": Entry("pressed_force", ("force_terms", "condition"), ("dforce",)),
+    # the same for a network with head offsets: it reads every point of the scene per press
+    "pressed_offsets": Entry("pressed", ("points", "disp_terms", "force_terms", "condition",
+                                         "surface"), ("deformed", "dforce")),
+    "pressed_force_offsets": Entry("pressed_force", ("force_terms", "condition", "surface"),
+                                   ("dforce",)),
 }
-PER_POINT = ("points", "neighbours", "disp_terms", "deformed")
+PER_POINT = ("points", "neighbours", "disp_terms", "deformed", "surface")
 
 
 def entries(si: SIModel) -> tuple[str, ...]:
     """The entries a predictor of ``si`` runs: for a press-independent model a new scene
     (its terms and first answer in one run, so one session runs per call) and the press
-    from known terms; otherwise the whole network and the force alone."""
+    from known terms (:func:`press_entries`); otherwise the whole network and the force
+    alone."""
     if si.model.press_independent:
-        return ("new_scene", "pressed", "pressed_force")
+        return ("new_scene", *press_entries(si))
     return ("full", "force")
+
+
+def press_entries(si: SIModel) -> tuple[str, str]:
+    """A press-independent model's entries for a press on a known scene: (both heads, the
+    force alone); a network with head offsets also reads the scene's points."""
+    if si.model.offsets is None:
+        return ("pressed", "pressed_force")
+    return ("pressed_offsets", "pressed_force_offsets")
 
 
 class Call(nn.Module):
@@ -224,9 +254,11 @@ class Call(nn.Module):
 
 
 def example_inputs(si: SIModel, entry: str, n: int = 26) -> tuple[torch.Tensor, ...]:
-    """Inputs of the right shapes and types for ``entry`` at ``n`` points (for tracing)."""
+    """Inputs of the right shapes and types for ``entry`` at ``n`` points (for tracing; the
+    scene's ``surface`` has more)."""
     points = torch.rand(1, n, 3) * 0.1
-    made = {"points": points, "condition": torch.rand(1, 6) * 0.1,
+    made = {"points": points, "surface": torch.rand(1, n + 3, 3) * 0.1,
+            "condition": torch.rand(1, 6) * 0.1,
             "neighbours": torch.cdist(points, points).topk(si.model.config.k,
                                                            largest=False).indices,
             "disp_terms": torch.rand(1, n, si.model.disp_head[0].out_features),
@@ -239,7 +271,8 @@ def to_onnx(si: SIModel, out: str | Path | io.BytesIO, entry: str = "export",
     """Trace one entry of ``si`` to ONNX (default: the whole network, computing its own
     graph, as ``pipeline export`` writes it), N a dynamic axis."""
     e = ENTRIES[entry]
-    axes = {name: {1: "N"} for name in (*e.inputs, *e.outputs) if name in PER_POINT}
+    axes = {name: {1: "M" if name == "surface" else "N"}      # a region's N, the scene's M
+            for name in (*e.inputs, *e.outputs) if name in PER_POINT}
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)     # the TorchScript exporter
         torch.onnx.export(Call(si, entry).eval(), example_inputs(si, entry, example_points),

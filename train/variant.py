@@ -6,7 +6,10 @@ from these fields for display only; nothing parses a label back, and nothing gro
 fine-tuned run's label leaves out its own rotation and aug). The fields: ``model`` ("cGNN", or
 "noCond" without the condition), ``train_data`` ("MSM" or "Exp", from the states file's
 ``source``), ``rotate`` and ``aug`` (rotation augmentation; a point fraction), and
-``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning).
+``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning),
+and ``offsets``: where the network reads the tip's offsets
+(:data:`data_schema.json_docs.OFFSETS`), "graph" being the one whose graph layers read the
+press (a mesh pressed again reruns the whole network).
 A checkpoint's meta and ``metrics.json`` keep it as a plain dict of the same fields
 (:meth:`Variant.to_dict`).
 """
@@ -21,6 +24,8 @@ import h5py
 from data_schema.hdf5 import attr_text
 from train.checkpoint import load_checkpoint
 
+OFFSET_NAMES = {"graph": "tip offsets", "heads": "head offsets"}
+
 
 @dataclass(frozen=True)
 class Variant:
@@ -31,17 +36,27 @@ class Variant:
     rotate: bool
     aug: bool
     pretrained: Variant | None = None
+    offsets: str = "none"
+
+    @property
+    def graph_reads_press(self) -> bool:
+        """Whether the network's graph layers read the press (tip offsets)."""
+        return self.offsets == "graph"
 
     def to_dict(self) -> dict:
         """The plain form kept in a checkpoint's meta and in ``metrics.json``."""
         return {"model": self.model, "train_data": self.train_data, "rotate": self.rotate,
                 "aug": self.aug,
-                "pretrained": None if self.pretrained is None else self.pretrained.to_dict()}
+                "pretrained": None if self.pretrained is None else self.pretrained.to_dict(),
+                "offsets": self.offsets}
 
     @classmethod
-    def from_dict(cls, d: dict) -> Variant:
+    def from_dict(cls, d: dict, offsets: str = "none") -> Variant:
+        """From :meth:`to_dict`'s form; ``offsets`` where a record from before the field
+        lacks it (a fine-tuned run's network is the one it started from)."""
+        own = str(d.get("offsets", offsets))
         return cls(str(d["model"]), str(d["train_data"]), bool(d["rotate"]), bool(d["aug"]),
-                   cls.from_dict(d["pretrained"]) if d.get("pretrained") else None)
+                   cls.from_dict(d["pretrained"], own) if d.get("pretrained") else None, own)
 
     @property
     def label(self) -> str:
@@ -54,9 +69,11 @@ class Variant:
 
     @property
     def full_name(self) -> str:
-        """A name that says every field ("cGNN/rot Exp from cGNN/aug MSM"): shown where two
-        variants share a label."""
-        return self._own + (f" from {self.pretrained.full_name}" if self.pretrained else "")
+        """A name that says every field ("cGNN/rot Exp from cGNN/aug MSM", "with head
+        offsets" where it has them): shown where two variants share a label."""
+        own = self._own + (f" with {OFFSET_NAMES[self.offsets]}" if self.offsets in
+                           OFFSET_NAMES else "")
+        return own + (f" from {self.pretrained.full_name}" if self.pretrained else "")
 
     @property
     def _own(self) -> str:
@@ -89,13 +106,22 @@ def _variant(config: dict, options: dict, data: str | Path, init_meta: dict | No
              ) -> Variant:
     return Variant("cGNN" if config["use_condition"] else "noCond", source_name(data),
                    bool(options.get("rotate")), bool(options.get("point_fraction")),
-                   None if init_meta is None else recorded_variant(init_meta))
+                   None if init_meta is None else recorded_variant(init_meta),
+                   offsets_of(config))
+
+
+def offsets_of(config: dict) -> str:
+    """Where the network of ``config`` (:meth:`train.model.CGNNConfig.to_dict`) reads the
+    tip's offsets (:data:`data_schema.json_docs.OFFSETS`)."""
+    if config.get("tip_offsets"):
+        return "graph"
+    return "heads" if config.get("head_offsets") else "none"
 
 
 def recorded_variant(meta: dict) -> Variant:
     """The variant a checkpoint's meta records (derived for checkpoints older than the field)."""
     if isinstance(meta.get("variant"), dict):
-        return Variant.from_dict(meta["variant"])
+        return Variant.from_dict(meta["variant"], offsets_of(meta["config"]))
     init = None
     if meta.get("init"):                  # an old run: read the one it started from
         init = load_checkpoint(meta["init"])["meta"]

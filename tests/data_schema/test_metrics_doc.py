@@ -83,6 +83,8 @@ CASES = [
     (("runs", 0, "gain", "ld_reference_mm"), -1.0, "not a finite"),
     (("runs", 0, "variant", "rotate"), "yes", "variant.rotate"),
     (("runs", 0, "variant", "pretrained", "model"), _DROP, "variant.pretrained.model"),
+    (("runs", 0, "variant", "offsets"), "tip", "variant.offsets is 'tip', not one of"),
+    (("runs", 0, "variant", "pretrained", "offsets"), 1, "variant.pretrained.offsets missing"),
     (("overall", 0, "fold_ids"), [0], "fold_ids must list"),
     (("overall", 0, "folds_not_beating_references"), [3], "only folds of them"),
     (("scarcity", 0, "force_abs_n"), None, "scarcity[0].force_abs_n"),
@@ -98,6 +100,16 @@ CASES = [
 def test_a_wrong_field_is_refused_by_name(tmp_path, keys, value, words) -> None:
     with pytest.raises(BadInput, match=words.replace("[", r"\[").replace("]", r"\]")):
         validate_metrics(_write(tmp_path, _set(_doc(), keys, value)))
+
+
+def test_where_the_network_reads_the_offsets_is_valid_and_may_be_absent(tmp_path) -> None:
+    """1.1 records where a network reads the tip's offsets; a 1.0 variant has no such field
+    (the fixture's) and stays valid."""
+    for where in ("none", "graph", "heads"):
+        doc = _set(_doc(), ("runs", 0, "variant", "offsets"), where)
+        doc = _set(doc, ("runs", 0, "variant", "pretrained", "offsets"), where)
+        validate_metrics(_write(tmp_path, doc))
+    assert "offsets" not in _doc()["runs"][0]["variant"]
 
 
 def test_a_document_from_before_the_schema_says_so(tmp_path) -> None:

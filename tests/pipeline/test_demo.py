@@ -18,7 +18,7 @@ from data_schema.states import validate_states
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.demo_plan import PAPER_NETWORK, SMOKE, demo_steps
+from pipeline.demo_plan import NETWORKS, RECIPE, SMOKE, demo_steps
 
 
 def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
@@ -81,17 +81,20 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     assert not any("fold1" in line for line in rerun if "pipeline eval" not in line), rerun
 
 
-def test_no_tip_offsets_trains_the_papers_network_with_the_rest_of_the_recipe(tmp_path):
-    """``--no-tip-offsets`` changes every training run's network and nothing else."""
+@pytest.mark.parametrize("network", list(NETWORKS))
+def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, network):
+    """``--network`` adds its flags after the recipe's to every training run (pre-training
+    and both fine-tunings); every other step is the same."""
     ours = demo_steps(tmp_path, 0, SMOKE)
-    paper = demo_steps(tmp_path, 0, SMOKE, recipe=PAPER_NETWORK)
-    trains = [(a.args, b.args) for a, b in zip(ours, paper, strict=True) if a.args[0] == "train"]
+    other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network])
+    trains = [(a.args, b.args) for a, b in zip(ours, other, strict=True) if a.args[0] == "train"]
     assert len(trains) == 3 * SMOKE.folds                  # pre-training and two fine-tunings
-    for with_offsets, without in trains:
-        assert "--no-tip-offsets" in without and "--no-tip-offsets" not in with_offsets
-        assert [a for a in without if a != "--no-tip-offsets"] == list(with_offsets)
+    extra = NETWORKS[network][len(RECIPE):]
+    for plain, changed in trains:
+        at = plain.index(RECIPE[-1]) + 1
+        assert changed == (*plain[:at], *extra, *plain[at:])
     assert [a.args for a in ours if a.args[0] != "train"] == \
-        [b.args for b in paper if b.args[0] != "train"]
+        [b.args for b in other if b.args[0] != "train"]
 
 
 def test_demo_runs_on_another_labs_phantom(tmp_path):

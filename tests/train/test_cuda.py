@@ -70,12 +70,13 @@ def test_eval_and_predictor_on_cuda_give_the_cpu_answers(dent, tmp_path) -> None
     assert region[0].shape == points.shape and np.isfinite(region[0]).all()
 
 
-def test_a_known_scene_on_cuda_gives_the_cpu_answers(dent, tmp_path) -> None:
-    """The paper's network keeps a scene's head terms on a first press and runs the heads
-    alone after: on CUDA as on the CPU, for a new press and in a region."""
+@pytest.mark.parametrize("head_offsets", [0, 8])
+def test_a_known_scene_on_cuda_gives_the_cpu_answers(dent, tmp_path, head_offsets) -> None:
+    """The paper's network (and head offsets) keeps a scene's head terms on a first press
+    and runs the heads alone after: on CUDA as on the CPU, for a new press and in a region."""
     run = tmp_path / "run"
-    run_train(TrainInputs(*dent), run,
-              TrainParams(OPTIONS, replace(SMALL, tip_offsets=False), "cpu"))
+    run_train(TrainInputs(*dent), run, TrainParams(
+        OPTIONS, replace(SMALL, tip_offsets=False, head_offsets=head_offsets), "cpu"))
     g = (np.arange(7) + 0.5) / 7 * 0.1
     points = np.stack([*np.meshgrid(g, g), np.zeros((7, 7))], -1).reshape(-1, 3)
     presses = [np.array([0.05, 0.05, 0.0, 0.05, 0.05, -d], np.float32) for d in (2e-3, 3e-3)]

@@ -37,9 +37,13 @@ PRESS = np.array([0.05, 0.05, 0.001, 0.05, 0.05, -0.003], np.float32)
 BACKENDS = ["torch", "onnx"]
 
 
-def _si(tip_offsets: bool, norm: Normaliser = NORM) -> SIModel:
+# where the networks read the tip's offsets: nowhere (the paper's), the first layer, the heads
+NETWORKS = {"paper": {}, "tip offsets": {"tip_offsets": True}, "head offsets": {"head_offsets": 8}}
+
+
+def _si(network: str, norm: Normaliser = NORM) -> SIModel:
     torch.manual_seed(1)
-    return SIModel(CGNN(CGNNConfig(tip_offsets=tip_offsets)).eval(), norm)
+    return SIModel(CGNN(CGNNConfig(**NETWORKS[network])).eval(), norm)
 
 
 def _grid(side: int) -> np.ndarray:
@@ -94,15 +98,15 @@ def _runs(si: SIModel, pts: np.ndarray, press: np.ndarray = PRESS,
     return out
 
 
-@pytest.mark.parametrize("tip_offsets", [False, True])
+@pytest.mark.parametrize("network", list(NETWORKS))
 @pytest.mark.parametrize("points", ["grid", "lab", "ring"])
-def test_the_answer_does_not_depend_on_the_order_of_the_points(points: str, tip_offsets: bool
+def test_the_answer_does_not_depend_on_the_order_of_the_points(points: str, network: str
                                                                ) -> None:
     """5 orderings of a 32 x 32 grid (the MSM's), of 26 lab points, and of a wide tie. The
     exported graph cannot search again with more candidates: it is left out of the wide tie
     (the predictor builds the first layer's graph itself, in numpy)."""
     pts = {"grid": _grid(32), "lab": _lab(), "ring": _ring()}[points]
-    si = _si(tip_offsets)
+    si = _si(network)
     session, predictors = None if points == "ring" else _exported(si), _predictors(si)
     first = _runs(si, pts, session=session, predictors=predictors)
     rng = np.random.default_rng(5)
@@ -115,11 +119,11 @@ def test_the_answer_does_not_depend_on_the_order_of_the_points(points: str, tip_
             assert df == pytest.approx(first[name][1], abs=1e-6), name
 
 
-@pytest.mark.parametrize("tip_offsets", [False, True])
-def test_the_fewest_points_run_on_every_path(tip_offsets: bool) -> None:
+@pytest.mark.parametrize("network", list(NETWORKS))
+def test_the_fewest_points_run_on_every_path(network: str) -> None:
     """k + 1 = 6 points, fewer than the exported graph's k + 2 candidates: the same answer."""
     pts = np.random.default_rng(0).uniform(0.04, 0.06, (6, 3)).astype(np.float32)
-    si = _si(tip_offsets)
+    si = _si(network)
     runs = _runs(si, pts, session=_exported(si))
     for name, (deformed, df) in runs.items():
         np.testing.assert_allclose(deformed, runs["torch"][0], atol=1e-6, err_msg=name)
@@ -139,10 +143,10 @@ def test_knn_is_the_brute_force_nearest_where_there_are_no_ties(n: int, f: int) 
     assert (knn(x, 5) == order[..., :5])[clear].all()
 
 
-@pytest.mark.parametrize("tip_offsets", [False, True])
-def test_a_tip_that_does_not_move_moves_nothing_and_changes_no_force(tip_offsets: bool) -> None:
+@pytest.mark.parametrize("network", list(NETWORKS))
+def test_a_tip_that_does_not_move_moves_nothing_and_changes_no_force(network: str) -> None:
     """C = [c, c] anywhere (on, above, below the surface) on every path: exactly nothing."""
-    si, pts = _si(tip_offsets), _grid(12)
+    si, pts = _si(network), _grid(12)
     session, predictors = _exported(si), _predictors(si)
     for tip in ([0.05, 0.05, 0.0], [0.02, 0.07, 0.004], [0.05, 0.05, -0.045]):
         still = np.array(tip * 2, np.float32)
@@ -161,7 +165,7 @@ def test_a_press_shorter_than_any_learned_shrinks_linearly() -> None:
     / ramp (small-strain linearity); above it the network's own (training unchanged, and a
     held-out press a little shorter than the training ones too)."""
     pts = _grid(12)
-    gated, bare = _si(False), _si(False, replace(NORM, envelope=None))
+    gated, bare = _si("paper"), _si("paper", replace(NORM, envelope=None))
     for length, share in ((0.025e-3, 0.25), (0.05e-3, 0.5), (0.1e-3, 1.0), (0.5e-3, 1.0),
                           (3e-3, 1.0)):
         press = np.r_[PRESS[:3], PRESS[:3] - [0, 0, length]].astype(np.float32)
@@ -184,7 +188,7 @@ def _flags(p: Predictor, pts: np.ndarray, press: list[float]) -> str:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_presses_beyond_the_training_envelope_are_flagged(backend: str) -> None:
-    p, pts = Predictor(_si(True), torch.device("cpu"), backend), _grid(12)
+    p, pts = Predictor(_si("tip offsets"), torch.device("cpu"), backend), _grid(12)
     assert _flags(p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, -0.003]) == ""      # inside
     assert _flags(p, pts, [0.05, 0.05, 0.001] * 2) == ""                    # no motion: exact
     deep = _flags(p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, -0.044])          # 45 mm down
@@ -207,7 +211,7 @@ def test_a_checkpoint_without_an_envelope_keeps_the_old_checks() -> None:
     old = {k: v for k, v in NORM.to_dict().items() if k != "envelope"}
     norm = Normaliser.from_dict(old)
     assert norm.envelope is None and "envelope" not in norm.to_dict()
-    p, pts = Predictor(_si(False, norm), torch.device("cpu"), "torch"), _grid(12)
+    p, pts = Predictor(_si("paper", norm), torch.device("cpu"), "torch"), _grid(12)
     assert _flags(p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, -0.044]) == ""
     assert p.predict(pts, np.array([0.05, 0.05, 0.001] * 2, np.float32))[1] == 0.0
     assert Normaliser.from_dict(NORM.to_dict()) == NORM
@@ -249,7 +253,7 @@ def test_a_checkpoint_envelope_is_checked() -> None:
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_far_inputs_say_how_far_and_ask_about_millimetres_only_when_it_fits(backend: str
                                                                            ) -> None:
-    p, pts = Predictor(_si(False), torch.device("cpu"), backend), _grid(12)
+    p, pts = Predictor(_si("paper"), torch.device("cpu"), backend), _grid(12)
     with pytest.raises(ValueError, match="a point lies 17.4 m from the training data's "
                                          "centre") as shifted:
         p.predict(pts + 10.0, PRESS + 10.0)
@@ -267,7 +271,7 @@ def test_large_scenes_build_their_graph_in_torch(monkeypatch) -> None:
     """Above ``LARGE`` points the calls that search neighbours run on the torch backend (its
     kNN works in pieces: memory linear in N), with the same answer."""
     pytest.importorskip("onnxruntime")
-    si, pts = _si(True), _grid(20)
+    si, pts = _si("tip offsets"), _grid(20)
     p = Predictor(si, torch.device("cpu"), "onnx")
     small = p.predict(pts, PRESS)
     used = []

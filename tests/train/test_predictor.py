@@ -51,6 +51,13 @@ def offsets_run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
     return _trained(tmp_path_factory.mktemp("pred_offsets"), tip_offsets=True)
 
 
+@pytest.fixture(scope="module")
+def head_run(tmp_path_factory) -> tuple[Path, np.ndarray, np.ndarray]:
+    """With head offsets: the heads read each point's offsets from the tip, the graph layers
+    do not read the press, so a scene's features are cached."""
+    return _trained(tmp_path_factory.mktemp("pred_heads"), head_offsets=8)
+
+
 def test_predict_is_the_network_in_si_units(run) -> None:
     path, points, cond = run
     p = Predictor.load(path)
@@ -99,10 +106,11 @@ def test_duplicate_points_are_allowed(run) -> None:
     np.testing.assert_allclose(deformed[-3:], deformed[:3], atol=1e-6)
 
 
+@pytest.mark.parametrize("model", ["run", "head_run"])
 @pytest.mark.parametrize("n", [26, 1024])
-def test_onnx_export_matches_torch(run, tmp_path, n: int) -> None:
+def test_onnx_export_matches_torch(request, tmp_path, model: str, n: int) -> None:
     ort = pytest.importorskip("onnxruntime")
-    path, points, cond = run
+    path, points, cond = request.getfixturevalue(model)
     onnx = tmp_path / "m.onnx"
     res = CliRunner().invoke(cli, ["-q", "export", str(path), "--onnx", str(onnx)])
     assert res.exit_code == 0, res.output
@@ -135,13 +143,14 @@ def _surface(points: np.ndarray, n: int, seed: int) -> np.ndarray:
     return np.concatenate([points, extra])[:n].astype(np.float32)
 
 
-@pytest.mark.parametrize("model", ["run", "offsets_run", "nocond_run"])
+@pytest.mark.parametrize("model", ["run", "offsets_run", "nocond_run", "head_run"])
 @pytest.mark.parametrize("backend", ["torch", "onnx"])
 @pytest.mark.parametrize("n", [26, 1024])
 def test_every_backend_gives_the_networks_answer(request, model: str, backend: str, n: int
                                                  ) -> None:
     """Whole network, force alone, and a new press on the same scene (for the paper's
-    network, from the scene's cached terms) against the network as training runs it."""
+    network and head offsets, from the scene's cached terms) against the network as training
+    runs it."""
     if backend == "onnx":
         pytest.importorskip("onnxruntime")
     path, points, cond = request.getfixturevalue(model)
@@ -178,7 +187,7 @@ def test_segment_distance_is_euclidean() -> None:
     np.testing.assert_allclose(segment_distance(pts, start, start), [5, 5, np.sqrt(2), 6])
 
 
-@pytest.mark.parametrize("model", ["run", "offsets_run"])
+@pytest.mark.parametrize("model", ["run", "offsets_run", "head_run"])
 def test_region_covering_the_surface_is_the_whole_model(request, model: str) -> None:
     path, points, cond = request.getfixturevalue(model)
     pts = _surface(points, 300, 3)
@@ -212,11 +221,13 @@ def test_region_runs_the_network_on_the_press_and_its_rings(offsets_run) -> None
     assert df == pytest.approx(ref_df, abs=1e-5)
 
 
-def test_region_of_a_cached_scene_is_the_whole_model_near_the_press(run) -> None:
-    """The paper's network on a known scene: the whole surface's features are cached, so a
-    region moves the points near the tip's path exactly as the whole model does, leaves the
-    rest at rest, and its force is the whole surface's."""
-    path, points, cond = run
+@pytest.mark.parametrize("model", ["run", "head_run"])
+def test_region_of_a_cached_scene_is_the_whole_model_near_the_press(request, model: str
+                                                                     ) -> None:
+    """The paper's network or head offsets on a known scene: the whole surface's features
+    are cached, so a region moves the points near the tip's path exactly as the whole model
+    does, leaves the rest at rest, and its force is the whole surface's."""
+    path, points, cond = request.getfixturevalue(model)
     pts = _surface(points, 300, 4)
     pts += np.random.default_rng(0).normal(0, 1e-5, pts.shape).astype(np.float32)  # no ties
     radius = 0.015

@@ -62,7 +62,7 @@ def test_the_log_keeps_its_provenance_beside_it(made) -> None:
 
 def test_metrics_carry_their_schema_and_provenance(made) -> None:
     doc = validate_metrics(made / "metrics.json")
-    assert (doc["schema"], doc["schema_version"]) == ("phantom.metrics", "1.0")
+    assert (doc["schema"], doc["schema_version"]) == ("phantom.metrics", "1.1")
     prov = doc["provenance"]
     assert (prov["schema"], prov["stage"]) == ("phantom.metrics", "eval")
     best = made / "tl" / "best.pt"

@@ -75,14 +75,18 @@ def test_a_flag_given_overrides_the_recipe(resolved) -> None:
 
 
 def test_the_demo_trains_with_recipe_ours(resolved, tmp_path) -> None:
-    from pipeline.demo_plan import PAPER_NETWORK, QUICK, RECIPE, demo_steps
+    from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, demo_steps
+    from train.recipes import HEAD_OFFSETS
 
-    for flags, tip in ((RECIPE, True), (PAPER_NETWORK, False)):
+    networks = {"head-offsets": {"tip_offsets": False, "head_offsets": HEAD_OFFSETS},
+                "tip-offsets": {"tip_offsets": True, "head_offsets": 0},
+                "paper": {"tip_offsets": False, "head_offsets": 0}}
+    for flags, network in ((RECIPE, {}), *((NETWORKS[n], networks[n]) for n in NETWORKS)):
         train = next(s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags)
                      if s.args[0] == "train")
         got = resolved(*train.args[train.args.index("--epochs"):])
         want = OURS.settings(epochs=QUICK.pretrain_epochs, lr=QUICK.lr, batch=QUICK.batch,
-                             tip_offsets=tip)
+                             **network)
         assert (got.options, got.config, got.device) == (*want, "cpu")
 
 
@@ -93,6 +97,19 @@ def test_tip_offsets_without_the_condition_is_refused(resolved, tmp_path) -> Non
     assert res.exit_code == 2 and "--no-tip-offsets" in res.output
     assert resolved("--recipe", "ours", "--no-cond", "--no-tip-offsets").config.use_condition \
         is False
+
+
+@pytest.mark.parametrize(("flags", "words"), [
+    (("--tip-offsets", "--head-offsets", "8"), "not both"),
+    (("--head-offsets", "8", "--no-cond"), "not with --no-cond"),
+    (("--tip-offsets", "--no-cond"), "not with --no-cond"),
+])
+def test_offsets_in_two_places_or_without_the_condition_are_refused(resolved, tmp_path, flags,
+                                                                     words) -> None:
+    res = CliRunner().invoke(cli, ["train", "--data", str(tmp_path / "states.h5"), "--splits",
+                                   str(tmp_path / "splits.json"), "--out", str(tmp_path / "r"),
+                                   "--recipe", "paper", *flags])
+    assert res.exit_code == 2 and words in res.output
 
 
 def test_an_unknown_recipe_is_bad_input() -> None:

@@ -184,7 +184,8 @@ def test_a_run_records_its_variant_and_a_fine_tuned_one_its_pre_training(dent, t
     variant = load_checkpoint(run / "best.pt")["meta"]["variant"]
     assert variant == {"model": "cGNN", "train_data": "Exp", "rotate": True, "aug": False,
                        "pretrained": {"model": "cGNN", "train_data": "Exp", "rotate": False,
-                                      "aug": True, "pretrained": None}}
+                                      "aug": True, "pretrained": None, "offsets": "none"},
+                       "offsets": "none"}
     result = evaluate_runs([run])
     assert result["runs"][0]["variant"] == variant
     assert result["overall"][0]["label"] == "cGNN/aug Exp (TL)"
