@@ -1,7 +1,7 @@
 """Region of interest: what running the cGNN near the press only buys in time and costs in error.
 
 An MSM model is trained on the 32 x 32 grid (1024 points), with the recipe of docs/model.md's
-"Training that learns" (``ours``, :mod:`train.recipes`: tip offsets, balanced loss, rotation,
+"Training that learns" (``ours``, :mod:`train.recipes`: head offsets, balanced loss, rotation,
 lr 2e-3; without its average of the weights, as measured), or taken from ``--run``
 (a run trained elsewhere, e.g. on a GPU). Presses it never saw are simulated on the same surface
 and sampled at its 1024 masses and at a 64 x 64 lattice (4096 points, the same physics seen

@@ -59,13 +59,13 @@ class Settings:
 
 
 # The recipe the measurements support (docs/model.md, "Training that learns"; train/recipes.py):
-# tip offsets, the balanced loss, rotation augmentation, the weights' average; its step size
-# is the settings' (--lr below overrides the recipe's).
+# the tip's offsets in the heads, the balanced loss, rotation augmentation, the weights'
+# average; its step size is the settings' (--lr below overrides the recipe's).
 RECIPE = ("--recipe", "ours")
 # The networks the demo can train, each with the rest of the recipe (docs/results.md compares
-# them): the tip's offsets in the heads (graph layers that do not read the press: a mesh
-# pressed again runs the heads alone), in the first layer (every layer reads the press), or
-# nowhere (the paper's network: fast as the first, less accurate).
+# them): the tip's offsets in the heads (the recipe's: graph layers that do not read the
+# press, so a mesh pressed again runs the heads alone), in the first layer (every layer reads
+# the press), or nowhere (the paper's network: as fast as the first, less accurate).
 NETWORKS = {
     "head-offsets": (*RECIPE, "--no-tip-offsets", "--head-offsets", str(HEAD_OFFSETS)),
     "tip-offsets": (*RECIPE, "--tip-offsets", "--head-offsets", "0"),

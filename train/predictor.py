@@ -12,18 +12,19 @@ their 3-D neighbour graph (the first layer's) built once, then reused while the 
 the same points again (a mesh pressed at 1 kHz).
 
 What a press needs depends on the model:
-- the paper's network (no tip offsets) reads C only in its heads, so a surface's features are
-  the same for every press. A scene's first press runs the whole network once and keeps each
-  head's surface terms; every later press on it runs the heads alone (C's part of their first
-  layer and the rest): the same answer, at a fraction of the time. ``region=R`` (metres) then
+- the paper's network and the head-offset one (our recipe's) read the press only in their
+  heads, so a surface's features are the same for every press. A scene's first press runs
+  the whole network once and keeps each head's surface terms; every later press on it runs
+  the heads alone (the press's part of their first layer and the rest): the same answer, at
+  a fraction of the time. ``region=R`` (metres) then
   runs the displacement head on the points within R of the tip's path only and leaves the
   rest at rest; the force is always the whole surface's.
-- with tip offsets (our recipe) every layer reads the press, so every press runs the whole
+- with tip offsets every layer reads the press, so every press runs the whole
   network. ``region=R`` runs it only on the points within R of the tip's path and the graph's
   rings around them, and leaves the rest where they are; the force head pools over that
   region (:mod:`train.region`).
-Either way region mode is how a 4096-point mesh runs at haptic rates; for the paper's network
-on a mesh that changes every call it saves nothing (each new mesh runs the whole network, so
+Either way region mode is how a 4096-point mesh runs at haptic rates; for a press-independent
+network on a mesh that changes every call it saves nothing (each new mesh runs the whole network, so
 that a press's answer never depends on which presses came before). ``DEFAULT_REGION`` is
 the radius the benchmarks time; what a radius costs in error is measured by
 ``benchmarks/region_study.py`` (the speed-accuracy report's region rows), not assumed.

@@ -2,9 +2,10 @@
 
 - ``paper``: the paper's settings (:mod:`train.paper`), the dataclasses' defaults; what plain
   ``pipeline train`` runs.
-- ``ours``: the recipe the measurements support (docs/model.md, "Training that learns"): tip
-  offsets in the first layer, the balanced loss, rotation augmentation, an exponential
-  average of the weights (decay 0.99) and a step size of 2e-3; the paper's otherwise.
+- ``ours``: the recipe the measurements support (docs/model.md, "Training that learns"): the
+  tip's offsets in the heads (graph layers that do not read the press: a mesh pressed again
+  runs the heads alone), the balanced loss, rotation augmentation, an exponential average of
+  the weights (decay 0.99) and a step size of 2e-3; the paper's otherwise.
 
 A recipe names only what it changes; settings given explicitly (``pipeline train --lr ...``,
 or keyword arguments of :meth:`Recipe.settings`) override its values. Plain data: the command
@@ -68,7 +69,7 @@ class Recipe:
 HEAD_OFFSETS = 32        # the width of the heads' offset encoding (train/model.py)
 PAPER = Recipe("paper")
 OURS = Recipe("ours", options=_frozen(loss="balanced", rotate=True, ema=0.99, lr=2e-3),
-              network=_frozen(tip_offsets=True))
+              network=_frozen(head_offsets=HEAD_OFFSETS))
 RECIPES: Mapping[str, Recipe] = MappingProxyType({r.name: r for r in (PAPER, OURS)})
 
 

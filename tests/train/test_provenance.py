@@ -46,7 +46,7 @@ def test_checkpoints_carry_their_provenance(made) -> None:
             ("phantom.checkpoint", "1.0", "train")
         assert prov["inputs"] == {str(p): sha256_file(p) for p in (data, splits, init)}
         assert prov["params"]["options"]["epochs"] == 1 and prov["params"]["device"] == "cpu"
-        assert prov["params"]["config"]["tip_offsets"] is True     # --recipe ours
+        assert prov["params"]["config"]["head_offsets"] == 32     # --recipe ours
         assert prov["params"]["recipe"] == "ours"
         assert isinstance(prov["command"], str) and prov["code_version"]
 

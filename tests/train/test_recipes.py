@@ -13,7 +13,8 @@ from train.loop import TrainOptions
 from train.model import CGNNConfig
 from train.recipes import OURS, PAPER, recipe
 
-OURS_FLAGS = ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99", "--lr", "2e-3")
+OURS_FLAGS = ("--head-offsets", "32", "--loss", "balanced", "--rotate", "--ema", "0.99", "--lr",
+              "2e-3")
 
 
 @pytest.fixture
@@ -58,16 +59,17 @@ def test_recipe_ours_is_the_explicit_flags(resolved) -> None:
     assert (ours.options, ours.config, ours.device) == (spelt.options, spelt.config, spelt.device)
     assert (ours.recipe, spelt.recipe) == ("ours", "paper")       # the name, for provenance
     assert (ours.options, ours.config) == OURS.settings()
-    assert ours.config.tip_offsets and ours.options.rotate and ours.options.ema == 0.99
+    assert ours.config.head_offsets == 32 and not ours.config.tip_offsets
+    assert ours.options.rotate and ours.options.ema == 0.99
     assert (ours.options.loss, ours.options.lr) == ("balanced", 2e-3)
-    assert OURS.flags() == ("--tip-offsets", "--loss", "balanced", "--rotate", "--ema", "0.99",
-                            "--lr", "0.002")
+    assert OURS.flags() == ("--head-offsets", "32", "--loss", "balanced", "--rotate", "--ema",
+                            "0.99", "--lr", "0.002")
 
 
 def test_a_flag_given_overrides_the_recipe(resolved) -> None:
     ours = resolved("--recipe", "ours")
-    mine = resolved("--recipe", "ours", "--lr", "1e-3", "--no-tip-offsets", "--epochs", "7")
-    assert (mine.options.lr, mine.config.tip_offsets, mine.options.epochs) == (1e-3, False, 7)
+    mine = resolved("--recipe", "ours", "--lr", "1e-3", "--head-offsets", "0", "--epochs", "7")
+    assert (mine.options.lr, mine.config.head_offsets, mine.options.epochs) == (1e-3, 0, 7)
     assert mine.options == TrainOptions(**{**vars(ours.options), "lr": 1e-3, "epochs": 7})
     # a value given equal to the paper's default still overrides the recipe's
     assert resolved("--recipe", "ours", "--lr", "1e-4").options.lr == 1e-4
@@ -94,8 +96,8 @@ def test_tip_offsets_without_the_condition_is_refused(resolved, tmp_path) -> Non
     res = CliRunner().invoke(cli, ["train", "--data", str(tmp_path / "states.h5"), "--splits",
                                    str(tmp_path / "splits.json"), "--out", str(tmp_path / "r"),
                                    "--recipe", "ours", "--no-cond"])
-    assert res.exit_code == 2 and "--no-tip-offsets" in res.output
-    assert resolved("--recipe", "ours", "--no-cond", "--no-tip-offsets").config.use_condition \
+    assert res.exit_code == 2 and "--head-offsets 0" in res.output
+    assert resolved("--recipe", "ours", "--no-cond", "--head-offsets", "0").config.use_condition \
         is False
 
 
