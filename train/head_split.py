@@ -62,15 +62,17 @@ def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor,
     """(displacement (B, n, 3) or None, change of force (B,)): the press's part of each head's
     first layer added to the surface's terms, then the rest of the head. ``terms`` come from
     :func:`scene_terms`, which checked the model: nothing is checked here, per press. With
-    head offsets the press's part reads ``points`` (B, n, 3), those of ``terms.disp`` (the
-    surface's or some of them, in its order), and ``surface`` (B, N, 3), every point (the
-    force head pools over them); normalised, as ``cond`` is."""
-    encode = model.offsets is not None
-    pooled = pool(model.encoded(surface, cond), None) if encode else None
+    head offsets the press's part reads ``points`` (B, n, 3), those of ``terms.disp``, and the
+    force head pools the offsets of ``surface`` (B, N, 3), every point of the scene, or of
+    ``points`` where ``surface`` is None (they are the whole scene); normalised, as ``cond``
+    is."""
+    enc = model.encoded(points, cond) if points is not None else None
+    pooled = None
+    if model.offsets is not None:
+        pooled = pool(model.encoded(surface, cond) if surface is not None else enc, None)
     force = _after(model.force_head, terms.force, cond, pooled)
     if terms.disp is None:
         return None, force.squeeze(-1)
-    enc = model.encoded(points, cond) if encode else None
     return _after(model.disp_head, terms.disp, cond, enc), force.squeeze(-1)
 
 

@@ -120,8 +120,8 @@ class Predictor:
         self.press_independent = si.model.press_independent
         if self.press_independent:      # a known scene runs its cached head terms
             check_split(si.model)
-            self._press, self._press_force = press_entries(si)
-            self._offsets = si.model.offsets is not None   # the press reads every point
+            self._press_region, self._press_force = press_entries(si)
+            self._offsets = si.model.offsets is not None   # the force reads every point
         self.backend = make_backend(si, device, backend)
         self.large = self.backend if self.backend.name == "torch" else TorchBackend(si, device)
         self.extrapolating = False
@@ -198,8 +198,12 @@ class Predictor:
             moved = moved[:, core]
         else:
             disp_terms, force_terms = scene.terms
-            moved, df = self._run(self._press, scene.points[None, core],
-                                  disp_terms[:, core], force_terms, c, *self._surface(scene))
+            if radius is None:
+                moved, df = self._run("pressed", scene.points[None], disp_terms, force_terms, c)
+            else:
+                moved, df = self._run(self._press_region, scene.points[None, core],
+                                      disp_terms[:, core], force_terms, c,
+                                      *self._surface(scene))
         if radius is None:
             return moved[0], float(df[0])
         deformed = scene.points.copy()

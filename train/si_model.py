@@ -161,39 +161,31 @@ class SIModel(nn.Module):
         """A new surface's head terms and its first press's answer, in one run:
         (disp terms, force terms, deformed points, change of force)."""
         disp_terms, force_terms = self.scene(points, neighbours)
-        return disp_terms, force_terms, *self.pressed(points, disp_terms, force_terms, condition,
-                                                      points)
+        return disp_terms, force_terms, *self.pressed(points, disp_terms, force_terms, condition)
 
     def pressed(self, points: torch.Tensor, disp_terms: torch.Tensor,
                 force_terms: torch.Tensor, condition: torch.Tensor,
                 surface: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """:meth:`forward` from the scene's head terms (of ``points``, or of a subset of them
         in the same order): deformed points (B, N, 3) m and the change of force (B,) N.
-        ``surface``: all the scene's points (read by a network with head offsets only)."""
+        ``surface``: all the scene's points where ``points`` are a part of them and the
+        network has head offsets (its force head pools every point's)."""
         n = self.norm
         disp, df = pressed_heads(self.model, HeadTerms(disp_terms, force_terms),
-                                 n.condition(condition), *self._offset_points(points, surface))
+                                 n.condition(condition), n.points(points),
+                                 None if surface is None else n.points(surface))
         return in_metres(n, points, disp, df, condition)
 
     def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor,
                       surface: torch.Tensor | None = None) -> torch.Tensor:
         """:meth:`force` from the scene's force terms: the change of force (B,) N
-        (``surface``: the scene's points, read by a network with head offsets only)."""
-        _, df = pressed_heads(self.model, HeadTerms(None, force_terms),
-                              self.norm.condition(condition),
-                              *self._offset_points(None, surface))
-        return newtons(df, self.norm, press_gate(self.norm, condition))
-
-    def _offset_points(self, points: torch.Tensor | None, surface: torch.Tensor | None
-                       ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
-        """``points`` and ``surface`` normalised, for a network with head offsets (the only
-        one that reads them); (None, None) otherwise."""
-        if self.model.offsets is None:
-            return None, None
-        if surface is None:
+        (``surface``: the scene's points, which a network with head offsets reads)."""
+        if self.model.offsets is not None and surface is None:
             raise ValueError("a network with head offsets reads the scene's points per press")
-        return (None if points is None else self.norm.points(points),
-                self.norm.points(surface))
+        _, df = pressed_heads(self.model, HeadTerms(None, force_terms),
+                              self.norm.condition(condition), None,
+                              None if surface is None else self.norm.points(surface))
+        return newtons(df, self.norm, press_gate(self.norm, condition))
 
 
 @dataclass(frozen=True)
@@ -215,9 +207,9 @@ ENTRIES = {
     "pressed": Entry("pressed", ("points", "disp_terms", "force_terms", "condition"),
                      ("deformed", "dforce")),
     "pressed_force": Entry("pressed_force", ("force_terms", "condition"), ("dforce",)),
-    # the same for a network with head offsets: it reads every point of the scene per press
-    "pressed_offsets": Entry("pressed", ("points", "disp_terms", "force_terms", "condition",
-                                         "surface"), ("deformed", "dforce")),
+    # a network with head offsets: in a region its force head reads every point of the scene
+    "pressed_region": Entry("pressed", ("points", "disp_terms", "force_terms", "condition",
+                                        "surface"), ("deformed", "dforce")),
     "pressed_force_offsets": Entry("pressed_force", ("force_terms", "condition", "surface"),
                                    ("dforce",)),
 }
@@ -226,20 +218,20 @@ PER_POINT = ("points", "neighbours", "disp_terms", "deformed", "surface")
 
 def entries(si: SIModel) -> tuple[str, ...]:
     """The entries a predictor of ``si`` runs: for a press-independent model a new scene
-    (its terms and first answer in one run, so one session runs per call) and the press
-    from known terms (:func:`press_entries`); otherwise the whole network and the force
-    alone."""
+    (its terms and first answer in one run, so one session runs per call), the press on the
+    whole of a known scene, and the press in a region and the force alone
+    (:func:`press_entries`); otherwise the whole network and the force alone."""
     if si.model.press_independent:
-        return ("new_scene", *press_entries(si))
+        return ("new_scene", "pressed", *press_entries(si))
     return ("full", "force")
 
 
 def press_entries(si: SIModel) -> tuple[str, str]:
-    """A press-independent model's entries for a press on a known scene: (both heads, the
-    force alone); a network with head offsets also reads the scene's points."""
+    """A press-independent model's entries for a press on part of a known scene and for the
+    force alone: a network with head offsets also reads the scene's points in both."""
     if si.model.offsets is None:
         return ("pressed", "pressed_force")
-    return ("pressed_offsets", "pressed_force_offsets")
+    return ("pressed_region", "pressed_force_offsets")
 
 
 class Call(nn.Module):

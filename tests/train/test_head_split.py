@@ -33,7 +33,7 @@ def test_surface_terms_plus_the_press_are_the_whole_heads(kw: dict) -> None:
     with torch.no_grad():
         disp, force = m(x, c, mask)
         terms = scene_terms(m, m.features(x, None, mask), mask)
-        split_disp, split_force = pressed_heads(m, terms, c, x, x)
+        split_disp, split_force = pressed_heads(m, terms, c, x)     # x: the whole scene
         force_only = pressed_heads(m, scene_terms(m, m.features(x, None, mask), mask, False), c,
                                    None, x)
     torch.testing.assert_close(split_disp, disp, atol=1e-5, rtol=1e-5)
