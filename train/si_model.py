@@ -170,10 +170,10 @@ class SIModel(nn.Module):
         in the same order): deformed points (B, N, 3) m and the change of force (B,) N.
         ``surface``: all the scene's points where ``points`` are a part of them and the
         network has head offsets (its force head pools every point's)."""
-        n = self.norm
+        n, offsets = self.norm, self.model.offsets is not None   # only they read the points
         disp, df = pressed_heads(self.model, HeadTerms(disp_terms, force_terms),
-                                 n.condition(condition), n.points(points),
-                                 None if surface is None else n.points(surface))
+                                 n.condition(condition), n.points(points) if offsets else None,
+                                 n.points(surface) if offsets and surface is not None else None)
         return in_metres(n, points, disp, df, condition)
 
     def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor,
