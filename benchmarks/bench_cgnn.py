@@ -143,7 +143,7 @@ def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> Non
     print(f"batch-1 latency through Predictor [ms] (median of >= 30); ratio = PyG peer / "
           f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; 'new' = a new mesh "
           "every call (nothing cached):")
-    for name, cfg in NETWORKS.items():     # the last (tip offsets) is profiled below
+    for name, cfg in NETWORKS.items():     # the last (tip offsets) is timed apart below
         torch.manual_seed(0)
         model = CGNN(cfg).to(device).eval()
         si = SIModel(model, NORM)

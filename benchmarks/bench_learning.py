@@ -144,6 +144,10 @@ def main() -> None:
     ap.add_argument("--table-only", action="store_true",
                     help="with --networks: only the side-by-side table, from a former run")
     a = ap.parse_args()
+    if a.table_only and not a.networks:
+        ap.error("--table-only prints the --networks table: name the networks")
+    if a.network and a.networks:
+        ap.error("--network or --networks, not both")
     for net in a.networks or [a.network]:
         if a.table_only:
             break

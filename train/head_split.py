@@ -57,19 +57,19 @@ def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = No
 
 
 def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor,
-                  points: torch.Tensor | None = None, surface: torch.Tensor | None = None
-                  ) -> tuple[torch.Tensor | None, torch.Tensor]:
+                  points: torch.Tensor | None = None, surface: torch.Tensor | None = None,
+                  mask: torch.Tensor | None = None) -> tuple[torch.Tensor | None, torch.Tensor]:
     """(displacement (B, n, 3) or None, change of force (B,)): the press's part of each head's
     first layer added to the surface's terms, then the rest of the head. ``terms`` come from
     :func:`scene_terms`, which checked the model: nothing is checked here, per press. With
     head offsets the press's part reads ``points`` (B, n, 3), those of ``terms.disp``, and the
     force head pools the offsets of ``surface`` (B, N, 3), every point of the scene, or of
     ``points`` where ``surface`` is None (they are the whole scene); normalised, as ``cond``
-    is."""
+    is. ``mask``: the scene's valid points, as :func:`scene_terms` was given them."""
     enc = model.encoded(points, cond) if points is not None else None
     pooled = None
     if model.offsets is not None:
-        pooled = pool(model.encoded(surface, cond) if surface is not None else enc, None)
+        pooled = pool(model.encoded(surface, cond) if surface is not None else enc, mask)
     force = _after(model.force_head, terms.force, cond, pooled)
     if terms.disp is None:
         return None, force.squeeze(-1)

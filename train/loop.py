@@ -260,7 +260,7 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
     norm = fit_normaliser(states, train, opts.seed)
     if init_state is not None:
         state = init_state
-        if state["config"] != config.to_dict():
+        if CGNNConfig.from_dict(state["config"]) != config:    # older ones lack new fields
             raise BadInput(init, "its network (widths, k or conditioning) differs from this "
                                  "run's: transfer learning needs the same network")
         model.load_state_dict(state["model"])
@@ -310,10 +310,11 @@ def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
 
 def _resumable(meta: dict) -> dict:
     """What a resumed run must share with the one it continues (more epochs may be asked;
-    an option a run from before it existed lacks takes its default)."""
+    an option or a network field a run from before it existed lacks takes its default)."""
     options = {**asdict(TrainOptions()), **meta["options"]}
     return {**{k: v for k, v in meta.items() if k not in ("variant", "notes")},  # derived
-            "options": {k: v for k, v in options.items() if k != "epochs"}}
+            "options": {k: v for k, v in options.items() if k != "epochs"},
+            "config": CGNNConfig.from_dict(meta["config"]).to_dict()}
 
 
 def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,

@@ -25,17 +25,16 @@ def _model(**kw) -> CGNN:
 def test_surface_terms_plus_the_press_are_the_whole_heads(kw: dict) -> None:
     """Per surface, each head's first layer without the press; per press, C's part (with
     head offsets also each point's offsets') and the rest: the plain heads' answer, with
-    missing points left out of the pooling (a surface with none missing: head offsets pool
-    the whole surface's, as the predictor does)."""
+    missing points left out of the pooling."""
     m = _model(**kw)
     x, c = torch.randn(2, 30, 3), torch.randn(2, 6)
-    mask = torch.rand(2, 30) > 0.2 if not kw.get("head_offsets") else None
+    mask = torch.rand(2, 30) > 0.2
     with torch.no_grad():
         disp, force = m(x, c, mask)
         terms = scene_terms(m, m.features(x, None, mask), mask)
-        split_disp, split_force = pressed_heads(m, terms, c, x)     # x: the whole scene
+        split_disp, split_force = pressed_heads(m, terms, c, x, None, mask)  # x: the whole scene
         force_only = pressed_heads(m, scene_terms(m, m.features(x, None, mask), mask, False), c,
-                                   None, x)
+                                   None, x, mask)
     torch.testing.assert_close(split_disp, disp, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(split_force, force, atol=1e-5, rtol=1e-5)
     assert force_only[0] is None

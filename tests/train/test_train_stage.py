@@ -59,6 +59,30 @@ def test_a_resumed_run_equals_an_uninterrupted_one(dent, tmp_path) -> None:
     assert load_checkpoint(tmp_path / "killed" / "last.pt")["epoch"] == 2
 
 
+def _as_before_head_offsets(path: Path) -> None:
+    """Rewrite a checkpoint as one saved before the network had head offsets: its config
+    (and its meta's) without the field."""
+    state = torch.load(path, weights_only=True)
+    for config in (state["config"], state["meta"]["config"]):
+        config.pop("head_offsets", None)          # (the two may be one dict)
+    torch.save(state, path)
+
+
+def test_a_checkpoint_from_before_head_offsets_resumes_and_fine_tunes(dent, tmp_path) -> None:
+    """A network field a checkpoint lacks takes its default: an old last.pt resumes, an old
+    best.pt starts transfer learning (the same network), instead of being refused."""
+    _train(dent, tmp_path / "old", epochs=1)
+    for name in ("best.pt", "last.pt"):
+        _as_before_head_offsets(tmp_path / "old" / name)
+    _train(dent, tmp_path / "old", epochs=2)                  # resumes at epoch 2
+    assert load_checkpoint(tmp_path / "old" / "last.pt")["epoch"] == 1
+    _as_before_head_offsets(tmp_path / "old" / "best.pt")
+    data, splits = dent
+    run_train(TrainInputs(data, splits, tmp_path / "old" / "best.pt"), tmp_path / "tl",
+              TrainParams(TrainOptions(epochs=1, batch=8), SMALL, "cpu"))
+    assert (tmp_path / "tl" / "best.pt").is_file()
+
+
 def test_same_seed_same_weights_other_seed_other_weights(dent, tmp_path) -> None:
     a = _weights(_train(dent, tmp_path / "a", epochs=1, seed=3))
     b = _weights(_train(dent, tmp_path / "b", epochs=1, seed=3))
