@@ -260,7 +260,8 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
     norm = fit_normaliser(states, train, opts.seed)
     if init_state is not None:
         state = init_state
-        if CGNNConfig.from_dict(state["config"]) != config:    # older ones lack new fields
+        if CGNNConfig.from_dict(state["config"]).to_dict() != config.to_dict():  # an older
+            #                                         one lacks new fields: their defaults
             raise BadInput(init, "its network (widths, k or conditioning) differs from this "
                                  "run's: transfer learning needs the same network")
         model.load_state_dict(state["model"])
