@@ -13,7 +13,7 @@ Measured in one run, medians over repeats:
   pressed again (same points, new press: the predictor's scene is known), ``predict`` on a new
   mesh every call (nothing kept), and the peer behind the same SI numpy interface; the ratio
   is peer / ours. The paper's network reads the press in its heads only, so on a known mesh
-  only its heads run (:mod:`train.predictor`); with tip offsets the whole network runs;
+  only its heads run (:mod:`train.inference.predictor`); with tip offsets the whole network runs;
 - where a warm ``predict`` of the tip-offset network spends its time: the predictor's checks
   against the network, and the network's heaviest operators (ONNX Runtime's profiler);
 - training samples/s at batch 32 x 1024 points (forward, backward, Adam step), the part of a
@@ -41,11 +41,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from train.model import CGNN, CGNNConfig
-from train.normalise import Normaliser
-from train.predictor import DEFAULT_REGION, Predictor
-from train.recipes import HEAD_OFFSETS
-from train.si_model import ENTRIES, SIModel, deformed, newtons, to_onnx
+from train.inference.predictor import DEFAULT_REGION, Predictor
+from train.inference.si_model import ENTRIES, SIModel, to_onnx
+from train.model.cgnn import CGNN
+from train.model.config import CGNNConfig
+from train.model.normalise import Normaliser
+from train.model.si_units import deformed, newtons
 
 
 def pyg_knn_edges(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -128,8 +129,8 @@ class PeerPredictor:
 
 # The networks timed: the tip's offsets nowhere, in the heads, in the first layer
 NETWORKS = {"the paper's network": CGNNConfig(),
-            "head offsets": CGNNConfig(head_offsets=HEAD_OFFSETS),
-            "tip offsets": CGNNConfig(tip_offsets=True)}
+            "head offsets": CGNNConfig(offsets="heads"),
+            "tip offsets": CGNNConfig(offsets="graph")}
 
 
 READS = {True: "its graph layers read the press: every press runs them",
@@ -149,7 +150,7 @@ def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> Non
         si = SIModel(model, NORM)
         ours = {b: Predictor(si, device, b) for b in backends}
         them = PeerPredictor(PygPeer(model).to(device).eval(), device)
-        print(f" {name} ({READS[cfg.tip_offsets]}):")
+        print(f" {name} ({READS[not cfg.offsets.press_independent]}):")
         for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
             row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
             ratio = {what: row["PyG peer"] / row[f"{backends[0]} {what}"]
@@ -282,7 +283,7 @@ def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
           f"  ratio {ms['PyG peer'] / ms['ours']:5.2f}x; per step: ours {ms['ours']:.0f} ms, "
           f"peer {ms['PyG peer']:.0f} ms, shared by both (heads, loss, Adam) {ms['shared']:.0f}"
           f" ms: with free graph layers the ratio could reach {ms['PyG peer'] / ms['shared']:.1f}x")
-    if device.type == "cpu" and model.config.head_offsets:     # the recipe's network
+    if device.type == "cpu" and model.offsets.in_heads:     # the recipe's network
         profile_step(model, x, c, y, f)
 
 

@@ -1,11 +1,11 @@
 """Does the model learn? The quick demo's protocol on several twin seeds, scored beside the
-predictors that learn nothing (issue 16's table), so anyone can re-measure it.
+predictors that learn nothing (docs/results.md, Learning), so anyone can re-measure it.
 
     python benchmarks/bench_learning.py --seeds 0 1 2 [--out /tmp/bench_learning] [--jobs 2]
     python benchmarks/bench_learning.py --network paper --out /tmp/bench_paper_network
     python benchmarks/bench_learning.py --networks head-offsets tip-offsets paper --seeds 0 1 2
 
-The demo trains with the recipe ``ours`` (:mod:`train.recipes`, ``pipeline train --recipe
+The demo trains with the recipe ``ours`` (:mod:`train.training.recipes`, ``pipeline train --recipe
 ours``). ``--network`` runs another network with the rest of the recipe (``pipeline demo
 --network``: the tip's offsets in the heads or in the first layer, or the paper's network):
 what each costs in accuracy beside what it costs in time (docs/results.md).
@@ -41,8 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from pipeline.demo_plan import NETWORKS  # noqa: E402
 from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
-from train.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
-from train.scarcity import curve  # noqa: E402
+from train.evaluation.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
+from train.evaluation.scarcity import curve  # noqa: E402
 
 
 def run_demo(out: Path, seed: int, jobs: int | None, extra: tuple[str, ...] = ()) -> float:

@@ -3,8 +3,9 @@
 For each seed: synthesise a session (5 locations x 4 repeats), ingest it, sync it with the
 trigger clock and with the data-driven clock, and compare both with the twin's truth; and the
 same seed with the force through the mocap's analog board (``--force-via analog``: one shared
-clock, nothing to estimate). Prints the median and worst error over seeds against the issue's
-targets, and the ratios against peers measured in the same run:
+clock, nothing to estimate). Prints the median and worst error over seeds against sync's
+accuracy targets (:data:`sync.sync_accuracy.TARGETS`), and the ratios against peers measured
+in the same run:
 
 * clock: the data-driven estimate against the trigger (error ratio);
 * force: our anti-aliased resampler against naive decimation (the logger sample nearest each

@@ -30,6 +30,7 @@ import scipy.sparse.linalg as spla
 
 from ingest.ingest_stage import run_ingest
 from sim.twin.phantom import Phantom
+from sim.twin.synth_params import SynthParams
 from sim.twin.synth_stage import write_twin
 from sim.twin.twin import simulate_twin
 from sim.twin.twin_scene import TwinParams
@@ -95,7 +96,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "session"
         sim_s, twin = median_time(lambda: simulate_twin(TwinParams(seed=0)), args.repeats)
-        write_s, _ = median_time(lambda: write_twin(twin, folder), args.repeats)
+        write_s, _ = median_time(lambda: write_twin(twin, folder, SynthParams(seed=0)),
+                                 args.repeats)
         read_s, _ = median_time(lambda: run_ingest(folder, Path(tmp) / "s.mcap"),
                                 args.repeats)
         frames = len(twin.mocap.time_s)

@@ -28,8 +28,8 @@ import numpy as np
 from speed_accuracy_report import extremes_text
 
 from train.data import SETS
-from train.evaluate import load_run
-from train.predictor import Predictor
+from train.evaluation.evaluate import load_run
+from train.inference.predictor import Predictor
 
 Example = tuple[np.ndarray, np.ndarray, np.ndarray, float]   # points, target, C, dF
 SHIFTS_MM = (0.0, 1.0, 10.0, 50.0, 200.0, 1000.0)

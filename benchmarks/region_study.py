@@ -1,8 +1,8 @@
 """Region of interest: what running the cGNN near the press only buys in time and costs in error.
 
 An MSM model is trained on the 32 x 32 grid (1024 points), with the recipe of docs/model.md's
-"Training that learns" (``ours``, :mod:`train.recipes`: head offsets, balanced loss, rotation,
-lr 2e-3; without its average of the weights, as measured), or taken from ``--run``
+"Training that learns" (``ours``, :mod:`train.training.recipes`: head offsets, balanced loss,
+rotation, lr 2e-3; without its average of the weights, as measured), or taken from ``--run``
 (a run trained elsewhere, e.g. on a GPU). Presses it never saw are simulated on the same surface
 and sampled at its 1024 masses and at a 64 x 64 lattice (4096 points, the same physics seen
 denser; the model never trained at that density, so its error there is the whole model's too).
@@ -39,9 +39,10 @@ from sim.msm.msm_protocol import Protocol, draw_plan
 from sim.msm.msm_simulate import simulate_plan
 from sim.msm.simulate_stage import generate
 from split.split_stage import build_manifest, default_plan, write_manifest
-from train.predictor import Predictor
-from train.recipes import OURS
-from train.train_stage import TrainInputs, TrainParams, run_train
+from train.inference.predictor import Predictor
+from train.training.recipes import OURS
+from train.training.train_params import TrainInputs, TrainParams
+from train.training.train_stage import run_train
 
 RADII_MM = (5, 10, 15, 20, 30, 45)
 TOLERANCE = 0.05          # the default radius changes mean L_d by less than this

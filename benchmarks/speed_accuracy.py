@@ -53,14 +53,16 @@ from core.progress import set_quiet
 from sim.msm.msm import MSMParams
 from sim.msm.msm_protocol import Protocol
 from sim.msm.simulate_stage import generate
-from train.augment import about_normal, move_batch, tilt
 from train.data import Batch
-from train.evaluate import LoadedRun, example_errors, load_run, metrics
-from train.loop import TrainOptions
-from train.model import CGNN, CGNNConfig
-from train.predictor import Predictor
-from train.si_model import Prediction, SIModel, predict
-from train.train_stage import TrainInputs, TrainParams, run_train
+from train.evaluation.evaluate import LoadedRun, example_errors, load_run, metrics
+from train.inference.predictor import Predictor
+from train.inference.si_model import SIModel
+from train.model.cgnn import CGNN
+from train.model.config import CGNNConfig
+from train.model.si_units import Prediction, predict
+from train.training.augment import about_normal, move_batch, tilt
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+from train.training.train_stage import run_train
 
 HAPTIC_MS = 1.0          # a 1 kHz haptic loop's whole budget
 VISUAL_MS = 1000 / 60    # one 60 Hz frame

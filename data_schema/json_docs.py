@@ -58,7 +58,6 @@ FOLDS = JsonSchema("phantom.folds", "2.0", {
 })
 ROLES = ("train", "val", "test")
 SETS = ("single", "multi")
-JSON_SCHEMAS = {s.name: s for s in (MSM_PARAMS, FOLDS)}
 
 
 def validate_json_doc(path: str | Path, schema: JsonSchema) -> dict[str, Any]:
@@ -129,7 +128,8 @@ METRICS = JsonSchema("phantom.metrics", "1.1", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
-# The predictors that learn nothing (train/references.py), by the names a document keys them by
+# The predictors that learn nothing (train/evaluation/references.py), by the names a document keys
+# them by
 NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR = "nothing moves", "nearest press", "force, linear"
 REFERENCES = (NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR)
 _NUMBER = (int, float)

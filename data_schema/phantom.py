@@ -48,7 +48,8 @@ class PhantomLayout:
 
     @classmethod
     def from_json(cls, d: dict | None) -> PhantomLayout:
-        """Back from :meth:`as_json`; ``None`` (a file from before layouts) is the default."""
+        """Back from :meth:`as_json`; ``None`` (a file with no layout: a synced file of version
+        1.2) is the default."""
         if d is None:
             return cls()
         return cls(size_m=tuple(d["size_m"]), x_axis=_pair(d.get("x_axis")),

@@ -1,4 +1,5 @@
-"""Every schema the pipeline knows, by name, so a file's `schema` attribute finds its check."""
+"""Every schema the pipeline knows, by name, so a file's `schema` attribute (an HDF5 file's) or
+key (a JSON document's) finds its check."""
 
 from __future__ import annotations
 
@@ -7,6 +8,15 @@ from pathlib import Path
 from typing import Any
 
 from data_schema.hdf5 import H5Schema, validate_h5
+from data_schema.json_docs import (
+    FOLDS,
+    METRIC_ROWS,
+    METRICS,
+    MSM_PARAMS,
+    validate_folds,
+    validate_json_doc,
+    validate_metrics,
+)
 from data_schema.raw_mcap import RAW_MCAP, McapLayout
 from data_schema.states import STATES, validate_states
 from data_schema.synced import SYNCED, validate_synced
@@ -31,3 +41,20 @@ VALIDATORS: dict[str, Callable[[str | Path], Any]] = {
 def validator_for(name: str) -> Callable[[str | Path], Any] | None:
     """The check of a file whose ``schema`` attribute is ``name``, if the pipeline knows it."""
     return VALIDATORS.get(name)
+
+
+# The full check of each JSON document the pipeline writes, by its schema name.
+JSON_VALIDATORS: dict[str, Callable[[str | Path], Any]] = {
+    FOLDS.name: validate_folds, METRICS.name: validate_metrics,
+    MSM_PARAMS.name: lambda path: validate_json_doc(path, MSM_PARAMS),
+}
+
+
+def json_validator_for(doc: dict[str, Any]) -> Callable[[str | Path], Any] | None:
+    """The check of the JSON document ``doc`` by its ``schema`` name, if the pipeline knows
+    it. A document without one that holds the metrics tables is a metrics document older than
+    ``phantom.metrics`` 1.0: the metrics check, which says to re-run eval."""
+    if "schema" in doc:
+        name = doc["schema"]
+        return JSON_VALIDATORS.get(name) if isinstance(name, str) else None
+    return validate_metrics if set(METRIC_ROWS) <= set(doc) else None

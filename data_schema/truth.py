@@ -18,7 +18,7 @@ is the force the indenter exerts on the phantom.
 ``states`` are the true static states at every 0.5 N of each press's loading phase (step 0 is
 the untouched surface at contact), exactly as the phantom model solved them.
 
-Version 1.1: any number of phantom markers (1.0 always had 25).
+Version 1.1: any number of phantom markers (a 1.0 file has 25).
 """
 
 from data_schema.hdf5 import Dataset, H5Schema

@@ -2,5 +2,6 @@
 
 The math (:mod:`extract.static_states` per press, :mod:`extract.phantom_frame`,
 :mod:`extract.extract` over sessions), the synced files read (:mod:`extract.synced_presses`),
-the stage runner (:mod:`extract.extract_stage`) and the view (:mod:`extract.extract_view`).
+the settings (:mod:`extract.extract_params`), the stage runner (:mod:`extract.extract_stage`)
+and the view (:mod:`extract.extract_view`).
 """

@@ -23,7 +23,8 @@ import numpy as np
 from core.errors import BadInput
 from core.progress import progress
 from core.protocol import STEP_N
-from extract.static_states import ExtractParams, Press, PressStates, example_pairs, press_states
+from extract.extract_params import ExtractParams
+from extract.static_states import Press, PressStates, example_pairs, press_states
 from extract.synced_presses import Session
 
 

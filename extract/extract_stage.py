@@ -21,8 +21,8 @@ from core.provenance import make_provenance
 from data_schema.hdf5 import write_h5
 from data_schema.states import STATES, validate_states
 from extract.extract import Extracted, extract
+from extract.extract_params import ExtractParams
 from extract.extract_view import write_extract_recording
-from extract.static_states import ExtractParams
 from extract.synced_presses import read_synced
 
 
@@ -35,7 +35,7 @@ def run_extract(inputs: Sequence[str | Path], out: str | Path,
     sessions = [read_synced(path, params.size_m) for path in synced]
     ex = extract(sessions, params)
     first = sessions[0]
-    prov = make_provenance("extract", _recorded(params), synced, STATES.name, STATES.version)
+    prov = make_provenance("extract", asdict(params), synced, STATES.name, STATES.version)
     attrs = {**_attrs(ex, params, prov), "point_names": json.dumps(first.point_names),
              "footprint_m": np.asarray(first.layout.size_m, dtype=float)}
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
@@ -44,12 +44,6 @@ def run_extract(inputs: Sequence[str | Path], out: str | Path,
         if tmp_rrd is not None:
             write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m)
     return ex
-
-
-def _recorded(params: ExtractParams) -> dict[str, Any]:
-    """The settings the provenance records: every one but ``shared_locations`` (which it
-    has never recorded; adding it would change the bytes of every states file)."""
-    return {k: v for k, v in asdict(params).items() if k != "shared_locations"}
 
 
 def _attrs(ex: Extracted, params: ExtractParams, provenance: dict) -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 The rest plane is sync's (``calibration/surface_point``, ``surface_normal``); the in-plane axis
 and the origin come from the phantom's layout, the file's ``phantom`` attribute
-(:mod:`extract.phantom_frame`); a file from before layouts has the paper's 100 mm square grid.
+(:mod:`extract.phantom_frame`); a 1.2 file, which has no such attribute, has the paper's
+100 mm square grid.
 """
 
 from __future__ import annotations

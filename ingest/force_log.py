@@ -99,10 +99,13 @@ def force_log_columns(path: str | Path) -> list[str]:
 
 def _pick_time(path: str | Path, t: LogTable, time_column: str | None,
                rate_hz: float | None) -> str | None:
-    """The time column's name (the named one; for the default name "time", else the layout's
-    own), or None for a log timed by its rate."""
+    """The time column's name (the named one, or the layout's own for the default name "time"
+    or the file's own name for it, such as a model's ``tout``), or None for a log timed by
+    its rate."""
     if time_column is not None and time_column in t.columns:
         return time_column
+    if time_column is not None and time_column == t.time_alias and t.time is not None:
+        return t.time
     if time_column in (None, "time"):
         if t.time is not None:
             return t.time

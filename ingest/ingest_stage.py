@@ -11,7 +11,7 @@ succeeds; inputs are only read.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 from core.atomic import atomic_outputs, same_path
@@ -32,23 +32,17 @@ from ingest.analog import samples_per_frame
 from ingest.ati_cal import read_ati_cal
 from ingest.detect import detect_format, read_mocap
 from ingest.force_source import read_force
+from ingest.ingest_params import IngestParams
 from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
 from ingest.qtm_6d import read_qtm_6d
-
-
-@dataclass(frozen=True)
-class IngestParams:
-    """Every setting of ``pipeline ingest``."""
-
-    compression: str = "none"     # of the MCAP chunks: none (fast) or zstd (about half the size)
 
 
 def run_ingest(inputs: str | Path, out: str | Path, params: IngestParams | None = None,
                rrd: str | Path | None = None) -> RawSession:
     """Read, check and store the session in the folder ``inputs`` as the MCAP ``out``;
     ``rrd`` also writes the recording."""
-    folder, compression = inputs, (params or IngestParams()).compression
+    folder, params = inputs, params or IngestParams()
     cfg = read_session(folder)
     inputs = session_inputs(cfg)
     if rrd is not None and same_path(out, rrd):
@@ -56,15 +50,14 @@ def run_ingest(inputs: str | Path, out: str | Path, params: IngestParams | None 
     clash = [p for p in inputs if any(same_path(p, o) for o in (out, rrd) if o is not None)]
     if clash:
         raise BadInput(clash[0], "output would overwrite an input file")
-    params = {"session_dir": str(folder), "out": str(out),
-              "rrd": None if rrd is None else str(rrd), "compression": compression}
     # Hashing the inputs (hashlib frees the GIL) overlaps with parsing them: ~15% faster.
     with ThreadPoolExecutor(max_workers=1) as pool:
-        provenance = pool.submit(make_provenance, "ingest", params, inputs, SCHEMA, VERSION)
+        provenance = pool.submit(make_provenance, "ingest", asdict(params), inputs, SCHEMA,
+                                 VERSION)
         session = load_session(cfg)
         session.provenance = provenance.result()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
-        write_raw_mcap(tmp_out, session, {"provenance": session.provenance}, compression)
+        write_raw_mcap(tmp_out, session, {"provenance": session.provenance}, params.compression)
         validate_raw_mcap(tmp_out, deep=False)   # blocks are checked on every read
         if tmp_rrd is not None:
             write_ingest_recording(session, tmp_rrd)

@@ -18,15 +18,9 @@ from core.recording import rrd_entities, rrd_has_blueprint
 from core.series import RawSession
 from core.text import one_line
 from data_schema.hdf5 import h5_reading
-from data_schema.json_docs import (
-    JSON_SCHEMAS,
-    METRIC_ROWS,
-    validate_folds,
-    validate_json_doc,
-    validate_metrics,
-)
+from data_schema.json_docs import FOLDS
 from data_schema.raw_mcap import open_reader, read_index, reading
-from data_schema.registry import validator_for
+from data_schema.registry import json_validator_for, validator_for
 from ingest.inspect_lab import calibration_summary, duration_s, marker_summary, plain_value
 from ingest.mcap_io import read_raw_mcap
 
@@ -123,15 +117,13 @@ def inspect_json(path: Path) -> dict[str, Any]:
     if not isinstance(doc, dict):
         return {"details": {"value": one_line(doc)}}
     details = {"keys": sorted(k for k in doc if k != "provenance")}
-    if doc.get("schema") == "phantom.folds":
-        details["valid"] = _valid(lambda: validate_folds(path))
+    check = json_validator_for(doc)
+    if check is not None:
+        details["valid"] = _valid(lambda: check(path))
+    if doc.get("schema") == FOLDS.name:
         details["folds"] = [{r: len(f[r]["groups"]) for r in ("train", "val", "test")
                              if isinstance(f, dict) and isinstance(f.get(r), dict)}
                             for f in doc.get("folds", [])]
-    elif doc.get("schema") in JSON_SCHEMAS:
-        details["valid"] = _valid(lambda: validate_json_doc(path, JSON_SCHEMAS[doc["schema"]]))
-    elif set(METRIC_ROWS) <= set(doc):
-        details["valid"] = _valid(lambda: validate_metrics(path))
     return {"schema": doc.get("schema"), "schema_version": doc.get("schema_version"),
             "provenance": doc.get("provenance"), "details": details}
 

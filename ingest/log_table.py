@@ -39,6 +39,8 @@ class LogTable:
     where: Where = row_where
     units: dict[str, str] = field(default_factory=dict)    # units the file states, per column
     time: str | None = None                  # the column the layout knows to be time
+    time_alias: str | None = None            # the file's own name for it (a model's tout),
+                                             # which session.toml's time_column may give
     time_unit: str | None = None             # the unit the file states for it
     rate_hz: float | None = None             # the rate the file states (no time column)
     details: dict[str, Any] = field(default_factory=dict)  # what inspect shows

@@ -295,15 +295,19 @@ def _candidates(path: str | Path, variables: dict[str, Any]) -> dict[str, LogTab
 
 
 def _tout_yout(path: str | Path, variables: dict[str, Any]) -> LogTable:
+    """A model's default outputs: ``yout`` (an array, or a Structure With Time) timed by
+    ``tout``, which session.toml's ``time_column`` may name."""
     yout = variables["yout"]
     if isinstance(yout, dict):
         t = _as_table(path, "yout", yout)
         if t is None:
             raise BadInput(path, "yout is a struct without time and signals")
-        return t
-    values = _signals(path, yout, "yout")
-    return _numbered("tout + yout", _signals(path, variables["tout"], "tout"), values, None,
-                     {"variable": "tout, yout"})
+    else:
+        t = _numbered("tout + yout", _signals(path, variables["tout"], "tout"),
+                      _signals(path, yout, "yout"), None, {"variable": "tout, yout"})
+    if t.time is not None:
+        t.time_alias = "tout"
+    return t
 
 
 def _at(path: str | Path, variables: dict[str, Any], variable: str) -> LogTable:

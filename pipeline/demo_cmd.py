@@ -21,8 +21,9 @@ from pathlib import Path
 import click
 
 from pipeline.demo_plan import NETWORKS, PAPER, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
-from pipeline.options import SIZE_MM, finite_float, seed_option
+from pipeline.options import seed_option
 from pipeline.stage_cache import is_fresh, write_stamp
+from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 
 
 @click.command()
@@ -43,19 +44,19 @@ from pipeline.stage_cache import is_fresh, write_stamp
               help="Train this network with the rest of the recipe [default: the recipe's]: "
                    "the tip's offsets in the heads or in the first layer, or the paper's "
                    "(docs/results.md compares them; docs/model.md, Latency).")
-@click.option("--markers", default=Lab.markers, show_default=True,
+@click.option("--markers", type=MARKERS, default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
-@click.option("--marker-pitch", type=finite_float(0, min_open=True, unit="mm"),
+@click.option("--marker-pitch", type=MARKER_PITCH_MM,
               default=Lab.marker_pitch_mm, show_default=True, help="A grid's pitch (mm).")
-@click.option("--size", type=SIZE_MM, default=Lab.size_mm, show_default=True,
+@click.option("--size", type=SIZE, default=Lab.size_mm, show_default=True,
               help="The twin lab's phantom footprint LxW (mm).")
-@click.option("--mocap-rate", type=finite_float(0, min_open=True, unit="Hz"),
+@click.option("--mocap-rate", type=MOCAP_RATE,
               default=Lab.mocap_rate_hz, show_default=True, help="The twin lab's mocap rate.")
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
          device: str, jobs: int | None, network: str | None, markers: str,
-         marker_pitch: float, size: tuple[float, float], mocap_rate: float, seed: int) -> None:
+         marker_pitch: float, size: str, mocap_rate: float, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
@@ -74,7 +75,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     settings = SMOKE if smoke else QUICK if quick else PAPER
     jobs = jobs or (1 if _on_gpu(device) else _cores())
     started = time.perf_counter()
-    lab = Lab(markers, marker_pitch, "x".join(f"{v * 1e3:g}" for v in size), mocap_rate)
+    lab = Lab(markers, marker_pitch, size, mocap_rate)
     steps = demo_steps(out, seed, settings, device,
                        NETWORKS[network] if network else RECIPE, lab)
     for batch in _batches(steps):

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sim.msm import paper
-from train.recipes import HEAD_OFFSETS
 
 
 @dataclass(frozen=True)
@@ -58,18 +57,19 @@ class Settings:
     fit_sequences: int = 6           # training presses fitted per fold
 
 
-# The recipe the measurements support (docs/model.md, "Training that learns"; train/recipes.py):
-# the tip's offsets in the heads, the balanced loss, rotation augmentation, the weights'
-# average; its step size is the settings' (--lr below overrides the recipe's).
+# The recipe the measurements support (docs/model.md, "Training that learns";
+# train/training/recipes.py): the tip's offsets in the heads, the balanced loss, rotation
+# augmentation, the weights' average; its step size is the settings' (--lr below overrides the
+# recipe's).
 RECIPE = ("--recipe", "ours")
 # The networks the demo can train, each with the rest of the recipe (docs/results.md compares
 # them): the tip's offsets in the heads (the recipe's: graph layers that do not read the
 # press, so a mesh pressed again runs the heads alone), in the first layer (every layer reads
 # the press), or nowhere (the paper's network: as fast as the first, less accurate).
 NETWORKS = {
-    "head-offsets": (*RECIPE, "--no-tip-offsets", "--head-offsets", str(HEAD_OFFSETS)),
-    "tip-offsets": (*RECIPE, "--tip-offsets", "--head-offsets", "0"),
-    "paper": (*RECIPE, "--no-tip-offsets", "--head-offsets", "0"),
+    "head-offsets": (*RECIPE, "--offsets", "heads"),
+    "tip-offsets": (*RECIPE, "--offsets", "graph"),
+    "paper": (*RECIPE, "--offsets", "none"),
 }
 # quick: per fold a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on
 # 3 training presses: five folds' fits, MSM sets and pre-training cost about twice what the

@@ -1,7 +1,7 @@
 """The demo's summary: every result beside its target, so a miss is impossible to overlook.
 
-Targets (issues 16 and 21; the references are the predictors that learn nothing, scored on
-the same test examples, :mod:`train.references`):
+Targets (the references are the predictors that learn nothing, scored on the same test
+examples, :mod:`train.evaluation.references`):
 
 - sync against the twin's truth (:data:`sync.sync_accuracy.TARGETS`);
 - the MSM fitted per fold at most half as far from that fold's training presses as a still
@@ -142,7 +142,7 @@ def scarcity_rows(out: Path) -> list[dict]:
 
 
 def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
-    from train.scarcity import curve
+    from train.evaluation.scarcity import curve
 
     rows = scarcity_rows(out)
     if not rows:

@@ -1,4 +1,4 @@
-"""``pipeline eval``: the click layer over :func:`train.eval_stage.run_eval`."""
+"""``pipeline eval``: the click layer over :func:`train.evaluation.eval_stage.run_eval`."""
 
 from __future__ import annotations
 
@@ -42,8 +42,9 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     press's displacement; force linear in the tip's motion), on the same test examples, with
     its gain over the best of them.
     """
-    from train.eval_stage import EvalParams, run_eval
-    from train.evaluate import not_beating
+    from train.evaluation.eval_params import EvalParams
+    from train.evaluation.eval_stage import run_eval
+    from train.evaluation.evaluate import not_beating
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     result, table = run_eval(runs, out, EvalParams(device, scarcity, scarcity_epochs,

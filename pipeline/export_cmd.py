@@ -1,4 +1,4 @@
-"""``pipeline export``: the click layer over :func:`train.export_stage.run_export`."""
+"""``pipeline export``: the click layer over :func:`train.inference.export_stage.run_export`."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ def export(run: Path, onnx_path: Path) -> None:
     outputs `deformed` (1, N, 3) m and `dforce` (1,) N; normalisation is inside the graph;
     the metadata hold the guards the graph lacks, the training envelope and the provenance.
     """
-    from train.export_stage import ExportParams, run_export
+    from train.inference.export_params import ExportParams
+    from train.inference.export_stage import run_export
 
     run_export(run, onnx_path, ExportParams())
     click.echo(f"{onnx_path}: ONNX model of {run}")

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import click
 
 from core.text import count
-from extract.static_states import ExtractParams
+from extract.extract_params import ExtractParams
 from pipeline.options import SIZE_MM, finite_float, resolve_rrd, rrd_option, seed_option
 
 D = ExtractParams           # the option defaults are its fields'
@@ -26,15 +26,16 @@ if TYPE_CHECKING:
               show_default=True,
               help="Force level spacing, N: at least 3 x the force noise sync measured (and "
                    "1/320 N, a Nano17's resolution), at most the largest peak force.")
-@click.option("--max-speed", type=click.FloatRange(min=0, min_open=True), default=D.max_speed,
+@click.option("--max-speed", type=finite_float(0, min_open=True, unit="m/s"),
+              default=D.max_speed,
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
-@click.option("--half-window-ms", type=click.FloatRange(min=0, min_open=True),
+@click.option("--half-window-ms", type=finite_float(0, min_open=True, unit="ms"),
               default=D.half_window_s * 1e3, show_default=True,
               help="Frames within this of a level's instant are fitted.")
 @click.option("--phantom-size", type=SIZE_MM, default=D.size_m,
               help="Phantom footprint LxW in mm, overriding session.toml's [phantom] size_mm "
                    "(which sync keeps in the synced file; default 100x100).")
-@click.option("--shared-locations", is_flag=True,
+@click.option("--shared-locations", is_flag=True, default=D.shared_locations,
               help="The synced files' location ids name the same places in every session.")
 @seed_option
 @rrd_option

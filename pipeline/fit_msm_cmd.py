@@ -14,7 +14,9 @@ from pipeline.options import (
     rrd_option,
     seed_option,
 )
+from pipeline.simulate_cmd import CONTACT_RADIUS
 from sim.msm.fit_msm_params import FitMsmParams
+from sim.msm.msm_fit import K_MAX, K_MIN
 
 D = FitMsmParams            # the option defaults are its fields'
 OUT = click.Path(dir_okay=False, path_type=Path)
@@ -30,11 +32,11 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
               help="Fold manifest of STATES: fit on the training presses of --fold only, so "
                    "the fit never sees that fold's test presses.")
 @click.option("--fold", type=bounded_int(0), default=D.fold, show_default=True)
-@click.option("--start", nargs=2, type=finite_float(unit="N/m"),
+@click.option("--start", nargs=2, type=finite_float(K_MIN, K_MAX, unit="N/m"),
               default=D.start,
               show_default=True,
               help="Starting k_between k_fixed (N/m; the paper's constants).")
-@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
+@click.option("--contact-radius", type=CONTACT_RADIUS,
               default=D.contact_radius,
               help="Share the load among the masses within this radius (m) of the tip "
                    "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "

@@ -6,14 +6,17 @@ from pathlib import Path
 
 import click
 
+from ingest.ingest_params import IngestParams
 from pipeline.options import resolve_rrd, rrd_option
+
+D = IngestParams            # the option defaults are its fields'
 
 
 @click.command()
 @click.argument("session_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="MCAP file to write (raw streams, each on its own clock).")
-@click.option("--zstd", is_flag=True,
+@click.option("--zstd", is_flag=True, default=D.compression == "zstd",
               help="zstd-compress the MCAP chunks: about half the size, ingest ~2x slower.")
 @rrd_option
 def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: bool) -> None:
@@ -27,7 +30,7 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
     provenance metadata) and a rerun recording of the raw trajectories and force (--rrd,
     default beside --out). Inputs are never modified; nothing is written on bad input.
     """
-    from ingest.ingest_stage import IngestParams, run_ingest
+    from ingest.ingest_stage import run_ingest
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     s = run_ingest(session_dir, out, IngestParams(compression="zstd" if zstd else "none"),

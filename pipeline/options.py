@@ -171,6 +171,27 @@ def bounded_int(min: int | None = None, max: int | None = None,  # noqa: A002
     return BoundedInt(min, max, unit, why)
 
 
+class Parsed(click.ParamType):
+    """Text that the command's own parser reads (``parse``, refusing in one line with
+    :class:`~core.errors.BadInput`), checked as the options are parsed rather than when the
+    stage reaches it. The value is what ``parse`` returns, or with ``keep_text`` the text
+    itself (the settings hold the text; the parse only checks it)."""
+
+    def __init__(self, name: str, parse: Callable[[str], Any], keep_text: bool = False) -> None:
+        self.name, self.parse, self.keep_text = name, parse, keep_text
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        """``value`` parsed (or checked), or BadInput naming what is wrong."""
+        if not isinstance(value, str):          # a default already in its parsed form
+            return value
+        parsed = self.parse(value)
+        return value if self.keep_text else parsed
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return self.name
+
+
 MAX_SIZE_MM = 2000.0     # no phantom pressed by hand is larger (and the states file's limit
                          # of plausible metres is 5 m)
 

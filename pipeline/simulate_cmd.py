@@ -10,18 +10,22 @@ import click
 from pipeline.options import (
     SIZE_MM,
     SPACING_MM,
+    Parsed,
     bounded_int,
     finite_float,
     resolve_rrd,
     rrd_option,
     seed_option,
 )
+from sim.msm.msm_protocol import CONTACT_RADIUS_LIMIT_M, MAX_ANGLE_RANGE_DEG, parse_shard
 from sim.msm.simulate_params import SimulateParams
 
 D = SimulateParams          # the option defaults are its fields'
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
+# the contact patch's radius, as the protocol takes it (fit-msm's too: its fit is simulated)
+CONTACT_RADIUS = finite_float(0, CONTACT_RADIUS_LIMIT_M, max_open=True, unit="m")
 
 
 @click.command()
@@ -59,7 +63,7 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
                    "(phantom.msm_params JSON): overrides --k-between, --k-fixed and "
                    "--contact-radius, and brings the grid they were fitted on (a --size, "
                    "--spacing-mm or --layout footprint asking for another is refused).")
-@click.option("--contact-radius", type=finite_float(0, 0.05, unit="m"),
+@click.option("--contact-radius", type=CONTACT_RADIUS,
               default=D.contact_radius, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
                    "one: the indenter's contact patch (0: one mass, the paper's n_n = 1).")
@@ -69,7 +73,8 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
                    "named by its point_names), with the loaded patch's centre as the tip (the "
                    "last point), and load only inside the markers' bounding box: the graph the "
                    "network is fine-tuned on.")
-@click.option("--max-angle", type=finite_float(0, 90, unit="deg"), default=D.max_angle_deg,
+@click.option("--max-angle", type=finite_float(*MAX_ANGLE_RANGE_DEG, unit="deg"),
+              default=D.max_angle_deg,
               show_default=True,
               help="Largest angle of a force direction from the normal (degrees).")
 @click.option("--tol", type=finite_float(1e-9, 1e-2, unit="N",
@@ -82,7 +87,7 @@ SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
                    "stored (max_residual_N, stored_residual_N).")
 @click.option("--workers", type=bounded_int(0), default=D.workers,
               help="Processes (default: the cores this process may use).")
-@click.option("--shard", metavar="I/N", default=D.shard,
+@click.option("--shard", type=Parsed("I/N", parse_shard, keep_text=True), default=D.shard,
               help="Simulate only block I (0-based) of N contiguous blocks of locations.")
 @click.option("--merge", is_flag=True,
               help="Join the SHARDS files of one sharded run into --out instead of simulating.")

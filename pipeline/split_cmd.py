@@ -6,27 +6,31 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import resolve_rrd, rrd_option, seed_option
-from split.split import SplitParams
+from pipeline.options import Parsed, bounded_int, resolve_rrd, rrd_option, seed_option
+from split.split import parse_ratio
+from split.split_params import DEFAULTS, SplitParams
 
-D = SplitParams             # the option defaults are its fields'
+D = SplitParams             # the option defaults are its fields', or the data's (DEFAULTS)
+LAB, MSM = DEFAULTS["lab"], DEFAULTS["msm"]
 
 
 @click.command()
 @click.argument("states", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Fold manifest to write (JSON, schema phantom.folds 2.0).")
-@click.option("--folds", type=int, default=D.folds, show_default=True, help="Number of folds.")
-@click.option("--ratio", default=D.ratio,
-              help="TRAIN:VAL:TEST group counts ratio [default: 12:3:5 lab, 7:2:1 MSM].")
+@click.option("--folds", type=bounded_int(1), default=D.folds, show_default=True,
+              help="Number of folds.")
+@click.option("--ratio", type=Parsed("TRAIN:VAL:TEST", parse_ratio), default=D.ratio,
+              help=f"TRAIN:VAL:TEST group counts ratio [default: {':'.join(map(str, LAB[1]))} "
+                   f"lab, {':'.join(map(str, MSM[1]))} MSM].")
 @click.option("--group", "group_by", type=click.Choice(["sequence", "location"]),
               default=D.group_by,
               help="Keep whole presses (sequence) or whole places (location) in one role "
-                   "[default: sequence for lab states, location for MSM].")
+                   f"[default: {LAB[0]} for lab states, {MSM[0]} for MSM].")
 @seed_option
 @rrd_option
-def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str | None,
-          seed: int, rrd: Path | None, no_rrd: bool) -> None:
+def split(states: Path, out: Path, folds: int, ratio: tuple[int, int, int] | None,
+          group_by: str | None, seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Split a states file into k folds of train/val/test examples, grouped.
 
     Reads STATES (phantom.states 2.x, from `pipeline extract` or `pipeline simulate`). Writes
@@ -35,12 +39,10 @@ def split(states: Path, out: Path, folds: int, ratio: str | None, group_by: str 
     (trainers refuse a manifest whose data changed), and a rerun recording of the fold roles on
     the phantom footprint (--rrd, default beside --out).
     """
-    from split.split import parse_ratio
     from split.split_stage import run_split
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    params = SplitParams(group_by=group_by, ratio=parse_ratio(ratio) if ratio else None,
-                         folds=folds, seed=seed)
+    params = SplitParams(group_by=group_by, ratio=ratio, folds=folds, seed=seed)
     doc = run_split(states, out, params, rrd_path)
     f0 = doc["folds"][0]
     click.echo(f"{out}: {len(doc['folds'])} folds over {doc['groups']} {doc['group_by']} groups "

@@ -16,10 +16,8 @@ from functools import lru_cache
 from pathlib import Path
 
 from core.atomic import atomic_output
+from core.packages import PACKAGES
 from core.provenance import sha256_file
-
-PACKAGES = ("core", "data_schema", "ingest", "calib", "sync", "extract", "split", "sim", "train",
-            "pipeline")
 
 
 @lru_cache(maxsize=1)

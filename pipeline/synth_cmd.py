@@ -7,56 +7,84 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import resolve_rrd, rrd_option, seed_option
+from pipeline.options import (
+    Parsed,
+    bounded_int,
+    finite_float,
+    resolve_rrd,
+    rrd_option,
+    seed_option,
+)
+from sim.twin.marker_layout import MIN_PITCH_M, PITCH_SPACINGS, parse_layout, parse_size
 from sim.twin.synth_params import SynthParams
-from sim.twin.twin_scene import PIVOT_SECONDS, PRESS_SECONDS
+from sim.twin.twin_scene import (
+    FORCE_FILES,
+    MAX_DRIFT_PPM,
+    MAX_OFFSET_S,
+    PIVOT_SECONDS,
+    PRESS_SECONDS,
+    RATE_HZ,
+)
 
 D = SynthParams             # the option defaults are its fields'
+# The twin lab's options, which `pipeline demo` passes on to synth and so takes alike; each
+# refused as it is parsed, with the bounds the twin checks (sim/twin/twin_scene.py,
+# sim/twin/marker_layout.py).
+MARKERS = Parsed("RxC|scattered:N", parse_layout, keep_text=True)
+MARKER_PITCH_MM = finite_float(MIN_PITCH_M * 1e3, unit="mm",
+                               why=f"the lattice would be finer than "
+                                   f"{MIN_PITCH_M / PITCH_SPACINGS * 1e3:g} mm")
+SIZE = Parsed("LxW", parse_size, keep_text=True)
+MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
 
 
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--locations", type=click.IntRange(1, 10), default=D.locations, show_default=True,
+@click.option("--locations", type=bounded_int(1, 10), default=D.locations, show_default=True,
               help="Indentation locations on the phantom.")
-@click.option("--repeats", type=click.IntRange(1, 50), default=D.repeats, show_default=True,
+@click.option("--repeats", type=bounded_int(1, 50), default=D.repeats, show_default=True,
               help="Presses per location (in rounds over the locations).")
-@click.option("--press-seconds", type=click.FloatRange(*PRESS_SECONDS), default=D.press_seconds,
+@click.option("--press-seconds", type=finite_float(*PRESS_SECONDS, unit="s"),
+              default=D.press_seconds,
               help="Mean duration of one press cycle in s (default about 6 s).")
-@click.option("--pivot-seconds", type=click.FloatRange(*PIVOT_SECONDS),
+@click.option("--pivot-seconds", type=finite_float(*PIVOT_SECONDS, unit="s"),
               default=D.pivot_seconds,
               show_default=True, help="Length of the pivot-calibration recording (s).")
 @click.option("--trigger/--no-trigger", default=D.trigger, show_default=True,
               help="Record sync pulses (force-log column 'trigger', QTM EVENT 'Trigger').")
-@click.option("--offset", "offset_s", type=float, default=D.offset_s,
+@click.option("--offset", "offset_s", type=finite_float(-MAX_OFFSET_S, MAX_OFFSET_S, unit="s"),
+              default=D.offset_s,
               help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--drift", "drift_ppm", type=float, default=D.drift_ppm,
+@click.option("--drift", "drift_ppm",
+              type=finite_float(-MAX_DRIFT_PPM, MAX_DRIFT_PPM, unit="ppm"), default=D.drift_ppm,
               help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--force-via", type=click.Choice(["logger", "analog"]), default=D.force_via,
+@click.option("--force-via", type=click.Choice(list(FORCE_FILES)), default=D.force_via,
               show_default=True,
               help="logger: the Speedgoat log on its own clock (force.csv, force.mat); "
                    "analog: the Nano17 through the mocap's analog board, on the mocap clock "
                    "(indentation.c3d with markers and analog channels, indentation_a.tsv).")
-@click.option("--force-file", type=click.Choice(["csv", "mat", "tsv", "c3d"]),
+@click.option("--force-file", type=click.Choice([f for fs in FORCE_FILES.values() for f in fs]),
               default=D.force_file,
               help="The force file session.toml names: csv (default) or mat with --force-via "
                    "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
                    "file) with --force-via analog. Both of a route are written.")
-@click.option("--markers", default=D.markers, show_default=True,
+@click.option("--markers", type=MARKERS, default=D.markers, show_default=True,
               help="Phantom markers: a grid RxC (R rows along +x, C markers each, centred, "
                    "named row-major P00, P01, ...) or scattered:N (N markers at random "
                    "lattice nodes, at least 10 mm apart and 10 mm inside the edges; P00 -> P01 "
                    "along +x, written to session.toml as [phantom] x_axis and anchor).")
-@click.option("--marker-pitch", "marker_pitch_mm", type=float, default=D.marker_pitch_mm,
+@click.option("--marker-pitch", "marker_pitch_mm", type=MARKER_PITCH_MM,
+              default=D.marker_pitch_mm,
               show_default=True,
               help="Distance between neighbouring grid markers in mm (at least 10).")
-@click.option("--size", default=D.size, show_default=True,
+@click.option("--size", type=SIZE, default=D.size, show_default=True,
               help="The block's footprint LxW in mm (L along +x; 40 to 300 each; 32 mm thick).")
-@click.option("--mocap-rate", "rate_hz", type=float, default=D.rate_hz, show_default=True,
+@click.option("--mocap-rate", "rate_hz", type=MOCAP_RATE, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
                    "analog needs a rate that divides 1000).")
-@click.option("--view-press", type=click.IntRange(0), default=D.view_press, show_default=True,
+@click.option("--view-press", type=bounded_int(0), default=D.view_press, show_default=True,
               help="Press shown in the rerun recording.")
 @seed_option
 @rrd_option

@@ -1,27 +1,23 @@
-"""``pipeline train``: the click layer over :func:`train.train_stage.run_train`."""
+"""``pipeline train``: the click layer over :func:`train.training.train_stage.run_train`."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 from click.core import ParameterSource
 
+import train.paper as paper
 from core.errors import BadInput
 from pipeline.options import bounded_int, finite_float, seed_option
-from train import paper
-from train.recipes import RECIPES, recipe
-
-if TYPE_CHECKING:
-    from train.loop import TrainOptions
-    from train.model import CGNNConfig
+from train.model.config import CGNNConfig, Offsets
+from train.training.recipes import RECIPES, recipe
+from train.training.train_params import TrainOptions
 
 EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 # the options that are no training setting (TrainOptions, CGNNConfig): a recipe sets none
 NOT_SETTINGS = ("data", "splits", "out", "init", "device", "rrd", "recipe_name")
-# how to turn off each place a recipe may give the tip's offsets
-OFFSET_FLAGS = {"tip_offsets": "--no-tip-offsets", "head_offsets": "--head-offsets 0"}
+NETWORK = CGNNConfig()                 # the paper's network: the defaults of its options
 
 
 @click.command()
@@ -44,14 +40,16 @@ OFFSET_FLAGS = {"tip_offsets": "--no-tip-offsets", "head_offsets": "--head-offse
 @click.option("--rotate/--no-rotate", default=False,
               help="Rotation augmentation: turn each training example about the surface "
                    "normal by a random angle.")
-@click.option("--tip-offsets/--no-tip-offsets", default=False,
-              help="Also give the first layer each point's offset from the tip's start and end "
-                   "(ours, not the paper's; see docs/model.md, 'Training that learns').")
-@click.option("--head-offsets", type=bounded_int(0), default=0, show_default=True,
-              help="Give the heads each point's offsets from the tip's start and end, encoded "
-                   "in this many numbers (ours; 0: none): the graph layers stay "
-                   "press-independent, so a mesh pressed again runs the heads alone "
-                   "(docs/model.md, 'Latency').")
+@click.option("--offsets", type=click.Choice([o.value for o in Offsets]),
+              default=NETWORK.offsets.value, show_default=True,
+              help="Where the network reads each point's offsets from the tip's start and end "
+                   "(ours, not the paper's): none (the paper's network), graph (the first "
+                   "layer; every layer then reads the press) or heads (the graph layers stay "
+                   "press-independent, so a mesh pressed again runs the heads alone); "
+                   "docs/model.md, 'Training that learns' and 'Latency'.")
+@click.option("--offset-width", type=bounded_int(1), default=NETWORK.offset_width,
+              show_default=True,
+              help="With --offsets heads: the numbers per point of their encoding.")
 @click.option("--loss", type=click.Choice(["paper", "balanced"]), default=paper.LOSS,
               show_default=True,
               help="paper: alpha x mean distance (m) + force MSE (N^2); balanced: each term "
@@ -61,6 +59,9 @@ OFFSET_FLAGS = {"tip_offsets": "--no-tip-offsets", "head_offsets": "--head-offse
               help="Learning rate: constant (the paper), or cosine from --lr to 1 % of it.")
 @click.option("--patience", type=bounded_int(1), default=None,
               help="Stop after this many epochs without a better validation loss.")
+@click.option("--no-ema", is_flag=True,
+              help="No average of the weights (where the recipe keeps one): best.pt holds the "
+                   "stepped weights.")
 @click.option("--ema", type=finite_float(0, 1, min_open=True, max_open=True), default=None,
               help="Validate and keep an exponential moving average of the weights over the "
                    "steps with this decay (e.g. 0.99); best.pt holds the average.")
@@ -104,7 +105,8 @@ def train(ctx: click.Context, recipe_name: str, data: Path, splits: Path, out: P
     the first 3 epochs is warned of (stderr, the checkpoints' meta "notes" and train.rrd).
     Under torchrun it trains data-parallel (gloo on CPU, nccl on GPU).
     """
-    from train.train_stage import TrainInputs, TrainParams, run_train
+    from train.training.train_params import TrainInputs, TrainParams
+    from train.training.train_stage import run_train
 
     opts, config = _settings(ctx, recipe_name)
     if opts.no_val and opts.patience is not None:
@@ -128,17 +130,15 @@ def _settings(ctx: click.Context, recipe_name: str) -> tuple[TrainOptions, CGNNC
              and ctx.get_parameter_source(name) is not ParameterSource.DEFAULT}
     if "no_cond" in given:
         given["use_condition"] = not given.pop("no_cond")
+    if given.pop("no_ema", False):
+        if "ema" in given:
+            raise click.UsageError("--ema and --no-ema: keep an average of the weights or not")
+        given["ema"] = None
     chosen = recipe(recipe_name)
-    network = {**chosen.network, **given}
-    if (network.get("tip_offsets") or network.get("head_offsets")) and \
-            not network.get("use_condition", True):
-        off = [flag for name, flag in OFFSET_FLAGS.items()
-               if chosen.network.get(name) and name not in given]
-        raise click.UsageError("the tip's offsets are the condition C: not with --no-cond"
-                               + (f" (the {recipe_name} recipe has them: add {off[0]})"
-                                  if off else ""))
-    if network.get("tip_offsets") and network.get("head_offsets"):
-        raise click.UsageError("--tip-offsets and --head-offsets: the tip's offsets go to the "
-                               f"first layer or to the heads, not both (recipe {recipe_name}: "
-                               f"{' '.join(chosen.flags())})")
-    return chosen.settings(**given)
+    try:
+        return chosen.settings(**given)
+    except ValueError as e:          # the network's own check (CGNNConfig)
+        hint = f" (the {recipe_name} recipe gives --offsets {chosen.network['offsets']}: " \
+            "add --offsets none)" if "offsets" in chosen.network and "offsets" not in given \
+            else ""
+        raise click.UsageError(f"{e}{hint}") from None

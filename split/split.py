@@ -15,35 +15,10 @@ Pure numpy: importing it does not load torch.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from core.errors import BadInput
-
-DEFAULTS = {"lab": ("sequence", (12, 3, 5)), "msm": ("location", (7, 2, 1))}
-
-
-@dataclass(frozen=True)
-class SplitParams:
-    """Every setting of ``pipeline split`` (the defaults are the command line's): None where
-    the data's default (:data:`DEFAULTS`, by the states file's source) applies."""
-
-    group_by: str | None = None                     # sequence | location
-    ratio: tuple[int, int, int] | None = None       # train:val:test group counts
-    folds: int = 5
-    seed: int = 0
-
-
-@dataclass(frozen=True)
-class SplitPlan:
-    """How to split: grouping, ratio, folds, seed (:class:`SplitParams` with the data's
-    defaults filled in)."""
-
-    group_by: str
-    ratio: tuple[int, int, int]
-    folds: int = SplitParams.folds
-    seed: int = SplitParams.seed
+from split.split_params import SplitParams
 
 
 def parse_ratio(text: str) -> tuple[int, int, int]:
@@ -71,8 +46,9 @@ def role_counts(n_groups: int, ratio: tuple[int, int, int]) -> tuple[int, int, i
     return n_train, n_val, n_test
 
 
-def make_folds(groups: np.ndarray, plan: SplitPlan) -> tuple[list[dict], str]:
-    """Per fold the train/val/test group ids and the nested training subsets, and a note."""
+def make_folds(groups: np.ndarray, plan: SplitParams) -> tuple[list[dict], str]:
+    """Per fold the train/val/test group ids and the nested training subsets, and a note;
+    ``plan`` with the data's defaults filled in (its ``ratio`` given)."""
     ids = np.unique(groups)
     g = len(ids)
     if plan.folds < 1:

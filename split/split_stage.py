@@ -20,7 +20,8 @@ from core.provenance import make_provenance, sha256_file
 from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
 from data_schema.states import example_groups, validate_states
-from split.split import DEFAULTS, SplitParams, SplitPlan, examples_by_role, make_folds
+from split.split import examples_by_role, make_folds
+from split.split_params import DEFAULTS, SplitParams
 from split.split_view import write_split_recording
 
 
@@ -28,7 +29,8 @@ def run_split(inputs: str | Path, out: str | Path, params: SplitParams | None = 
               rrd: str | Path | None = None) -> dict:
     """Split the states file ``inputs`` (the data's defaults where ``params.group_by`` or
     ``params.ratio`` is None); write the manifest ``out`` and the recording ``rrd``
-    atomically; returns the manifest."""
+    atomically; returns the manifest, whose provenance records the settings with those
+    defaults filled in."""
     states, p = inputs, params or SplitParams()
     doc = build_manifest(states, default_plan(states, p.group_by, p.ratio, p.folds, p.seed))
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
@@ -46,14 +48,15 @@ def source_of(states: str | Path) -> str:
 
 
 def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int, int] | None,
-                 folds: int, seed: int) -> SplitPlan:
-    """The plan for ``states``: what the user gave, the data's defaults for the rest."""
+                 folds: int, seed: int) -> SplitParams:
+    """The settings for ``states``: what the user gave, the data's defaults for the rest."""
     d_group, d_ratio = DEFAULTS.get(source_of(states), DEFAULTS["lab"])
-    return SplitPlan(group_by or d_group, ratio or d_ratio, folds, seed)
+    return SplitParams(group_by or d_group, ratio or d_ratio, folds, seed)
 
 
-def build_manifest(states: str | Path, plan: SplitPlan) -> dict:
-    """The manifest document for ``states`` under ``plan`` (validated before it is written)."""
+def build_manifest(states: str | Path, plan: SplitParams) -> dict:
+    """The manifest document for ``states`` under ``plan``, the settings with the data's
+    defaults filled in (:func:`default_plan`); validated before it is written."""
     validate_states(states)
     eg = example_groups(states, plan.group_by)
     try:

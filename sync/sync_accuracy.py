@@ -16,7 +16,8 @@ from data_schema.hdf5 import read_h5
 from data_schema.synced import SYNCED
 from data_schema.truth import TRUTH
 
-# The issue's accuracy targets (same keys as sync_errors' result).
+# What sync must reach on the twin, the demo's and the tests' targets (same keys as
+# sync_errors' result).
 TARGETS = {"clock_offset_ms": 0.5, "clock_drift_ppm": 5.0, "tip_rms_mm": 0.25,
            "tip_offset_mm": 0.2, "force_rms_n": 0.02}
 # what the comparison needs of truth.h5 (the rest of it is large and not read)

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 from core.errors import BadInput
 
+CLOCKS = ("auto", "trigger", "data")   # the clock alignments --clock names
+
 
 @dataclass(frozen=True)
 class SyncParams:
@@ -31,17 +33,19 @@ class SyncParams:
     retare: bool = True              # re-tare from the rest next to every press (False: start)
 
 
+# The numbers that must be > 0, and those that must be >= 0 (0: off, or none): check_params
+# refuses the rest, and the command line's options take their bounds from here.
+POSITIVE = ("location_radius_m", "detect_n", "contact_n", "max_fit_rms_m")
+AT_LEAST_ZERO = ("max_gap_s", "margin_s", "robust_scale_m", "tip_cutoff_hz")
+
+
 def check_params(p: SyncParams) -> None:
     """Refuse settings outside their meaning (the CLI checks its options the same way)."""
-    if p.clock not in ("auto", "trigger", "data"):
-        raise BadInput(None, f"--clock must be auto, trigger or data, got {p.clock!r}")
-    for name, value, strict in (("max_gap_s", p.max_gap_s, False),
-                                ("margin_s", p.margin_s, False),
-                                ("location_radius_m", p.location_radius_m, True),
-                                ("detect_n", p.detect_n, True), ("contact_n", p.contact_n, True),
-                                ("max_fit_rms_m", p.max_fit_rms_m, True),
-                                ("robust_scale_m", p.robust_scale_m, False),
-                                ("tip_cutoff_hz", p.tip_cutoff_hz, False)):
+    if p.clock not in CLOCKS:
+        raise BadInput(None, f"--clock must be {', '.join(CLOCKS[:-1])} or {CLOCKS[-1]}, got "
+                             f"{p.clock!r}")
+    for name in POSITIVE + AT_LEAST_ZERO:
+        value, strict = getattr(p, name), name in POSITIVE
         if not (value > 0 if strict else value >= 0):
             raise BadInput(None, f"sync parameter {name} must be "
                                  f"{'positive' if strict else 'zero or more'}, got {value:g}")

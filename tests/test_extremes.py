@@ -22,12 +22,12 @@ from core.series import frame_times_ns, time_to_ns
 from data_schema.states import validate_states
 from pipeline.cli import cli
 from sync.force_conditioning import over_range
-from train.checkpoint import load_checkpoint
 from train.data import load_manifest, role_examples
-from train.evaluate import example_errors, load_run
-from train.loop import TrainOptions
-from train.model import CGNNConfig
-from train.train_stage import TrainInputs, TrainParams, run_train
+from train.evaluation.evaluate import example_errors, load_run
+from train.model.config import CGNNConfig
+from train.training.checkpoint import load_checkpoint
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+from train.training.train_stage import run_train
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8))
 NANO17_MAX = np.array([25.0, 25.0, 35.0, 0.25, 0.25, 0.25])      # SI-25-0.25, N and N m

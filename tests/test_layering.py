@@ -16,19 +16,22 @@ rerun itself.
 
 One runner contract: every ``run_*`` of a ``*_stage.py`` takes ``(inputs, out, params, rrd)``
 and nothing else, and only the runners open outputs (``core.atomic``) and record provenance
-(``core.provenance``); the math returns data or writes to the temporary paths it is given.
+(``core.provenance``), whose parameters are ``asdict`` of the params; the math returns data or
+writes to the temporary paths it is given. The packages given a layer here are
+``core/packages.py``'s, and what setuptools installs.
 """
 
 from __future__ import annotations
 
 import ast
 import re
+import tomllib
 from pathlib import Path
 
 import pytest
 
+from core.packages import PACKAGES
 from pipeline.cli import COMMANDS
-from pipeline.stage_cache import PACKAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
@@ -302,14 +305,38 @@ def test_runners_take_inputs_out_params_rrd(runner):
         f"{runner}: rrd defaults to None"
 
 
-def test_every_package_is_packaged_linted_and_hashed():
-    """A package named in LAYER is installed, sorted as ours by ruff, and part of the code a
-    demo step's stamp hashes (a change in it reruns the steps)."""
+def test_provenance_records_the_params_and_nothing_else():
+    """Every ``make_provenance`` call records ``asdict`` of the run's ``<Command>Params``: no
+    setting left out, nothing recorded beside them (the inputs have their own record)."""
+    calls = []               # (module, call, its arguments): called, or handed to a pool
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "make_provenance":
+                calls.append((name, node, node.args))
+            elif isinstance(node, ast.Call) and node.args and \
+                    getattr(node.args[0], "id", None) == "make_provenance":
+                calls.append((name, node, node.args[1:]))
+    assert {name for name, _, _ in calls} >= {"ingest.ingest_stage", "sync.sync_stage"}
+    for name, call, args in calls:
+        params = args[1] if len(args) > 1 else next(
+            (k.value for k in call.keywords if k.arg == "params"), None)
+        assert isinstance(params, ast.Call) and getattr(params.func, "id", None) == "asdict" \
+            and len(params.args) == 1, \
+            f"{name}:{call.lineno} records {params and ast.unparse(params)}"
+
+
+def test_every_package_is_listed_packaged_and_hashed():
+    """The packages given a layer here are core/packages.py's list (which the demo's stage
+    cache hashes: a change in them reruns its steps), and exactly those are what setuptools
+    installs from pyproject.toml's find rule."""
     tops = {p.split(".")[0] for p in LAYER}
-    project = (ROOT / "pyproject.toml").read_text()
-    for top in tops:
-        assert f'"{top}*"' in project and f'"{top}"' in project, top
-    assert set(PACKAGES) == tops
+    assert tops == set(PACKAGES)
+    find = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "packages"]["find"]
+    assert find.get("namespaces") is False, "a stray folder would become a namespace package"
+    setuptools = pytest.importorskip("setuptools")
+    found = setuptools.find_packages(str(ROOT), exclude=find.get("exclude", ()))
+    assert {p.split(".")[0] for p in found} == set(PACKAGES)
 
 
 def test_every_package_is_in_the_architecture():
@@ -332,3 +359,31 @@ def test_the_checks_can_fail():
     row = _stage_table("\n## Stages\n| `x` | `a.py`, `b.py` | `p/x_stage.py:run_x` | — | f |\n")
     assert row == {"x": {"math": ["a.py", "b.py"], "runner": ["p/x_stage.py:run_x"],
                          "view": [], "writes": []}}
+
+
+# train/ by job: what a job may import of another (docs/ARCHITECTURE.md, "train/ by job"); the
+# modules at train/'s top (its data and the paper's settings) are the ground of every job
+TRAIN_JOBS = {"train.model": {"train.model"},
+              "train.training": {"train.model", "train.training"},
+              "train.evaluation": {"train.model", "train.training", "train.evaluation"},
+              "train.inference": {"train.model", "train.training", "train.inference"}}
+
+
+def _job(module: str) -> str | None:
+    return next((j for j in TRAIN_JOBS if module == j or module.startswith(j + ".")), None)
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if _job(m)))
+def test_train_jobs_import_downward(module):
+    allowed = TRAIN_JOBS[_job(module)]
+    for target in sorted(GRAPH[module]):
+        job = _job(target)
+        assert job is None or job in allowed, f"{module} imports {target}: {_job(module)} " \
+                                              f"stands on {sorted(allowed)}"
+
+
+def test_train_ground_imports_no_job():
+    ground = [m for m in MODULES if m.startswith("train.") and _job(m) is None]
+    assert ground, "train/ has modules beside its jobs (data, paper)"
+    for module in ground:
+        assert not {t for t in GRAPH[module] if _job(t)}, f"{module} imports a job of train/"

@@ -11,7 +11,7 @@ from typing import Any
 
 def __getattr__(name: str) -> Any:
     if name == "Predictor":
-        from train.predictor import Predictor
+        from train.inference.predictor import Predictor
 
         return Predictor
     raise AttributeError(name)

@@ -103,6 +103,13 @@ def example_pairs(states: StateTensors, ids: dict[str, np.ndarray]) -> torch.Ten
     return torch.cat([states.pairs[s][torch.as_tensor(ids[s], dtype=torch.long)] for s in SETS])
 
 
+def fold_pairs(states: StateTensors, doc: dict, fold: int, role: str,
+               data: str | Path | None = None, train_groups: int | None = None) -> torch.Tensor:
+    """(E, 2) start/end state indices of one role's examples of one fold
+    (:func:`role_examples`, :func:`example_pairs`)."""
+    return example_pairs(states, role_examples(doc, fold, role, data, train_groups))
+
+
 def make_batch(states: StateTensors, pairs: torch.Tensor,
                point_idx: torch.Tensor | None = None) -> Batch:
     """Gather a batch for (B, 2) ``pairs``; ``point_idx`` (B, n) keeps those points only."""

@@ -1,7 +1,7 @@
 """The paper's cGNN training settings, each stated once (as :mod:`sim.msm.paper` states its
-MSM): the dataclasses' defaults (:class:`train.loop.TrainOptions`,
-:class:`train.model.CGNNConfig`) and so the ``paper`` recipe (:mod:`train.recipes`) and
-``pipeline train``'s option defaults.
+MSM): the dataclasses' defaults (:class:`train.training.train_params.TrainOptions`,
+:class:`train.model.config.CGNNConfig`) and so the ``paper`` recipe (:mod:`train.training.recipes`)
+and ``pipeline train``'s option defaults.
 
 The paper (section "Training Setup", "Hyperparameters"): 250 epochs, batches of 32, Adam
 with an initial learning rate of 1e-4, the loss alpha L_d + MSE of the force change with

@@ -9,7 +9,7 @@ the provenance. Its settings: :mod:`sim.msm.fit_msm_params`.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +32,8 @@ def run_fit_msm(inputs: FitMsmInputs, out: str | Path | None,
     """Fit the MSM to ``inputs.states`` (with ``inputs.splits``: fold ``params.fold``'s
     training presses only); write the constants to ``out`` and the recording to ``rrd`` when
     given. Lab states are fitted on a grid over their footprint at ``params.spacing`` m
-    (default the paper's), an MSM file on its own.
+    (default the paper's), an MSM file on its own. The provenance records the settings with
+    the contact radius the fit used (the data's where ``params.contact_radius`` is None).
     """
     p = params or FitMsmParams()
     states, splits = inputs.states, inputs.splits
@@ -41,13 +42,11 @@ def run_fit_msm(inputs: FitMsmInputs, out: str | Path | None,
                                    contact_radius=p.contact_radius, only=only,
                                    spacing=p.spacing)
     result = fit_msm(sequences, msm, start=p.start, workers=p.workers or default_workers())
-    settings = {"max_sequences": p.max_sequences, "start": list(p.start), "seed": p.seed,
-                "splits": str(splits) if splits else None, "fold": p.fold,
-                "contact_radius": sequences[0].contact_radius, "spacing": p.spacing}
+    used = replace(p, contact_radius=sequences[0].contact_radius)
     files = [states] + ([splits] if splits else [])
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         if tmp_out is not None:
-            text = json.dumps(_document(result, msm, settings, files), indent=2,
+            text = json.dumps(_document(result, msm, used, files), indent=2,
                               allow_nan=False)
             tmp_out.write_text(text + "\n")
             validate_json_doc(tmp_out, MSM_PARAMS)
@@ -66,11 +65,12 @@ def training_sequences(splits: str | Path, fold: int) -> np.ndarray:
     return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
 
 
-def _document(result: FitResult, params: MSMParams, settings: dict, inputs: list) -> dict:
+def _document(result: FitResult, params: MSMParams, settings: FitMsmParams, inputs: list
+              ) -> dict:
     """The ``phantom.msm_params`` document: the fit, the full MSM parameters, provenance."""
     return {
         "schema": MSM_PARAMS.name, "schema_version": MSM_PARAMS.version,
         **asdict(result), "msm_params": {**params.as_dict(), "k_between": result.k_between,
                                          "k_fixed": result.k_fixed},
-        "provenance": make_provenance("fit-msm", settings, inputs=inputs),
+        "provenance": make_provenance("fit-msm", asdict(settings), inputs=inputs),
     }

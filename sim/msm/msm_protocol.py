@@ -22,6 +22,8 @@ from sim.cone import cone_directions
 from sim.msm import paper
 
 MULTI_PER_SEQUENCE = 15
+MAX_ANGLE_RANGE_DEG = (0.0, 90.0)   # a force direction's angle from the normal: into the surface
+CONTACT_RADIUS_LIMIT_M = 0.05       # m, excluded: a patch this wide covers the paper's surface
 
 
 @dataclass(frozen=True)
@@ -45,12 +47,14 @@ class Protocol:
             raise BadInput(None, f"--locations {self.locations} exceeds the {n_masses} masses")
         if not (math.isfinite(self.fmax) and self.fmax > 0):
             raise BadInput(None, f"--fmax must be a finite positive force, got {self.fmax}")
-        if not 0 <= self.max_angle_deg <= 90:
-            raise BadInput(None, f"max angle must be within 0..90 degrees, got "
+        lo, hi = MAX_ANGLE_RANGE_DEG
+        if not lo <= self.max_angle_deg <= hi:
+            raise BadInput(None, f"max angle must be within {lo:g}..{hi:g} degrees, got "
                                  f"{self.max_angle_deg}")
-        if not (math.isfinite(self.contact_radius) and 0 <= self.contact_radius < 0.05):
-            raise BadInput(None, f"--contact-radius must be within [0, 0.05) m, got "
-                                 f"{self.contact_radius}")
+        if not (math.isfinite(self.contact_radius)
+                and 0 <= self.contact_radius < CONTACT_RADIUS_LIMIT_M):
+            raise BadInput(None, f"--contact-radius must be within [0, "
+                                 f"{CONTACT_RADIUS_LIMIT_M:g}) m, got {self.contact_radius}")
 
     @property
     def step_n(self) -> float:
@@ -108,9 +112,12 @@ def shard_locations(locations: int, shard: tuple[int, int] | None) -> np.ndarray
 
 
 def parse_shard(text: str) -> tuple[int, int]:
-    """``"I/N"`` -> (I, N)."""
+    """``"I/N"`` -> (I, N), block I (from 0) of N; that N does not exceed the locations is
+    :func:`shard_locations`' check."""
     try:
         i, count = (int(v) for v in text.split("/"))
     except ValueError:
         raise BadInput(None, f"--shard must look like I/N (e.g. 0/4), got {text!r}") from None
+    if not 0 <= i < count:
+        raise BadInput(None, f"--shard {i}/{count}: need 0 <= I < N")
     return i, count

@@ -63,7 +63,8 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     overrides the spring constants and the contact radius and brings the grid they were
     fitted on (a size or spacing asking for another is refused); ``inputs.layout`` (a lab
     states file) samples the MSM at its markers. States deeper than ``params.thickness`` (m,
-    the phantom's) are counted (:attr:`Simulation.beyond_thickness`).
+    the phantom's) are counted (:attr:`Simulation.beyond_thickness`). The provenance records
+    ``params`` with the spring constants and contact radius the run used (the fit's).
     """
     inputs, p = inputs or SimulateInputs(), params or SimulateParams()
     layout, params_file = inputs.layout, inputs.params_file
@@ -75,16 +76,14 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     msm = _sized(msm, p.size, p.spacing, lab, layout, params_file if fitted else None)
     if lab is not None:
         check_inside(lab.points, msm, layout, lab.names)
-    command = {**asdict(protocol), "k_between": msm.k_between, "k_fixed": msm.k_fixed,
-               "tol": p.tol, "shard": p.shard, "layout": str(layout) if layout else None,
-               "thickness": p.thickness, "footprint_m": list(msm.footprint),
-               "grid": [msm.n, msm.n_y]}
+    used = replace(p, k_between=msm.k_between, k_fixed=msm.k_fixed,
+                   contact_radius=protocol.contact_radius)
     shard = parse_shard(p.shard) if p.shard else None
     workers = p.workers or default_workers()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
         sim, arrays = generate(tmp_out, protocol, msm, tol=p.tol, workers=workers,
-                               shard=shard, command_params=command,
+                               shard=shard, settings=used,
                                layout=None if lab is None else lab.points,
                                inputs=[Path(f) for f in (params_file, layout) if f is not None],
                                thickness=p.thickness,
@@ -96,18 +95,22 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
 
 def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
              tol: float = DEFAULT_TOL, workers: int = 1, shard: tuple[int, int] | None = None,
-             command_params: dict | None = None, layout: np.ndarray | None = None,
+             settings: SimulateParams | None = None, layout: np.ndarray | None = None,
              inputs: Sequence[Path] = (), thickness: float = THICKNESS_M,
              point_names: Sequence[str] | None = None
              ) -> tuple[Simulated, dict[str, np.ndarray]]:
     """Simulate ``protocol`` (or one shard of it, :func:`sim.msm.msm_dataset.simulate_data`)
-    and write the states file ``out`` with its provenance (``command_params``, the hashes of
+    and write the states file ``out`` with its provenance (``settings``, default the
+    :class:`SimulateParams` that ask for this protocol, model and solver; the hashes of
     ``inputs``); returns the simulation and the arrays written."""
     data = simulate_data(protocol, params, tol=tol, workers=workers, shard=shard,
                          layout=layout, thickness=thickness, point_names=point_names)
-    prov = make_provenance("simulate", command_params or {**asdict(protocol), "tol": tol},
-                           inputs=list(inputs), schema=STATES.name,
-                           schema_version=STATES.version)
+    settings = settings or SimulateParams(
+        **asdict(protocol), k_between=params.k_between, k_fixed=params.k_fixed, tol=tol,
+        workers=workers, shard=None if shard is None else f"{shard[0]}/{shard[1]}",
+        thickness=thickness)
+    prov = make_provenance("simulate", asdict(settings), inputs=list(inputs),
+                           schema=STATES.name, schema_version=STATES.version)
     write_states(out, data.arrays, {"provenance": json.dumps(prov), **data.attrs})
     return data.sim, data.arrays
 
@@ -116,19 +119,21 @@ def run_merge(inputs: Sequence[str | Path], out: str | Path,
               params: SimulateParams | None = None, rrd: str | Path | None = None
               ) -> Simulation:
     """Join the shard files ``inputs`` of one run into ``out`` (and the recording ``rrd``);
-    of ``params`` only the recording's ``rrd_sequences`` and the ``thickness`` apply."""
+    of ``params`` only the recording's ``rrd_sequences`` and the ``thickness`` apply. The
+    provenance records ``params`` with the protocol, the spring constants and the tolerance
+    the shards were simulated with."""
     p = params or SimulateParams()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
         merged = merge_shards(inputs)
-        prov = make_provenance("simulate --merge",
-                               {"shards": len(merged.shards), **merged.protocol},
-                               inputs=merged.shards, schema=STATES.name,
-                               schema_version=STATES.version)
+        msm = MSMParams(**json.loads(merged.attrs["msm_params"]))
+        used = replace(p, **merged.protocol, k_between=msm.k_between, k_fixed=msm.k_fixed,
+                       tol=json.loads(merged.attrs["solver"])["tol_N"], shard=None)
+        prov = make_provenance("simulate --merge", asdict(used), inputs=merged.shards,
+                               schema=STATES.name, schema_version=STATES.version)
         attrs = {**merged.attrs, "provenance": json.dumps(prov)}
         write_states(tmp_out, merged.arrays, attrs)
         seconds = time.perf_counter() - started
-        msm = MSMParams(**json.loads(attrs["msm_params"]))
         _record(tmp_rrd, merged.arrays, msm, float(attrs["step_n"]), p.rrd_sequences)
     return Simulation(merged.arrays, seconds, thickness=p.thickness)
 

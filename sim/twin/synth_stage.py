@@ -48,7 +48,7 @@ def run_synth(inputs: None, out: str | Path, params: SynthParams | None = None,
         raise BadInput("--view-press",
                        f"press {s.view_press} does not exist (0..{s.locations * s.repeats - 1})")
     twin = simulate_twin(p)
-    write_twin(twin, folder, rrd, s.view_press)
+    write_twin(twin, folder, s, rrd)
     return folder
 
 
@@ -73,9 +73,11 @@ def _output_folder(out_dir: str | Path) -> Path:
     return folder
 
 
-def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
-               view_press: int = 0) -> None:
-    """Write every file of the session folder (atomically: all or nothing).
+def write_twin(twin: Twin, folder: str | Path, params: SynthParams,
+               rrd: str | Path | None = None) -> None:
+    """Write every file of the session folder (atomically: all or nothing): ``twin``, the
+    session ``params`` asked for (truth.h5's provenance records them), and the recording of
+    press ``params.view_press`` where ``rrd`` is given.
 
     Over an earlier session (the folder holds a ``truth.h5``), the files that session wrote
     and this one does not (another sensor's ``FT<serial>.cal``, a ``recording.rrd`` this run
@@ -88,14 +90,13 @@ def write_twin(twin: Twin, folder: str | Path, rrd: str | Path | None = None,
     finals = [folder / FILES[k] for k in keys] + [folder / calibration_name(twin)]
     if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
         raise BadInput(rrd, "--rrd names one of the session files synth writes")
-    provenance = make_provenance("synth", _twin_record(twin.params), [], TRUTH.name,
-                                 TRUTH.version)
+    provenance = make_provenance("synth", asdict(params), [], TRUTH.name, TRUTH.version)
     with atomic_outputs(*finals, rrd) as tmps:
         out = dict(zip([*keys, "cal", "rrd"], tmps, strict=True))
         write_lab_files(twin, out)
         write_truth(out["truth"], twin, provenance)
         if out["rrd"] is not None:
-            write_twin_recording(twin, out["rrd"], view_press)
+            write_twin_recording(twin, out["rrd"], params.view_press)
     if earlier:
         _remove_stale(folder, [*finals, rrd])
 
@@ -112,11 +113,3 @@ def _twin_file(name: str) -> bool:
     """Whether a session folder's file named ``name`` is one the twin writes."""
     return (name in FILES.values() or name == RECORDING
             or re.fullmatch(r"FT\d{5}\.cal", name) is not None)
-
-
-def _twin_record(p: TwinParams) -> dict[str, object]:
-    """The twin's parameters as truth.h5's provenance records them."""
-    record = asdict(p)
-    record["errors"] = asdict(p.errors)
-    record["phantom"] = asdict(p.phantom)
-    return record

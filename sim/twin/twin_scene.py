@@ -26,6 +26,9 @@ TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the 
 FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
 PRESS_SECONDS = (2.0, 60.0)         # s, the range of --press-seconds
 PIVOT_SECONDS = (2.0, 600.0)        # s, the range of --pivot-seconds
+RATE_HZ = (10.0, 2000.0)            # Hz, the mocap frame rates a lab runs (--mocap-rate)
+MAX_DRIFT_PPM = 1000.0              # |--drift|: beyond it is no clock
+MAX_OFFSET_S = 3600.0               # |--offset|: beyond an hour is not plausible
 
 Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab
 
@@ -65,8 +68,8 @@ def check_params(p: TwinParams) -> None:
         ("--force-file", p.force_source in FORCE_FILES.get(p.force_via, ()),
          f"must be {' or '.join(FORCE_FILES.get(p.force_via, ()))} with --force-via "
          f"{p.force_via}"),
-        ("--mocap-rate", 10.0 <= p.rate_hz <= 2000.0,
-         f"{p.rate_hz:g} Hz: must be between 10 and 2000 Hz"),
+        ("--mocap-rate", RATE_HZ[0] <= p.rate_hz <= RATE_HZ[1],
+         "{:g} Hz: must be between {:g} and {:g} Hz".format(p.rate_hz, *RATE_HZ)),
         ("--mocap-rate", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
          f"{p.rate_hz:g} Hz does not divide the {p.logger_hz:g} Hz force rate: through the "
          "analog board (--force-via analog) the force has a whole number of samples per frame"),
@@ -77,10 +80,10 @@ def check_params(p: TwinParams) -> None:
          "must be between {:g} and {:g} s".format(*PRESS_SECONDS)),
         ("--pivot-seconds", PIVOT_SECONDS[0] <= p.pivot_seconds <= PIVOT_SECONDS[1],
          "must be between {:g} and {:g} s".format(*PIVOT_SECONDS)),
-        ("--drift", p.drift_ppm is None or abs(p.drift_ppm) <= 1000.0,
-         "beyond 1000 ppm is not a clock"),
-        ("--offset", p.offset_s is None or abs(p.offset_s) <= 3600.0,
-         "beyond an hour is not plausible"),
+        ("--drift", p.drift_ppm is None or abs(p.drift_ppm) <= MAX_DRIFT_PPM,
+         f"beyond {MAX_DRIFT_PPM:g} ppm is not a clock"),
+        ("--offset", p.offset_s is None or abs(p.offset_s) <= MAX_OFFSET_S,
+         f"beyond {MAX_OFFSET_S:g} s is not plausible"),
     ]
     for option, ok, what in checks:
         if not ok:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import asdict
 from pathlib import Path
 
 import h5py
@@ -14,6 +15,8 @@ from click.testing import CliRunner
 from truth_checks import check_states_against_truth, truth_levels
 
 from core.recording import rrd_entities
+from core.text import to_json
+from extract.extract_params import ExtractParams
 from extract.phantom_frame import apply_transform
 from pipeline.cli import cli
 
@@ -132,6 +135,11 @@ def test_two_sessions_get_their_own_ids(session, tmp_path) -> None:
     with h5py.File(shared) as f:
         ses, loc = f["states/session"][()], f["states/location"][()]
         assert set(loc[ses == 0]) == set(loc[ses == 1])
+    for path, shared_locations in ((out, False), (shared, True)):    # every setting recorded
+        with h5py.File(path) as f:
+            recorded = json.loads(f.attrs["provenance"])["params"]
+        assert recorded == json.loads(to_json(asdict(ExtractParams(
+            shared_locations=shared_locations))))
 
 
 def test_recording_shows_levels_and_states(session) -> None:

@@ -1,4 +1,4 @@
-"""The analog board's volts (issue 28): an F/T interface's calibrated analog output arrives as
+"""The analog board's volts: an F/T interface's calibrated analog output arrives as
 volts; session.toml's per-channel ``scale`` (N/V, N m/V) and ``offset`` turn it into N and N m,
 and its ``units`` name the units of an export that states none. Checked on the real Qualisys
 C3D export against its own bytes, and on QTM analog TSV exports; ``inspect`` lists an analog

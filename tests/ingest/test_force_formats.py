@@ -1,4 +1,4 @@
-"""The force logs labs really have (issue 28): one known log written in every layout real rigs
+"""The force logs labs really have: one known log written in every layout real rigs
 and vendors' tools write (Simulink MAT arrays and structs, v7 and v7.3; ATI's DAQ F/T and Net
 F/T CSV; QTM force-plate exports; CSV in other dialects), read back equal to the original after
 unit conversion; MATLAB objects refused in one line naming them.
@@ -576,6 +576,33 @@ def test_session_toml_keys_reach_the_reader(tmp_path, layout, force):
     else:
         _check(s, V * ([1, 1, 1, 1e-3, 1e-3, 1e-3] if layout == "daq_eu" else 1),
                time_ns=np.arange(N) * 1_000_000)
+
+
+@pytest.mark.parametrize("yout", ["array", "struct"])
+@pytest.mark.parametrize("version", ["7", "7.3"])
+def test_session_toml_may_name_tout_the_time_column(tmp_path, version, yout):
+    """A model's default outputs saved with scipy.io.savemat (v7; v7.3 as MATLAB writes it):
+    ``time_column = "tout"`` names the time the file calls tout; a name the file does not have
+    is refused, listing what it has."""
+    from data_schema.session import read_session
+    from ingest.force_source import read_force
+
+    layout = "tout_yout" if yout == "array" else "tout_yout_struct"
+    _mat(tmp_path / "f.mat", version, MAT_LAYOUTS[layout]())
+    (tmp_path / "trial.tsv").write_text("")
+    (tmp_path / "ft.cal").write_text("")
+    for time_column in ("tout", "tin"):
+        (tmp_path / "session.toml").write_text(
+            '[mocap]\nfile = "trial.tsv"\nphantom_markers = ["A", "B", "C", "D"]\n'
+            'indenter_markers = ["I1", "I2", "I3"]\n[force]\ncalibration = "ft.cal"\n'
+            f'file = "f.mat"\ntime_column = "{time_column}"\nchannels = [1, 2, 3, 4, 5, 6]\n')
+        force = read_session(tmp_path).force
+        if time_column == "tout":
+            _check(read_force(force))
+        else:
+            with pytest.raises(BadInput, match=r"time column not in file: tin \(the file has: "
+                                               r"time, 1, 2"):
+                read_force(force)
 
 
 # ---------------------------------------------------------------------------- pipeline ingest

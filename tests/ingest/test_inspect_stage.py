@@ -243,6 +243,24 @@ def test_json_manifest(tmp_path):
     assert "invalid" in s["details"]["valid"]          # no data, ratio, seed...
 
 
+def test_json_documents_are_known_by_their_schema_name(tmp_path):
+    """A metrics document is checked as one whatever its file is called; a document of another
+    schema with the same tables is not taken for one; one with no schema but the metrics
+    tables is a metrics document older than 1.0, and its check says so."""
+    tables = {"schema_version": "1.1", "runs": [], "overall": [], "provenance": {}}
+    renamed = tmp_path / "other.json"
+    renamed.write_text(json.dumps({"schema": "phantom.metrics", **tables}))
+    s = inspect_json(renamed)
+    assert s["schema"] == "phantom.metrics" and s["details"]["valid"] == "valid"
+    foreign = tmp_path / "metrics.json"
+    foreign.write_text(json.dumps({"schema": "lab.metrics", **tables}))
+    s = inspect_json(foreign)
+    assert s["schema"] == "lab.metrics" and "valid" not in s["details"]
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps({k: v for k, v in tables.items() if k != "schema_version"}))
+    assert "before phantom.metrics 1.0" in inspect_json(old)["details"]["valid"]
+
+
 def test_unknown_file_is_bad_input(tmp_path):
     path = tmp_path / "blob.bin"
     path.write_bytes(bytes(range(256)) * 4)

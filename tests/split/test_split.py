@@ -19,7 +19,8 @@ from paths import ROOT
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
-from split.split import SplitPlan, make_folds
+from split.split import make_folds
+from split.split_params import SplitParams
 
 READER_DOC = ROOT / "docs" / "stages.md"   # the split manual: its ten-line reader
 
@@ -62,14 +63,14 @@ def test_groups_never_cross_roles(states, tmp_path, group_by) -> None:
 
 def test_test_sets_cover_or_the_manifest_says_why() -> None:
     groups = np.arange(20)
-    folds, note = make_folds(groups, SplitPlan("sequence", (12, 3, 5), folds=4, seed=1))
+    folds, note = make_folds(groups, SplitParams("sequence", (12, 3, 5), folds=4, seed=1))
     tests = [set(f["groups"]["test"]) for f in folds]
     assert set().union(*tests) == set(groups) and sum(map(len, tests)) == 20   # disjoint
     assert "disjoint and cover" in note
-    folds, note = make_folds(groups, SplitPlan("sequence", (12, 3, 5), folds=5, seed=1))
+    folds, note = make_folds(groups, SplitParams("sequence", (12, 3, 5), folds=5, seed=1))
     assert set().union(*(f["groups"]["test"] for f in folds)) == set(groups)
     assert "overlap" in note
-    folds, note = make_folds(groups, SplitPlan("sequence", (12, 3, 5), folds=2, seed=1))
+    folds, note = make_folds(groups, SplitParams("sequence", (12, 3, 5), folds=2, seed=1))
     assert "cover 10 of 20" in note
 
 
@@ -112,7 +113,7 @@ def test_msm_defaults_hold_whole_locations_out(tmp_path) -> None:
 
 
 def test_training_subsets_are_nested() -> None:
-    folds, _ = make_folds(np.arange(20), SplitPlan("sequence", (12, 3, 5), folds=5, seed=0))
+    folds, _ = make_folds(np.arange(20), SplitParams("sequence", (12, 3, 5), folds=5, seed=0))
     for f in folds:
         subsets = f["train_subsets"]
         assert [len(s) for s in subsets] == list(range(1, 13))
@@ -122,7 +123,7 @@ def test_training_subsets_are_nested() -> None:
 
 def test_a_ratio_that_does_not_fit_names_the_numbers() -> None:
     with pytest.raises(BadInput, match=r"12:3:5 does not fit 3 group\(s\).*train"):
-        make_folds(np.arange(3), SplitPlan("sequence", (12, 3, 5)))
+        make_folds(np.arange(3), SplitParams("sequence", (12, 3, 5)))
 
 
 def test_manifest_names_its_data_and_defaults_follow_it(states, tmp_path) -> None:

@@ -1,4 +1,4 @@
-"""`pipeline sync` on phantom-twin sessions against their truth: the issue's accuracy targets
+"""`pipeline sync` on phantom-twin sessions against their truth: sync's accuracy targets
 over 5 seeds, presses and locations, gap flags, and the recording.
 
 Each session is small in presses (2 locations x 1 repeat) but long in time (press cycles of

@@ -1,7 +1,7 @@
 """Sync and extract at the extremes: no silent wrong data.
 
-A twin session without a trigger whose logger clock is 36 s off (beyond the old +-30 s
-search), then the same session altered in its raw MCAP: the logger's clock moved further
+A twin session without a trigger whose logger clock is 36 s off (beyond a +-30 s search
+window), then the same session altered in its raw MCAP: the logger's clock moved further
 (-45 s) or stamped from its boot or the epoch (+3600 s, +1.7e9 s), the force log cut to one
 press, the force of another session, gauge voltages amplified onto the .cal's +-10 V rail,
 quantised coarser than their noise (a flat peak that is no clip), one press pushed beyond
@@ -87,7 +87,8 @@ def _clock(out: Path) -> tuple[float, float]:
 
 
 def test_an_offset_beyond_30_s_is_found(twin: dict) -> None:
-    """36 s: the old +-30 s search locked a press cycle away (here 30.2 s) and exited 0."""
+    """36 s: a search bounded at +-30 s would lock a press cycle away (here 30.2 s) and exit
+    0; the whole overlap is searched."""
     assert twin["sync_output"].exit_code == 0, twin["sync_output"].output
     offset, sd = _clock(twin["synced"])
     err = abs(offset - twin["truth"]["offset_s"])
@@ -110,7 +111,8 @@ def test_a_negative_offset_of_45_s_is_found(twin: dict, tmp_path: Path) -> None:
 def test_a_logger_stamped_from_boot_or_the_epoch_is_found(twin: dict, tmp_path: Path,
                                                          shift_s: int) -> None:
     """Logger stamps an hour (from its boot) or 1.7e9 s (the epoch) ahead of the mocap's:
-    the old search reached only the longer recording's length (a few minutes)."""
+    a search bounded by the longer recording's length (a few minutes) would never reach
+    them."""
     raw = copy.deepcopy(twin["raw"])
     raw.force.time_ns = raw.force.time_ns + shift_s * 1_000_000_000
     res, out = _sync_variant(twin, tmp_path, raw)
@@ -148,8 +150,8 @@ def test_force_of_another_session_is_refused(twin: dict, tmp_path: Path) -> None
 
 
 def _near_clock(twin: dict) -> tuple[RawSession, dict]:
-    """The raw session with the logger's stamps moved back by 36 s (its offset within the old
-    +-30 s search, so that a force check fails on its own), and its truth."""
+    """The raw session with the logger's stamps moved back by 36 s (its offset within +-30 s,
+    so that a force check fails on its own), and its truth."""
     raw = copy.deepcopy(twin["raw"])
     raw.force.time_ns = raw.force.time_ns - int(OFFSET_S * 1e9)
     return raw, {**twin["truth"], "offset_s": twin["truth"]["offset_s"] - OFFSET_S}
@@ -256,8 +258,8 @@ def _quantised(volts: np.ndarray, steps_per_noise: float) -> np.ndarray:
 
 
 def _flat_extremes(volts: np.ndarray) -> int:
-    """Samples in runs of :data:`FLAT_RUN` identical values at a channel's extreme (what the
-    flat-top rule looked at, before it asked for noise wider than the step)."""
+    """Samples in runs of :data:`FLAT_RUN` identical values at a channel's extreme: what a
+    flat-top rule that did not ask for noise wider than the step would call a clip."""
     out = 0
     for c in volts.T:
         for extreme in (c.max(), c.min()):
@@ -272,8 +274,8 @@ def _flat_extremes(volts: np.ndarray) -> int:
 def test_a_quantised_quiet_log_has_no_flat_top(twin: dict, tmp_path: Path,
                                                steps_per_noise: float) -> None:
     """Voltages on a step 1.5 or 3 times their noise: the strongest press's slow peak is a run
-    of one value at the channel's extreme (the old rule flagged it and extract dropped it);
-    it is no clip, so nothing is flagged and every press is kept."""
+    of one value at the channel's extreme (a rule on such runs alone would flag it, and
+    extract drop the press); it is no clip, so nothing is flagged and every press is kept."""
     raw, _ = _near_clock(twin)
     raw.force.values = _quantised(raw.force.values, steps_per_noise)
     assert _flat_extremes(raw.force.values) > 0
@@ -311,8 +313,8 @@ def _periodic_trigger(raw: RawSession, truth: dict) -> RawSession:
 
 def test_a_periodic_trigger_takes_a_data_prior_that_fails_a_check(twin: dict) -> None:
     """A lock that fails a check the trigger session does not need (here a force-depth
-    correlation of 0.99 asked for) still says which period: the old code refused the session
-    with 'record a trigger'."""
+    correlation of 0.99 asked for) still says which period, rather than asking for a trigger
+    to be recorded."""
     raw = _periodic_trigger(twin["raw"], twin["truth"])
     res = sync_session(raw, SyncParams(min_correlation=0.99))
     assert res.clock.method == "trigger"

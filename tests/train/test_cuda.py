@@ -16,17 +16,17 @@ import pytest
 import torch
 from cgnn_data import dent_fold
 
-from train.evaluate import evaluate_runs
-from train.loop import TrainOptions
-from train.model import CGNNConfig
-from train.predictor import Predictor
-from train.references import DISPLACEMENT
-from train.train_stage import TrainInputs, TrainParams, run_train
+from train.evaluation.evaluate import evaluate_runs
+from train.evaluation.references import DISPLACEMENT
+from train.inference.predictor import Predictor
+from train.model.config import CGNNConfig
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+from train.training.train_stage import run_train
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 
 SMALL = CGNNConfig(edge_widths=((16, 16),) * 3, disp_widths=(32,), force_widths=(16, 8, 8),
-                   tip_offsets=True)
+                   offsets="graph")
 OPTIONS = TrainOptions(epochs=2, batch=8, lr=3e-3, loss="balanced", rotate=True,
                        point_fraction=0.5, ema=0.9)
 
@@ -70,13 +70,13 @@ def test_eval_and_predictor_on_cuda_give_the_cpu_answers(dent, tmp_path) -> None
     assert region[0].shape == points.shape and np.isfinite(region[0]).all()
 
 
-@pytest.mark.parametrize("head_offsets", [0, 8])
-def test_a_known_scene_on_cuda_gives_the_cpu_answers(dent, tmp_path, head_offsets) -> None:
+@pytest.mark.parametrize("offsets", ["none", "heads"])
+def test_a_known_scene_on_cuda_gives_the_cpu_answers(dent, tmp_path, offsets) -> None:
     """The paper's network (and head offsets) keeps a scene's head terms on a first press
     and runs the heads alone after: on CUDA as on the CPU, for a new press and in a region."""
     run = tmp_path / "run"
     run_train(TrainInputs(*dent), run, TrainParams(
-        OPTIONS, replace(SMALL, tip_offsets=False, head_offsets=head_offsets), "cpu"))
+        OPTIONS, replace(SMALL, offsets=offsets, offset_width=8), "cpu"))
     g = (np.arange(7) + 0.5) / 7 * 0.1
     points = np.stack([*np.meshgrid(g, g), np.zeros((7, 7))], -1).reshape(-1, 3)
     presses = [np.array([0.05, 0.05, 0.0, 0.05, 0.05, -d], np.float32) for d in (2e-3, 3e-3)]

@@ -16,17 +16,19 @@ import pytest
 import torch
 from cgnn_data import DENT_NAMES, dent_fold, write_dent_split, write_dent_states
 
+import train.inference.predictor as predictor_module
 from core.errors import BadInput
-from train import predictor as predictor_module
-from train.checkpoint import check_checkpoint, load_checkpoint
-from train.edgeconv import knn
-from train.export import export_onnx
-from train.loop import TrainOptions
-from train.model import CGNN, CGNNConfig
-from train.normalise import Envelope, Normaliser, highest_tip
-from train.predictor import Predictor
-from train.si_model import SIModel, to_onnx
-from train.train_stage import TrainInputs, TrainParams, run_train
+from train.inference.export import export_onnx
+from train.inference.predictor import Predictor
+from train.inference.si_model import SIModel, to_onnx
+from train.model.cgnn import CGNN
+from train.model.config import CGNNConfig
+from train.model.edgeconv import knn
+from train.model.normalise import Envelope, Normaliser, highest_tip
+from train.training.checkpoint import check_checkpoint, load_checkpoint
+from train.training.migrate import migrate
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+from train.training.train_stage import run_train
 
 # a training envelope: presses of 1 to 5 mm from within 8 mm of the surface, tips down to -4 mm
 ENVELOPE = Envelope(press_min=1e-3, press_max=5e-3, tip_lowest=-4e-3, gap_max=8e-3,
@@ -38,7 +40,8 @@ BACKENDS = ["torch", "onnx"]
 
 
 # where the networks read the tip's offsets: nowhere (the paper's), the first layer, the heads
-NETWORKS = {"paper": {}, "tip offsets": {"tip_offsets": True}, "head offsets": {"head_offsets": 8}}
+NETWORKS = {"paper": {}, "tip offsets": {"offsets": "graph"},
+            "head offsets": {"offsets": "heads", "offset_width": 8}}
 
 
 def _si(network: str, norm: Normaliser = NORM) -> SIModel:
@@ -208,9 +211,11 @@ def test_presses_beyond_the_training_envelope_are_flagged(backend: str) -> None:
 
 
 def test_a_checkpoint_without_an_envelope_keeps_the_old_checks() -> None:
+    """A checkpoint of a version that kept no envelope (read through the migration) has the
+    distance checks alone."""
     old = {k: v for k, v in NORM.to_dict().items() if k != "envelope"}
-    norm = Normaliser.from_dict(old)
-    assert norm.envelope is None and "envelope" not in norm.to_dict()
+    norm = Normaliser.from_dict(migrate({"norm": old})["norm"])
+    assert norm.envelope is None and norm.to_dict()["envelope"] is None
     p, pts = Predictor(_si("paper", norm), torch.device("cpu"), "torch"), _grid(12)
     assert _flags(p, pts, [0.05, 0.05, 0.001, 0.05, 0.05, -0.044]) == ""
     assert p.predict(pts, np.array([0.05, 0.05, 0.001] * 2, np.float32))[1] == 0.0

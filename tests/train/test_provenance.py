@@ -15,8 +15,8 @@ from click.testing import CliRunner
 from core.provenance import sha256_file
 from data_schema.json_docs import validate_metrics
 from pipeline.cli import cli
-from train.checkpoint import load_checkpoint
-from train.loop import LOG_FIELDS
+from train.training.checkpoint import load_checkpoint
+from train.training.loop import LOG_FIELDS
 
 TINY = ("--epochs", "2", "--batch", "8", "--lr", "3e-3", "--device", "cpu", "--no-rrd")
 
@@ -46,7 +46,7 @@ def test_checkpoints_carry_their_provenance(made) -> None:
             ("phantom.checkpoint", "1.0", "train")
         assert prov["inputs"] == {str(p): sha256_file(p) for p in (data, splits, init)}
         assert prov["params"]["options"]["epochs"] == 1 and prov["params"]["device"] == "cpu"
-        assert prov["params"]["config"]["head_offsets"] == 32     # --recipe ours
+        assert prov["params"]["config"]["offsets"] == "heads"     # --recipe ours
         assert prov["params"]["recipe"] == "ours"
         assert isinstance(prov["command"], str) and prov["code_version"]
 

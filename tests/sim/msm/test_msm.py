@@ -233,7 +233,8 @@ def test_bad_direction_is_refused():
 
 
 def test_a_solver_of_another_tolerance_or_model_is_refused():
-    """simulate_sequence used to ignore ``tol`` silently when handed a solver."""
+    """simulate_sequence handed a solver of another tolerance or model refuses it, rather than
+    silently solving to the solver's tolerance."""
     solver = StaticSolver(MODEL, tol=1e-3)
     with pytest.raises(ValueError, match="tolerance"):
         simulate_sequence(MODEL, CENTRE, [0, 0, -1], steps=1, tol=1e-8, solver=solver)

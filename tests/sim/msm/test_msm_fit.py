@@ -98,8 +98,8 @@ def test_lab_states_give_the_constants(tmp_path, radius):
 
 
 def test_a_marker_missing_at_rest_is_left_out_not_an_index(tmp_path):
-    """A NaN rest position used to become a grid index (IndexError); now that marker is
-    left out of the distance and the rest still fits."""
+    """A NaN rest position becomes no grid index: that marker is left out of the distance and
+    the rest still fits."""
     path = _lab_file(tmp_path / "lab.h5", TRUE)
     with h5py.File(path, "r+") as f:
         points, valid = f["states/points"][()], f["states/valid"][()]
@@ -175,15 +175,19 @@ def test_cli_bad_input(tmp_path):
 
 def test_cli_refuses_a_start_outside_the_physical_range(made, tmp_path):
     """--start 1e6 1e-3 N/m (a stiffness ratio of 1e9; the MSM cannot settle there) ends at
-    once with one line, no file; the search from it used to run 300 failing trials and write
-    Infinity."""
+    once with one line, no file, rather than searched from (hundreds of failing trials, a
+    distance of Infinity): the command line refuses it as it parses, the fit when a library
+    caller asks."""
     out = tmp_path / "params.json"
     result = CliRunner().invoke(cli, ["fit-msm", str(made[0]), "--out", str(out),
                                       "--max-sequences", "1", "--start", "1e6", "1e-3"])
     assert result.exit_code == 2, result.output
-    assert result.output.startswith("error: --start:") and len(result.output.splitlines()) == 1
-    assert "must lie in [1, 100000] N/m" in result.output
+    assert result.output.startswith("error: --start ") and len(result.output.splitlines()) == 1
+    assert "must be in [1, 100000] N/m" in result.output
     assert not out.exists()
+    sequences, params = read_measured(made[0], max_sequences=1)
+    with pytest.raises(BadInput, match=r"must lie in \[1, 100000\] N/m"):
+        fit_msm(sequences, params, start=(1e6, 1e-3))
 
 
 def test_a_fit_whose_every_trial_fails_is_refused(made, monkeypatch):

@@ -228,8 +228,8 @@ def test_synth_over_an_earlier_session_leaves_none_of_its_files(skewed: Path,
 
 
 def test_peak_forces_are_a_truncated_normal_not_piled_at_the_bounds() -> None:
-    """6.2 +- 1.4 N kept within 2.5..8 N by drawing again: ~10 % of presses used to sit at
-    exactly 8 N (clipped)."""
+    """6.2 +- 1.4 N kept within 2.5..8 N by drawing again, not by clipping (which would pile
+    ~10 % of the presses at exactly 8 N)."""
     style = HandStyle()
     hand = plan_hand(np.random.default_rng(0), [(0, k, np.zeros(3)) for k in range(400)],
                      style)

@@ -1,0 +1,430 @@
+"""The training loop's parts (:mod:`train.training.loop`) against hand numbers: the step
+size's schedule, each epoch's seeded draws, the stall warning, the options' guard, early
+stopping and the best epoch, a fold's examples, what a run's checkpoints record of it, the
+validation metrics, and the per-epoch files.
+
+Whole runs (learning, resuming, a resumed run of other options refused, patience, ema) are
+``tests/train/training/test_train_stage.py``'s; runs that cannot learn are
+``test_train_extremes.py``'s.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+from types import SimpleNamespace
+
+import h5py
+import numpy as np
+import pytest
+import torch
+from cgnn_data import DENT_NAMES, dent_fold
+from torch import nn
+
+from core.errors import BadInput
+from train.data import StateTensors
+from train.model.config import CGNNConfig
+from train.model.normalise import Envelope, Normaliser
+from train.training.loop import (
+    LOG_FIELDS,
+    STALL_PROBE,
+    STALL_REL,
+    RunFiles,
+    _checkpoint,
+    _track_best,
+    check_options,
+    evaluate_pairs,
+    fold_examples,
+    learning_rate,
+    resolve_device,
+    run_meta,
+    run_notes,
+    seeded,
+    stalled,
+    stopped_early,
+)
+from train.training.train_params import TrainOptions
+
+SMALL = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8, 8, 8))
+
+
+@pytest.fixture(scope="module")
+def dent(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The dent states (closed-form truth, ``tests/cgnn_data.py``) and a 2-fold manifest."""
+    return dent_fold(tmp_path_factory.mktemp("loop_dent"))
+
+
+# --- the step size ---------------------------------------------------------------------------
+
+def test_a_constant_schedule_keeps_the_rate() -> None:
+    """The constant schedule: lr at every epoch."""
+    opts = TrainOptions(epochs=7, lr=2e-3, schedule="constant")
+    assert [learning_rate(opts, e) for e in range(7)] == [2e-3] * 7
+
+
+def test_the_cosine_falls_from_lr_to_a_hundredth_at_the_last_epoch() -> None:
+    """lr (0.01 + 0.99 (1 + cos(pi t)) / 2), t = epoch / (epochs - 1): at a quarter
+    (epoch 2 of 9) 1e-3 (0.01 + 0.99 (1 + 1/sqrt 2) / 2) = 0.855018e-3; falling each epoch."""
+    opts = TrainOptions(epochs=9, lr=1e-3, schedule="cosine")
+    rates = [learning_rate(opts, e) for e in range(9)]
+    assert rates[0] == pytest.approx(1e-3, rel=1e-12)
+    assert rates[-1] == pytest.approx(1e-5, rel=1e-9)
+    assert rates[2] == pytest.approx(1e-3 * (0.01 + 0.99 * (1 + 2**-0.5) / 2), rel=1e-12)
+    assert rates[2] == pytest.approx(0.855018e-3, rel=1e-6)
+    assert rates[6] == pytest.approx(1e-3 * (0.01 + 0.99 * (1 - 2**-0.5) / 2), rel=1e-12)
+    assert all(a > b for a, b in zip(rates[:-1], rates[1:], strict=True))
+
+
+def test_a_one_epoch_cosine_is_the_rate_itself() -> None:
+    """No last epoch to fall to (and no division by epochs - 1 = 0)."""
+    assert learning_rate(TrainOptions(epochs=1, lr=5e-4, schedule="cosine"), 0) == 5e-4
+
+
+# --- each epoch's draws ----------------------------------------------------------------------
+
+def _draws(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """What an epoch draws: a shuffle, then points and angles."""
+    return torch.randperm(50, generator=g), torch.rand(8, generator=g)
+
+
+def test_the_same_seed_and_epoch_draw_the_same_whatever_came_before() -> None:
+    """A resumed run's epoch draws what the uninterrupted run's did: the generator depends
+    on (seed, epoch) alone, not on the global RNG or earlier epochs."""
+    first = _draws(seeded(3, 5))
+    torch.manual_seed(12345)
+    torch.rand(100)
+    _draws(seeded(3, 4))
+    again = _draws(seeded(3, 5))
+    for a, b in zip(first, again, strict=True):
+        assert torch.equal(a, b)
+    assert seeded(3, 5).device == torch.device("cpu")
+
+
+@pytest.mark.parametrize(("seed", "epoch"), [(3, 6), (4, 5), (0, 0)])
+def test_another_epoch_or_seed_draws_otherwise(seed: int, epoch: int) -> None:
+    """Each epoch and seed its own shuffle: not the same order again and again."""
+    perm, _ = _draws(seeded(3, 5))
+    other, _ = _draws(seeded(seed, epoch))
+    assert not torch.equal(perm, other)
+    assert sorted(other.tolist()) == list(range(50))       # still a shuffle
+
+
+# --- a loss that does not move ---------------------------------------------------------------
+
+def test_a_loss_that_moves_less_than_stall_rel_is_a_warning() -> None:
+    """1.0 -> 0.99996: a relative change of 4e-5 < 1e-4; the message names both losses, the
+    probe's size, the epochs and what to do."""
+    assert STALL_REL == 1e-4
+    text = stalled(1.0, 0.99996, 3)
+    assert text is not None
+    assert "1 -> 0.99996" in text and f"on {STALL_PROBE} training examples" in text
+    assert "over the first 3 epoch(s)" in text and "4e-05 < 0.0001" in text
+    assert "--lr" in text
+    assert stalled(2.0, 2.00004, 1) is not None               # up as much: the same
+    assert stalled(0.0, 0.0, 1) is not None                  # nothing at all: stalled
+
+
+@pytest.mark.parametrize(("before", "after"), [(1.0, 0.9997), (1.0, 0.5), (2.0, 2.001),
+                                               (1e-6, 0.5e-6), (0.0, 1e-12)])
+def test_a_loss_that_moves_is_no_warning(before: float, after: float) -> None:
+    """A relative change of STALL_REL or more (either way), or any from 0: no warning."""
+    assert stalled(before, after, 3) is None
+
+
+# --- the options' guard ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("field", ["lr", "alpha", "ema", "point_fraction"])
+@pytest.mark.parametrize("value", [-0.1, 0.0, math.inf, -math.inf])
+def test_a_non_positive_or_infinite_rate_or_weight_is_refused_naming_it(field: str,
+                                                                       value: float) -> None:
+    """(NaN through the runner: ``test_train_extremes.py``.)"""
+    with pytest.raises(BadInput) as e:
+        check_options(TrainOptions(**{field: value}))
+    assert e.value.path is None
+    assert str(e.value) == (f"--{field.replace('_', '-')} {value}: must be a finite "
+                            "positive number")
+
+
+def test_unset_optional_weights_and_the_paper_s_options_pass() -> None:
+    """The defaults, no average and no point fraction (None), and usual values pass."""
+    check_options(TrainOptions())
+    check_options(TrainOptions(ema=None, point_fraction=None, loss="balanced"))
+    check_options(TrainOptions(ema=0.99, point_fraction=0.3, lr=2e-3, alpha=1.0))
+
+
+@pytest.mark.parametrize("loss", ["l1", "Paper", ""])
+def test_an_unknown_loss_is_refused_naming_the_known(loss: str) -> None:
+    """A loss name must be one of LOSSES, exactly (case included)."""
+    with pytest.raises(BadInput) as e:
+        check_options(TrainOptions(loss=loss))
+    assert str(e.value) == f"--loss must be one of paper, balanced, got {loss!r}"
+
+
+# --- early stopping and the best epoch -------------------------------------------------------
+
+@pytest.mark.parametrize(("patience", "best", "epoch", "stop"), [
+    (None, 0, 100, False),     # no patience: never
+    (2, -1, 10, False),        # nothing validated yet
+    (2, 3, 5, False),          # two epochs without better: still going
+    (2, 3, 6, True),           # three: stop
+    (0, 4, 5, True),           # patience 0: the first epoch without better
+    (0, 4, 4, False),
+])
+def test_a_run_stops_once_patience_epochs_pass_without_a_better_loss(
+        patience: int | None, best: int, epoch: int, stop: bool) -> None:
+    """Stop when more than ``patience`` epochs passed since the best; never without patience or a
+    best."""
+    run = SimpleNamespace(best_epoch=best)
+    assert stopped_early(run, TrainOptions(patience=patience), epoch) is stop
+
+
+def test_the_best_epoch_is_the_first_lowest_validation_loss() -> None:
+    """Losses 3, 2, 2.5, 1, 1, 4: the best is epoch 3 (a tie keeps the earlier), loss 1."""
+    run = SimpleNamespace(best_val=math.inf, best_epoch=-1)
+    seen = []
+    for epoch, loss in enumerate([3.0, 2.0, 2.5, 1.0, 1.0, 4.0]):
+        _track_best(run, epoch, loss)
+        seen.append((run.best_epoch, run.best_val))
+    assert seen == [(0, 3.0), (1, 2.0), (1, 2.0), (3, 1.0), (3, 1.0), (3, 1.0)]
+
+
+def test_a_nan_first_validation_still_gives_a_best_epoch_and_a_real_loss_beats_it() -> None:
+    """A NaN validation loss never becomes the best value, but the first epoch is kept until a real
+    loss comes."""
+    run = SimpleNamespace(best_val=math.inf, best_epoch=-1)
+    _track_best(run, 0, math.nan)
+    assert run.best_epoch == 0 and run.best_val == math.inf
+    _track_best(run, 1, 5.0)
+    assert (run.best_epoch, run.best_val) == (1, 5.0)
+
+
+def test_without_validation_the_last_epoch_is_the_best() -> None:
+    """--no-val: every epoch replaces the best (best.pt is the last epoch)."""
+    run = SimpleNamespace(best_val=1.0, best_epoch=0)
+    for epoch in (1, 2):
+        _track_best(run, epoch, math.nan, last=True)
+        assert run.best_epoch == epoch and math.isnan(run.best_val)
+
+
+# --- a fold's examples -----------------------------------------------------------------------
+
+def _manifest_pairs(data: Path, splits: Path, fold: int, role: str) -> np.ndarray:
+    """A role's (start, end) state pairs read straight from the files: single then multi."""
+    doc = json.loads(splits.read_text())
+    part = doc["folds"][fold][role]
+    with h5py.File(data) as f:
+        return np.concatenate([np.stack([f[f"{s}/start"][()][part[s]], f[f"{s}/end"][()][part[s]]],
+                                        1) for s in ("single", "multi")])
+
+
+@pytest.mark.parametrize("fold", [0, 1])
+def test_a_fold_s_examples_are_the_manifest_s(dent: tuple[Path, Path], fold: int) -> None:
+    """Training and validation pairs are the manifest's ids through the file's pairs; the
+    digest is the states file's sha256."""
+    data, splits = dent
+    states, train, val, sha = fold_examples(data, splits, TrainOptions(fold=fold))
+    np.testing.assert_array_equal(train.numpy(), _manifest_pairs(data, splits, fold, "train"))
+    np.testing.assert_array_equal(val.numpy(), _manifest_pairs(data, splits, fold, "val"))
+    assert sha == hashlib.sha256(data.read_bytes()).hexdigest()
+    assert states.points.shape == (len(states.valid), len(DENT_NAMES), 3)
+
+
+def test_no_val_leaves_the_validation_examples_out(dent: tuple[Path, Path]) -> None:
+    """--no-val on a fold that has validation examples: none are used (best.pt is then the
+    last epoch, not chosen on examples the run was told not to use)."""
+    _, train, val, _ = fold_examples(*dent, TrainOptions(no_val=True))
+    assert len(val) == 0 and val.shape == (0, 2)
+    assert len(train) == len(_manifest_pairs(*dent, 0, "train"))
+
+
+def _edited(dent: tuple[Path, Path], tmp_path: Path, role: str) -> Path:
+    """The manifest with fold 0's ``role`` emptied (its groups too)."""
+    doc = json.loads(dent[1].read_text())
+    doc["folds"][0][role] = {"groups": [], "single": [], "multi": []}
+    if role == "train":
+        doc["folds"][0]["train_subsets"] = []
+    path = tmp_path / f"no_{role}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_a_fold_without_training_examples_is_refused(dent: tuple[Path, Path],
+                                                     tmp_path: Path) -> None:
+    """Nothing to train on is refused naming the manifest, even with --no-val."""
+    splits = _edited(dent, tmp_path, "train")
+    with pytest.raises(BadInput) as e:
+        fold_examples(dent[0], splits, TrainOptions(no_val=True))
+    assert str(e.value) == f"{splits}: fold 0 has no training example"
+
+
+def test_a_fold_without_validation_examples_is_refused_unless_no_val(
+        dent: tuple[Path, Path], tmp_path: Path) -> None:
+    """No validation examples: refused naming the manifest and --no-val; with --no-val trained."""
+    splits = _edited(dent, tmp_path, "val")
+    with pytest.raises(BadInput) as e:
+        fold_examples(dent[0], splits, TrainOptions())
+    assert e.value.path == str(splits) and "fold 0 has no validation example" in e.value.what
+    assert "--no-val" in e.value.what and "\n" not in e.value.what
+    _, train, val, _ = fold_examples(dent[0], splits, TrainOptions(no_val=True))
+    assert len(train) > 0 and len(val) == 0
+
+
+# --- what a run's checkpoints record of it ---------------------------------------------------
+
+def test_run_meta_records_resolved_paths_options_network_and_variant(
+        dent: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Given relative paths (from the data's folder), the meta names the files absolutely;
+    the options and network as plain dicts; the data's point names; the variant from the
+    options (rotation, a point fraction: aug), the file's source (lab: Exp) and the network
+    (head offsets)."""
+    data, splits = dent
+    monkeypatch.chdir(data.parent)
+    opts = TrainOptions(fold=1, rotate=True, point_fraction=0.5, seed=7)
+    config = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8, 8, 8),
+                        offsets="heads", offset_width=4)
+    meta = run_meta(Path(data.name), Path(splits.name), None, opts, config, "ab" * 32, None)
+    assert meta["data"] == {"file": str(data.resolve()), "sha256": "ab" * 32,
+                            "point_names": DENT_NAMES}
+    assert meta["splits"] == str(splits.resolve()) and meta["init"] is None
+    assert meta["options"] == asdict(opts) and meta["options"]["fold"] == 1
+    assert meta["config"] == config.to_dict() and meta["config"]["offsets"] == "heads"
+    assert meta["variant"] == {"model": "cGNN", "train_data": "Exp", "rotate": True,
+                               "aug": True, "pretrained": None, "offsets": "heads"}
+
+
+def test_run_meta_of_a_fine_tuned_run_names_its_init_and_the_variant_it_came_from(
+        dent: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A relative --init is named absolutely, and its checkpoint's variant is the pretrained one."""
+    data, splits = dent
+    monkeypatch.chdir(tmp_path)
+    pre = {"model": "cGNN", "train_data": "MSM", "rotate": False, "aug": True,
+           "pretrained": None, "offsets": "none"}
+    init = Path("pre.pt")
+    meta = run_meta(data, splits, init, TrainOptions(), SMALL, "0" * 64,
+                    {"meta": {"variant": pre}})
+    assert meta["init"] == str(tmp_path.resolve() / "pre.pt")
+    assert meta["variant"] == {"model": "cGNN", "train_data": "Exp", "rotate": False,
+                               "aug": False, "pretrained": pre, "offsets": "none"}
+
+
+# --- the validation metrics ------------------------------------------------------------------
+
+class _Constant(nn.Module):
+    """A network that answers the same normalised displacement ``v`` at every point and the
+    same normalised force change ``f`` (the metrics then follow by hand)."""
+
+    def __init__(self, v: tuple[float, float, float], f: float) -> None:
+        super().__init__()
+        self.v, self.f = torch.tensor(v), f
+
+    def forward(self, points, cond, mask=None, neighbours=None):
+        return self.v.expand_as(points).clone(), torch.full((len(points),), self.f)
+
+
+def _tiny_states() -> StateTensors:
+    """Four states of five points; point 4 is invalid in state 3; the tip presses 2 mm per
+    state; the force 0, 1, 3, 4 N."""
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(0.0, 0.1, (4, 5, 3)).astype(np.float32)
+    valid = np.ones((4, 5), bool)
+    valid[3, 4] = False
+    pts[3, 4] = 0.0
+    tip = np.array([[0.05, 0.05, -2e-3 * s] for s in range(4)], np.float32)
+    return StateTensors(torch.from_numpy(pts), torch.from_numpy(valid), torch.from_numpy(tip),
+                        torch.tensor([0.0, 1.0, 3.0, 4.0]), {})
+
+
+def test_evaluate_pairs_is_the_hand_computed_mean_over_all_examples() -> None:
+    """Every example's predicted points are its start moved by v x disp_scale (every press
+    is 2 mm or more: the gate is 1), its force change f x force_scale; L_d over the points
+    valid at both ends; the means are over the examples, across batches of two."""
+    states = _tiny_states()
+    pairs = torch.tensor([[0, 1], [0, 3], [1, 2]])
+    norm = Normaliser((0.05, 0.05, 0.0), 0.03, disp_scale=0.002, force_scale=0.5, extent=0.08,
+                      envelope=Envelope(2e-3, 6e-3, -6e-3, 0.0, 1.0, 4.0))
+    v, f = (1.0, -0.5, 2.0), 3.0
+    pts, valid = states.points.double().numpy(), states.valid.numpy()
+    move = np.array(v) * 0.002
+    ld, err = [], []
+    for s, e in pairs.tolist():
+        both = valid[s] & valid[e]
+        d = np.linalg.norm(pts[s] + move - pts[e], axis=1)
+        ld.append(d[both].mean())
+        err.append(f * 0.5 - (float(states.force[e]) - float(states.force[s])))
+    ld, err = np.array(ld), np.array(err)
+    for balanced, loss in ((False, 88.0 * ld + err**2),
+                           (True, ld / 0.002 + (err / 0.5) ** 2)):
+        out = evaluate_pairs(_Constant(v, f), norm, states, pairs, alpha=88.0, batch=2,
+                             balanced=balanced)
+        assert out["val_loss"] == pytest.approx(loss.mean(), rel=1e-5)
+        assert out["val_ld_mm"] == pytest.approx(ld.mean() * 1e3, rel=1e-5)
+        assert out["val_force_abs_n"] == pytest.approx(np.abs(err).mean(), rel=1e-5)
+
+
+def test_evaluate_pairs_puts_the_model_in_eval_mode() -> None:
+    """Validation never runs a network in training mode (dropout, norms)."""
+    model = _Constant((0.0, 0.0, 0.0), 0.0).train()
+    norm = Normaliser((0.05, 0.05, 0.0), 0.03, 0.002, 0.5, 0.08)
+    evaluate_pairs(model, norm, _tiny_states(), torch.tensor([[0, 1]]), alpha=88.0)
+    assert not model.training
+
+
+# --- the run's files -------------------------------------------------------------------------
+
+def test_a_run_folder_names_best_last_and_log(tmp_path: Path) -> None:
+    """A run folder's three files, and no notes before a last.pt exists."""
+    files = RunFiles.in_folder(tmp_path)
+    assert (files.best, files.last, files.log) == (tmp_path / "best.pt", tmp_path / "last.pt",
+                                                   tmp_path / "log.csv")
+    assert run_notes(files.last) == []                     # no last.pt yet: no notes
+
+
+def _fake_run(best_epoch: int) -> SimpleNamespace:
+    model = nn.Linear(2, 1)
+    return SimpleNamespace(kept=model, model=model, averaged=None, best_val=0.5,
+                           best_epoch=best_epoch,
+                           optimizer=torch.optim.Adam(model.parameters(), lr=1e-3),
+                           meta={"config": {"k": 5}, "notes": []},
+                           norm=Normaliser((0.0, 0.0, 0.0), 0.03, 0.002, 0.5, 0.08))
+
+
+def test_each_epoch_writes_last_and_best_only_when_it_is_the_best(tmp_path: Path) -> None:
+    """Epoch 0 (the best): best.pt and last.pt, the log's header and row; epoch 1 (not
+    better): last.pt alone, a row appended; a run started over at epoch 0 starts the log
+    afresh."""
+    files = RunFiles.in_folder(tmp_path)
+    saved: list[tuple[str, int]] = []
+
+    def save(path: Path, state: dict) -> None:
+        saved.append((path.name, state["epoch"]))
+        path.write_bytes(b"x")
+
+    def row(epoch: int) -> dict:
+        return {"epoch": epoch, "train_loss": 1.0 / (epoch + 1), "val_loss": 0.5,
+                "val_ld_mm": 0.1, "val_force_abs_n": 0.2, "seconds": 1.0,
+                "samples_per_s": 10.0, "extra": "not logged"}
+
+    _checkpoint(_fake_run(0), files, save, 0, row(0))
+    _checkpoint(_fake_run(0), files, save, 1, row(1))
+    assert saved == [("best.pt", 0), ("last.pt", 0), ("last.pt", 1)]
+    with open(files.log, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["epoch"]) for r in rows] == [0, 1] and tuple(rows[0]) == LOG_FIELDS
+    assert float(rows[1]["train_loss"]) == 0.5
+    _checkpoint(_fake_run(0), files, save, 0, row(0))
+    with open(files.log, newline="") as f:
+        assert [int(r["epoch"]) for r in csv.DictReader(f)] == [0]
+
+
+def test_the_device_is_resolved_or_refused() -> None:
+    """cpu as asked, auto to CUDA only where torch has it, cuda refused without it."""
+    assert resolve_device("cpu") == torch.device("cpu")
+    auto = resolve_device("auto")
+    assert auto.type == ("cuda" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(BadInput, match="--device cuda: this torch has no CUDA device"):
+            resolve_device("cuda")

@@ -1,0 +1,48 @@
+"""A run's variant records where its network reads the tip's offsets, so that evaluation
+never pools the paper's network with one whose graph layers read the press."""
+
+from __future__ import annotations
+
+import pytest
+
+from train.model.config import CGNNConfig
+from train.training.migrate import migrate
+from train.training.variant import Variant, make_variant, recorded_variant
+
+
+@pytest.mark.parametrize(("config", "offsets", "reads"), [
+    (CGNNConfig(), "none", False),
+    (CGNNConfig(offsets="graph"), "graph", True),
+    (CGNNConfig(offsets="heads"), "heads", False),
+])
+def test_the_variant_says_where_the_offsets_enter(tmp_path, config, offsets, reads) -> None:
+    recorded = make_variant(config.to_dict(), {"rotate": True}, tmp_path / "gone.h5", None)
+    variant = Variant.from_dict(recorded)
+    assert recorded["offsets"] == offsets
+    assert variant.offsets.press_independent is not reads
+    tuned = Variant.from_dict(make_variant(config.to_dict(), {}, tmp_path / "gone.h5",
+                                           {"variant": recorded, "config": config.to_dict()}))
+    assert tuned.pretrained == variant and tuned.offsets == offsets
+
+
+def test_a_record_from_before_the_field_reads_its_network() -> None:
+    """A checkpoint's variant without ``offsets`` takes them from its network's config (in
+    the form before ``offsets`` was one field), and so does the run it was fine-tuned from
+    (the same network)."""
+    old = {"model": "cGNN", "train_data": "Exp", "rotate": True, "aug": False,
+           "pretrained": {"model": "cGNN", "train_data": "MSM", "rotate": True, "aug": False,
+                          "pretrained": None}}
+    config = {k: v for k, v in CGNNConfig().to_dict().items()
+              if k not in ("offsets", "offset_width")}
+    meta = {"variant": old, "config": {**config, "tip_offsets": True, "head_offsets": 0}}
+    variant = recorded_variant(migrate({"meta": meta})["meta"])
+    assert variant.offsets == variant.pretrained.offsets == "graph"
+    assert recorded_variant(migrate({"meta": {**meta, "config": config}})["meta"]).offsets \
+        == "none"
+
+
+def test_networks_that_differ_only_in_their_offsets_are_told_apart() -> None:
+    a = Variant("cGNN", "Exp", True, False, None, "graph")
+    b = Variant("cGNN", "Exp", True, False, None, "heads")
+    assert a != b and a.label == b.label and a.full_name != b.full_name
+    assert "head offsets" in b.full_name and "tip offsets" in a.full_name

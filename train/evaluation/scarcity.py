@@ -1,0 +1,118 @@
+"""The data-scarcity study (paper, "Data Scarcity"): train on 1..n training groups of a fold,
+with and without transfer learning, and evaluate each on the fold's test examples.
+
+For a run, the curve retrains its fold with the nested subsets of the manifest
+(``train_subsets``), once from scratch and, when the run was fine-tuned from a pre-trained model
+(``--init``), once from that model too; beside them, at each subset, the no-learning references
+fitted on the same training groups (:mod:`train.evaluation.references`). Written as
+``scarcity.json``, ``scarcity.csv`` and a three-panel ``scarcity.png`` (mean L_d, max L_d, force
+error over training groups; the references dashed).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from core.progress import say
+from train.evaluation.evaluate import (
+    ExampleErrors,
+    example_errors,
+    load_run,
+    metrics,
+    reference_errors,
+)
+from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from train.model.config import CGNNConfig
+from train.training.checkpoint import load_checkpoint
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+from train.training.train_stage import run_train
+
+FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n")
+MODELS = {False: "no TL", True: "TL"}
+
+
+def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str = "cpu",
+                  most: int | None = None) -> list[dict]:
+    """Retrain ``run_dir``'s fold on 1..n groups (at most ``most``), with and without its
+    --init, and score each beside the references fitted on the same groups."""
+    meta = load_checkpoint(run_dir / "best.pt")["meta"]
+    opts = TrainOptions(**meta["options"])
+    opts = dataclasses.replace(opts, epochs=epochs or opts.epochs)
+    config = CGNNConfig.from_dict(meta["config"])
+    data, splits = Path(meta["data"]["file"]), Path(meta["splits"])
+    n_groups = len(json.loads(splits.read_text())["folds"][opts.fold]["train_subsets"])
+    inits = [None] + ([Path(meta["init"])] if meta["init"] else [])
+    rows = []
+    for n in range(1, min(n_groups, most or n_groups) + 1):
+        for init in inits:
+            tag = f"fold{opts.fold}_n{n:02d}_{'tl' if init else 'notl'}"
+            say(f"scarcity: {tag}")
+            sub = dataclasses.replace(opts, train_groups=n)
+            run_train(TrainInputs(data, splits, init), out_dir / tag,
+                      TrainParams(sub, config, device))
+            run = load_run(out_dir / tag, device)
+            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0]))
+        rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
+    return rows
+
+
+def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors) -> dict:
+    m = metrics(errors)["all"]
+    return {"fold": fold, "groups": groups, "predictor": predictor,
+            "ld_mean_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
+            "force_abs_n": m["force_abs_n"]}
+
+
+def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[float]]:
+    """Training groups and the mean of ``key`` over folds for one predictor (None skipped)."""
+    sel = [r for r in rows if r["predictor"] == predictor and r[key] is not None]
+    groups = sorted({r["groups"] for r in sel})
+    return groups, [float(np.mean([r[key] for r in sel if r["groups"] == g])) for g in groups]
+
+
+LINES = (("no TL", "tab:red", "o-"), ("TL", "tab:blue", "o-"),
+         (NOTHING_MOVES, "tab:gray", "s--"), (NEAREST_PRESS, "tab:green", "^--"),
+         (FORCE_LINEAR, "tab:olive", "v--"))
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    """The curve as CSV, written to ``path`` (the runner's temporary file)."""
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def plot(path: Path, rows: list[dict]) -> None:
+    """Three panels like the paper's figure: mean L_d, max L_d, force error over groups (log
+    scale: a linear fit to one press can be off by newtons), one legend for all; written to
+    ``path`` (the runner's temporary file)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.0))
+    panels = (("ld_mean_mm", "mean $L_d$ [mm]"), ("ld_max_mm", "max $L_d$ [mm]"),
+              ("force_abs_n", "force absolute error [N]"))
+    for ax, (key, label) in zip(axes, panels, strict=True):
+        for name, color, style in LINES:
+            groups, mean = curve(rows, name, key)
+            if groups:
+                ax.plot(groups, mean, style, color=color, label=name)
+        ax.set_xlabel("training groups (presses)")
+        ax.set_ylabel(label)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(alpha=0.3)
+    axes[2].set_yscale("log")
+    handles, labels = axes[2].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=len(labels), fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.9))
+    fig.savefig(path, dpi=120, format="png")
+    plt.close(fig)

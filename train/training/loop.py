@@ -1,0 +1,486 @@
+"""Training the cGNN on one fold: Adam, the paper's loss, validation every epoch, checkpoints.
+
+The loss and the distances are the SI units' (:mod:`train.model.si_units`): ``alpha * L_d +
+MSE(dF)``, L_d in metres and the force change in newtons (alpha = 88, the paper's), or "balanced".
+
+Each epoch's shuffle and point sampling (``point_fraction``: the paper's aug variant, that
+fraction of the points per sample in training, all in validation and test) come from a
+generator seeded by (seed, epoch), so a run killed after epoch e and resumed from ``last.pt``
+draws exactly what the uninterrupted run drew: same weights. ``best.pt`` is the epoch with the
+lowest validation loss; with ``no_val`` (no validation set, said explicitly) it is the last
+epoch. ``rotate`` turns each training example about the surface normal by
+a random angle (drawn from the same generator), so the model cannot lean on where on the
+phantom a press was. A non-finite or exploding loss stops the run naming epoch and batch.
+
+Training that cannot learn says so: a fold without validation examples is refused unless
+``no_val`` says so; training examples in which nothing moves (no point by a micrometre, the
+force not by a millinewton: below any lab's noise) are refused before training; a training
+loss that does not move over the first epochs is a warning, kept in the checkpoints' meta
+("notes") and the recording.
+
+The runner names the files (:class:`RunFiles`) and writes the checkpoints (``save``: atomically,
+with their provenance, :mod:`train.training.train_stage`); this module only appends ``log.csv``. The
+defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.nn.parallel import DistributedDataParallel
+
+from core.errors import BadInput
+from core.progress import say, warn
+from data_schema.states import point_names
+from train.data import (
+    Batch,
+    StateTensors,
+    fold_pairs,
+    load_manifest,
+    load_states,
+    make_batch,
+)
+from train.model.cgnn import CGNN
+from train.model.config import CGNNConfig
+from train.model.normalise import Envelope, Normaliser, highest_tip
+from train.model.si_units import loss_sum, mean_distance, predict
+from train.training.augment import about_normal, move_batch
+from train.training.checkpoint import load_checkpoint
+from train.training.distributed import DistContext, from_env
+from train.training.train_params import TrainOptions
+from train.training.variant import make_variant
+
+LOSSES = ("paper", "balanced")
+EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
+# Nothing to learn: no point of any training example moves by STILL_M and the force changes by
+# less than STILL_N, both below any lab's noise (markers ~0.1 mm, the force sensor ~10 mN).
+STILL_M = 1e-6
+STILL_N = 1e-3
+# A loss that does not move: the loss of a fixed probe of training examples (all points, no
+# augmentation: no sampling noise) changed by less than STALL_REL of itself from before
+# training to the end of the first STALL_EPOCHS epochs (or of the run, when shorter). A run
+# that learns moves it by percents there.
+STALL_EPOCHS = 3
+STALL_REL = 1e-4
+STALL_PROBE = 64       # training examples in the probe
+LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
+              "samples_per_s")
+Save = Callable[[Path, dict[str, Any]], None]    # writes a checkpoint (state) to a path
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """Where a run's files go, named by its runner: the checkpoints ``best`` (the kept epoch)
+    and ``last`` (each epoch; a killed run resumes from it), and the per-epoch ``log`` (CSV,
+    appended)."""
+
+    best: Path
+    last: Path
+    log: Path
+
+    @classmethod
+    def in_folder(cls, out: Path) -> RunFiles:
+        """A run folder's files: best.pt, last.pt, log.csv."""
+        return cls(out / "best.pt", out / "last.pt", out / "log.csv")
+
+
+def learning_rate(opts: TrainOptions, epoch: int) -> float:
+    """The step size of an epoch: constant, or cosine from ``lr`` to 1 % of it."""
+    if opts.schedule == "constant" or opts.epochs <= 1:
+        return opts.lr
+    t = epoch / (opts.epochs - 1)
+    return opts.lr * (0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * t)))
+
+
+def seeded(seed: int, epoch: int) -> torch.Generator:
+    """The generator of one epoch's draws (shuffle, points), the same on every resume and
+    every device: it draws on the CPU, and the draws are moved to the run's device."""
+    return torch.Generator(device="cpu").manual_seed(seed * 1_000_003 + epoch)
+
+
+def check_options(opts: TrainOptions) -> None:
+    """Refuse a non-finite or non-positive rate or weight (the CLI bounds them further), so
+    that a caller's NaN never reaches the optimizer or shows as a diverged loss."""
+    for name in ("lr", "alpha", "ema", "point_fraction"):
+        value = getattr(opts, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise BadInput(None, f"--{name.replace('_', '-')} {value}: must be a finite "
+                                 "positive number")
+    if opts.loss not in LOSSES:
+        raise BadInput(None, f"--loss must be one of {', '.join(LOSSES)}, got {opts.loss!r}")
+
+
+def check_learnable(states: StateTensors, pairs: torch.Tensor, data: Path, fold: int,
+                    chunk: int = 256) -> None:
+    """Refuse training examples in which nothing moves: no point by ``STILL_M`` and the force
+    not by ``STILL_N`` (a model trained on them learns "nothing moves", silently)."""
+    moved = changed = 0.0
+    for rows in pairs.split(chunk):
+        s, e = rows[:, 0], rows[:, 1]
+        both = states.valid[s] & states.valid[e]
+        d = (states.points[e] - states.points[s]).norm(dim=-1) * both
+        moved = max(moved, float(d.max()))
+        changed = max(changed, float((states.force[e] - states.force[s]).abs().max()))
+    if moved < STILL_M and changed < STILL_N:
+        raise BadInput(data, f"nothing to learn: in the {len(pairs)} training examples of "
+                             f"fold {fold} no point moves more than {moved * 1e6:.3g} um and "
+                             f"the force changes by at most {changed * 1e3:.3g} mN (below "
+                             f"{STILL_M * 1e6:g} um and {STILL_N * 1e3:g} mN, any lab's noise)")
+
+
+def probe_loss(run: Run, opts: TrainOptions) -> float:
+    """The loss of the trained weights on the first ``STALL_PROBE`` training examples."""
+    return evaluate_pairs(run.model, run.norm, run.states, run.train[:STALL_PROBE], opts.alpha,
+                          balanced=balance(run, opts) is not None)["val_loss"]
+
+
+def stalled(before: float, after: float, epochs: int) -> str | None:
+    """A warning when the probe's loss moved by less than ``STALL_REL`` of itself."""
+    change = abs(after - before) / max(abs(before), 1e-30)
+    if change >= STALL_REL:
+        return None
+    return (f"the training loss did not move: {before:.7g} -> {after:.7g} on {STALL_PROBE} "
+            f"training examples over the first {epochs} epoch(s) (relative change "
+            f"{change:.2g} < {STALL_REL:g}); the model is barely learning: raise --lr or "
+            "check the data")
+
+
+def note_warning(run: Run, text: str) -> None:
+    """A warning line on stderr (even with --quiet), kept in the checkpoints' meta."""
+    warn(text)
+    run.meta.setdefault("notes", []).append(f"warning: {text}")
+
+
+def fit_normaliser(states: StateTensors, pairs: torch.Tensor, seed: int, most: int = 2000
+                   ) -> Normaliser:
+    """Statistics of (at most ``most``, seeded) training examples, with the training envelope
+    (:func:`training_envelope`)."""
+    rng = np.random.default_rng(seed)
+    keep = pairs[np.sort(rng.choice(len(pairs), min(most, len(pairs)), replace=False))]
+    b = make_batch(states, keep)
+    m = b.mask.numpy()
+    norm = Normaliser.fit(b.points.numpy(), m, (b.target - b.points).numpy(), b.dforce.numpy())
+    return replace(norm, envelope=training_envelope(states, pairs, b))
+
+
+def training_envelope(states: StateTensors, pairs: torch.Tensor, sample: Batch) -> Envelope:
+    """What the training examples span: press lengths, tip depths and forces of every one
+    (the no-motion gate's shortest press must leave each of them whole), the tip's height
+    above the surface of ``sample``'s, and the highest point of every start state."""
+    s, e = pairs[:, 0], pairs[:, 1]
+    cond = torch.cat([states.tip[s], states.tip[e]], dim=1).numpy()
+    gap = highest_tip(sample.points.numpy(), sample.mask.numpy(), sample.cond[:, :3].numpy())
+    top = float(states.points[s][..., 2][states.valid[s]].max())
+    return Envelope.fit(cond, (states.force[e] - states.force[s]).numpy(), gap, top)
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto``: CUDA when torch has it, else the CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise BadInput(None, "--device cuda: this torch has no CUDA device")
+    return torch.device(name)
+
+
+@dataclass
+class Run:
+    """What a training run needs, assembled."""
+
+    model: CGNN
+    norm: Normaliser
+    optimizer: torch.optim.Optimizer
+    states: StateTensors
+    train: torch.Tensor        # (E, 2) pairs
+    val: torch.Tensor
+    start_epoch: int
+    best_val: float
+    meta: dict
+    best_epoch: int = -1
+    averaged: CGNN | None = None   # with ``ema``: the average validated and saved as "model"
+
+    @property
+    def kept(self) -> CGNN:
+        """The weights validated and saved as the run's model."""
+        return self.averaged if self.averaged is not None else self.model
+
+
+def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
+            config: CGNNConfig, init: Path | None, device: torch.device) -> Run:
+    """Load data and fold, build the model (from ``init``'s weights for transfer learning)
+    and its optimizer, and resume a killed run from ``files.last``."""
+    check_options(opts)
+    states, train, val, sha = fold_examples(data, splits, opts)
+    init_state = load_checkpoint(init) if init is not None else None
+    meta = run_meta(data, splits, init, opts, config, sha, init_state)
+    model, norm = initial_model(states, train, opts, config, init, init_state)
+    model.to(device)
+    averaged = copy.deepcopy(model).requires_grad_(False) if opts.ema is not None else None
+    run = Run(model, norm, torch.optim.Adam(model.parameters(), lr=opts.lr), states, train,
+              val, 0, math.inf, meta, -1, averaged)
+    if files.last.is_file():
+        resume(run, files.last, device)
+    run.states, run.train, run.val = states.to(device), train.to(device), val.to(device)
+    return run
+
+
+def fold_examples(data: Path, splits: Path, opts: TrainOptions
+                  ) -> tuple[StateTensors, torch.Tensor, torch.Tensor, str]:
+    """The states, the fold's training and validation pairs (E, 2), and the data's sha256
+    the manifest names; a fold without training examples, or without validation unless
+    ``no_val``, or whose training examples do not move, is refused."""
+    doc = load_manifest(splits, data)
+    states = load_states(data)
+    train = fold_pairs(states, doc, opts.fold, "train", data, opts.train_groups)
+    val = fold_pairs(states, doc, opts.fold, "val")
+    if len(train) == 0:
+        raise BadInput(splits, f"fold {opts.fold} has no training example")
+    if len(val) == 0 and not opts.no_val:
+        raise BadInput(splits, f"fold {opts.fold} has no validation example, so best.pt "
+                               "could only be chosen by the training loss: split with a "
+                               "validation share, or give --no-val (best.pt = the last epoch)")
+    if opts.no_val:
+        val = val[:0]
+    check_learnable(states, train, data, opts.fold)
+    return states, train, val, doc["data"]["sha256"]
+
+
+def run_meta(data: Path, splits: Path, init: Path | None, opts: TrainOptions,
+             config: CGNNConfig, sha256: str, init_state: dict | None) -> dict:
+    """What a run's checkpoints record of it: its options, network, data, manifest, the
+    checkpoint it started from, and its variant."""
+    return {"options": asdict(opts), "config": config.to_dict(),
+            "data": {"file": str(Path(data).resolve()), "sha256": sha256,
+                     "point_names": point_names(data)},
+            "splits": str(Path(splits).resolve()),
+            "init": str(Path(init).resolve()) if init else None,
+            "variant": make_variant(config.to_dict(), asdict(opts), data,
+                                    init_state and init_state["meta"])}
+
+
+def initial_model(states: StateTensors, train: torch.Tensor, opts: TrainOptions,
+                  config: CGNNConfig, init: Path | None, init_state: dict | None
+                  ) -> tuple[CGNN, Normaliser]:
+    """The seeded network and the normaliser of the training examples; with ``init_state``
+    (transfer learning) its weights and phantom frame's statistics, the envelope this run's."""
+    torch.manual_seed(opts.seed)
+    model = CGNN(config)
+    norm = fit_normaliser(states, train, opts.seed)
+    if init_state is None:
+        return model, norm
+    if CGNNConfig.from_dict(init_state["config"]).to_dict() != config.to_dict():
+        raise BadInput(init, "its network (widths, k, conditioning or offsets) differs from "
+                             "this run's: transfer learning needs the same network")
+    model.load_state_dict(init_state["model"])
+    return model, replace(Normaliser.from_dict(init_state["norm"]), envelope=norm.envelope)
+
+
+def resume(run: Run, last: Path, device: torch.device) -> None:
+    """Continue ``run`` from its last checkpoint: weights, average, optimizer, normaliser,
+    epoch, best so far and notes; refused when it holds another run."""
+    state = load_checkpoint(last, device)
+    if _resumable(state["meta"]) != _resumable(run.meta):
+        raise BadInput(last, "holds a run with other data, fold, options or network: "
+                             "choose another --out or remove it")
+    run.model.load_state_dict(state.get("trained", state["model"]))
+    if run.averaged is not None:
+        run.averaged.load_state_dict(state["model"])
+    run.optimizer.load_state_dict(state["optimizer"])
+    run.norm = Normaliser.from_dict(state["norm"])
+    run.start_epoch, run.best_val = state["epoch"] + 1, state["best_val"]
+    run.meta["notes"] = list(state["meta"].get("notes", []))
+    run.best_epoch = int(state.get("best_epoch", state["epoch"]))
+
+
+@torch.no_grad()
+def update_average(run: Run, decay: float) -> None:
+    """One step of the exponential average: avg <- decay avg + (1 - decay) weights."""
+    for avg, w in zip(run.averaged.parameters(), run.model.parameters(), strict=True):
+        avg.lerp_(w, 1.0 - decay)
+
+
+def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
+    """The normaliser that puts the loss terms in their scales ("balanced"), or None
+    (the loss's name was checked once, :func:`check_options`)."""
+    return run.norm if opts.loss == "balanced" else None
+
+
+def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
+    """True once ``patience`` epochs have passed without a better validation loss."""
+    return opts.patience is not None and run.best_epoch >= 0 \
+        and epoch - run.best_epoch > opts.patience
+
+
+def _resumable(meta: dict) -> dict:
+    """What a resumed run must share with the one it continues (more epochs may be asked)."""
+    return {**{k: v for k, v in meta.items() if k not in ("variant", "notes")},  # derived
+            "options": {k: v for k, v in meta["options"].items() if k != "epochs"}}
+
+
+def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
+                ctx: DistContext, first_loss: float | None) -> float:
+    """One pass over the training examples; the mean loss."""
+    device = run.train.device
+    g = seeded(opts.seed, epoch)
+    perm = torch.randperm(len(run.train), generator=g).to(device)
+    n_points = run.states.points.shape[1]
+    keep = max(run.model.config.k + 1, math.ceil(opts.point_fraction * n_points)) \
+        if opts.point_fraction else None
+    net.train()
+    for group in run.optimizer.param_groups:
+        group["lr"] = learning_rate(opts, epoch)
+    total = torch.zeros(2, device=device)
+    for b, rows in enumerate(perm.split(opts.batch)):
+        pairs = run.train[rows]
+        idx = None
+        if keep is not None:
+            idx = torch.rand(len(rows), n_points, generator=g).argsort(1)[:, :keep].to(device)
+        turns = about_normal(torch.rand(len(rows), generator=g) * 2 * math.pi) \
+            if opts.rotate else None
+        mine = ctx.my_slice(torch.arange(len(rows), device=device))
+        batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
+        if turns is not None:
+            batch = move_batch(batch, turns[mine.cpu()], torch.tensor(run.norm.centre))
+        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha, balance(run, opts))
+        value = float(loss.detach()) / max(len(mine), 1)
+        first_loss = first_loss or value
+        if not math.isfinite(value) or value > EXPLODE * first_loss:
+            raise BadInput(None, f"training diverged at epoch {epoch}, batch {b}: loss "
+                                 f"{value:.4g} (try a lower --lr)")
+        run.optimizer.zero_grad(set_to_none=True)
+        (loss * ctx.world / len(rows)).backward()     # DDP averages: the global batch's mean
+        run.optimizer.step()
+        if run.averaged is not None:
+            update_average(run, opts.ema)
+        total += torch.stack([loss.detach(), torch.tensor(float(len(mine)), device=device)])
+    total = ctx.total(total)
+    return float(total[0] / total[1])
+
+
+@torch.no_grad()
+def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: StateTensors,
+                   pairs: torch.Tensor, alpha: float, batch: int = 64,
+                   balanced: bool = False) -> dict[str, float]:
+    """Mean loss, L_d (mm) and force error (N) over ``pairs`` (all points)."""
+    model.eval()
+    sums = torch.zeros(4, device=pairs.device)
+    for rows in torch.arange(len(pairs), device=pairs.device).split(batch):
+        b = make_batch(states, pairs[rows])
+        p = predict(model, norm, b)
+        sums += torch.stack([loss_sum(p, b, alpha, norm if balanced else None),
+                             mean_distance(p, b).sum(),
+                             (p.dforce - b.dforce).abs().sum(), sums.new_tensor(float(len(rows)))])
+    n = max(float(sums[3]), 1.0)
+    return {"val_loss": float(sums[0]) / n, "val_ld_mm": float(sums[1]) / n * 1e3,
+            "val_force_abs_n": float(sums[2]) / n}
+
+
+def train_run(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
+              config: CGNNConfig, init: Path | None, device: str, save: Save) -> Path:
+    """Train (or resume from ``files.last``) one fold: ``save`` writes the checkpoints
+    ``files.best`` and ``files.last`` each epoch, and each epoch's row is appended to
+    ``files.log`` (only the main process writes); returns ``files.best``."""
+    dev = resolve_device(device)
+    ctx = from_env(dev)
+    run = prepare(data, splits, files, opts, config, init, dev)
+    net = DistributedDataParallel(run.model) if ctx.world > 1 else run.model
+    if ctx.main:
+        for path in {files.best.parent, files.last.parent, files.log.parent}:
+            path.mkdir(parents=True, exist_ok=True)
+    if opts.no_val:
+        _note(run, "no validation (--no-val): best.pt is the last epoch", ctx.main)
+    first = None
+    probe = probe_loss(run, opts) if run.start_epoch == 0 and ctx.main else None
+    probe_at = min(STALL_EPOCHS, opts.epochs) - 1        # the epoch after which it is checked
+    for epoch in range(run.start_epoch, opts.epochs):
+        if _agreed(ctx, stopped_early(run, opts, epoch), run.train.device):
+            say(f"stopped after epoch {epoch}: no better validation in {opts.patience} epochs "
+                f"(best: epoch {run.best_epoch + 1})")
+            break
+        tic = time.perf_counter()
+        train_loss = train_epoch(run, net, opts, epoch, ctx, first)
+        first = first or train_loss
+        if probe is not None and epoch == probe_at \
+                and (stall := stalled(probe, probe_loss(run, opts), epoch + 1)):
+            note_warning(run, stall)
+        metrics = _validate(run, opts)
+        secs = time.perf_counter() - tic
+        row = {"epoch": epoch, "train_loss": train_loss, **metrics, "seconds": secs,
+               "samples_per_s": len(run.train) / secs}
+        _track_best(run, epoch, row["val_loss"], last=opts.no_val)
+        if ctx.main:
+            _checkpoint(run, files, save, epoch, row)
+            say(_epoch_line(row, opts.epochs, validated=len(run.val) > 0))
+    return files.best
+
+
+def _validate(run: Run, opts: TrainOptions) -> dict[str, float]:
+    """The validation metrics of the kept weights; NaN without validation (``no_val``)."""
+    if len(run.val) == 0:
+        return {"val_loss": math.nan, "val_ld_mm": math.nan, "val_force_abs_n": math.nan}
+    return evaluate_pairs(run.kept, run.norm, run.states, run.val, opts.alpha,
+                          balanced=balance(run, opts) is not None)
+
+
+def _epoch_line(row: dict, epochs: int, validated: bool) -> str:
+    """One epoch's progress line."""
+    val = (f"val {row['val_loss']:.5f} (L_d {row['val_ld_mm']:.3f} mm, |dF| "
+           f"{row['val_force_abs_n']:.3f} N)") if validated else "no validation"
+    return (f"epoch {row['epoch'] + 1}/{epochs}: train {row['train_loss']:.5f}, {val}, "
+            f"{row['samples_per_s']:.0f} samples/s")
+
+
+def _note(run: Run, text: str, main: bool) -> None:
+    """A choice the run made, said once and kept in the checkpoints' meta ("notes")."""
+    if text not in run.meta.get("notes", []):
+        run.meta.setdefault("notes", []).append(text)
+    if main:
+        say(text)
+
+
+def run_notes(last: Path) -> list[str]:
+    """The notes (choices, warnings) kept in a run's last checkpoint (none when absent)."""
+    return list(load_checkpoint(last)["meta"].get("notes", [])) if last.is_file() else []
+
+
+def _agreed(ctx: DistContext, stop: bool, device: torch.device) -> bool:
+    """Stop when any process would: every rank takes the same decision, so none waits for
+    another that has left (validation losses may differ in the last bits on a GPU)."""
+    return bool(ctx.total(torch.tensor([float(stop)], device=device)) > 0)
+
+
+def _track_best(run: Run, epoch: int, val_loss: float, last: bool = False) -> None:
+    """Remember the best validation loss and its epoch (every rank alike); with ``last``
+    (no validation), the last epoch is the best."""
+    if last:
+        run.best_val, run.best_epoch = val_loss, epoch
+    elif val_loss < run.best_val or run.best_epoch < 0:
+        run.best_val, run.best_epoch = min(run.best_val, val_loss), epoch
+
+
+def _checkpoint(run: Run, files: RunFiles, save: Save, epoch: int, row: dict) -> None:
+    """Append the log row; write last.pt, and best.pt when validation improved."""
+    state = {"model": run.kept.state_dict(), "optimizer": run.optimizer.state_dict(),
+             "epoch": epoch, "best_val": run.best_val, "best_epoch": run.best_epoch,
+             "config": run.meta["config"], "norm": run.norm.to_dict(), "meta": run.meta}
+    if run.averaged is not None:
+        state["trained"] = run.model.state_dict()     # what the optimizer steps, for resume
+    if run.best_epoch == epoch or not files.best.exists():
+        save(files.best, state)
+    save(files.last, state)
+    log = files.log
+    new = not log.exists() or epoch == 0
+    with open(log, "w" if new else "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+        if new:
+            w.writeheader()
+        w.writerow({k: row[k] for k in LOG_FIELDS})

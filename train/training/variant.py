@@ -1,0 +1,105 @@
+"""A run's variant as structured fields, recorded in its checkpoint when it is trained.
+
+:class:`Variant` is what evaluation groups runs by: two runs are pooled only when every field
+is the same. What Table 2 calls a run ("cGNN/aug MSM (TL)", :attr:`Variant.label`) is built
+from these fields for display only; nothing parses a label back, and nothing groups by it (a
+fine-tuned run's label leaves out its own rotation and aug). The fields: ``model`` ("cGNN", or
+"noCond" without the condition), ``train_data`` ("MSM" or "Exp", from the states file's
+``source``), ``rotate`` and ``aug`` (rotation augmentation; a point fraction),
+``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning),
+and ``offsets``: where the network reads the tip's offsets
+(:class:`train.model.config.Offsets`).
+A checkpoint's meta and ``metrics.json`` keep it as a plain dict of the same fields
+(:meth:`Variant.to_dict`); a checkpoint's older forms are read through
+:mod:`train.training.migrate`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+
+from data_schema.hdf5 import attr_text
+from train.model.config import Offsets
+
+OFFSET_NAMES = {Offsets.GRAPH: "tip offsets", Offsets.HEADS: "head offsets"}
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One variant of the paper's Table 2 (hashable: runs are grouped by it)."""
+
+    model: str
+    train_data: str
+    rotate: bool
+    aug: bool
+    pretrained: Variant | None = None
+    offsets: Offsets = Offsets.NONE
+
+    def to_dict(self) -> dict:
+        """The plain form kept in a checkpoint's meta and in ``metrics.json``."""
+        return {"model": self.model, "train_data": self.train_data, "rotate": self.rotate,
+                "aug": self.aug,
+                "pretrained": None if self.pretrained is None else self.pretrained.to_dict(),
+                "offsets": self.offsets.value}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Variant:
+        """From :meth:`to_dict`'s form."""
+        return cls(str(d["model"]), str(d["train_data"]), bool(d["rotate"]), bool(d["aug"]),
+                   cls.from_dict(d["pretrained"]) if d.get("pretrained") else None,
+                   Offsets(d["offsets"]))
+
+    @property
+    def label(self) -> str:
+        """The Table 2 name: model/train set, or model/pre-training set (TL) when
+        fine-tuned. For display only: a fine-tuned run's leaves out its own fields."""
+        if self.pretrained:
+            p = self.pretrained
+            return f"{self.model}/{'aug ' if p.aug else ''}{p.train_data} (TL)"
+        return self._own
+
+    @property
+    def full_name(self) -> str:
+        """A name that says every field ("cGNN/rot Exp from cGNN/aug MSM", "with head
+        offsets" where it has them): shown where two variants share a label."""
+        own = self._own + (f" with {OFFSET_NAMES[self.offsets]}" if self.offsets in
+                           OFFSET_NAMES else "")
+        return own + (f" from {self.pretrained.full_name}" if self.pretrained else "")
+
+    @property
+    def _own(self) -> str:
+        return f"{self.model}/{'rot ' if self.rotate else ''}{'aug ' if self.aug else ''}" \
+               f"{self.train_data}"
+
+
+SOURCE_NAMES = {"msm": "MSM", "lab": "Exp"}
+
+
+def source_name(data: str | Path) -> str:
+    """'MSM' or 'Exp' for a states file; '?' where it cannot be read (a moved file)."""
+    try:
+        with h5py.File(data, "r") as f:
+            source = attr_text(f.attrs["source"])
+    except (OSError, KeyError):
+        return "?"
+    return SOURCE_NAMES.get(source, source)
+
+
+def make_variant(config: dict, options: dict, data: str | Path, init_meta: dict | None
+                 ) -> dict:
+    """The variant of a run with this network ``config``
+    (:meth:`train.model.config.CGNNConfig.to_dict`), training ``options`` and data, fine-tuned
+    from the run whose checkpoint meta is ``init_meta`` (or trained from scratch), in the
+    plain form its checkpoint keeps."""
+    return Variant("cGNN" if config["use_condition"] else "noCond", source_name(data),
+                   bool(options.get("rotate")), bool(options.get("point_fraction")),
+                   None if init_meta is None else recorded_variant(init_meta),
+                   Offsets(config["offsets"])).to_dict()
+
+
+def recorded_variant(meta: dict) -> Variant:
+    """The variant a checkpoint's meta records."""
+    return Variant.from_dict(meta["variant"])
