@@ -24,7 +24,7 @@ from calib.force_tare import (
     unloaded_start,
 )
 from core.errors import BadInput
-from core.series import RawSession
+from core.series import AtiCalibration, RawSession
 from sync.sync_params import SyncParams
 
 
@@ -134,9 +134,14 @@ def output_rails(raw: RawSession) -> tuple[float, float] | None:
     """The amplifier's output range (V) of a gauge log, from the ATI calibration's
     ``OutputRange`` and ``OutputBipolar`` (a bipolar 20 V range is -10..+10 V); None when the
     force is no gauge log or the calibration does not say."""
-    if raw.force.kind != "gauge" or raw.calibration is None:
+    return rails(raw.force.kind, raw.calibration)
+
+
+def rails(kind: str, calibration: AtiCalibration | None) -> tuple[float, float] | None:
+    """:func:`output_rails` of a force of ``kind`` read through ``calibration``."""
+    if kind != "gauge" or calibration is None:
         return None
-    cal = raw.calibration.meta.get("calibration", {})
+    cal = calibration.meta.get("calibration", {})
     try:
         span = float(cal["OutputRange"])
     except (KeyError, TypeError, ValueError):
