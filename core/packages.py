@@ -6,4 +6,4 @@ Packaging (setuptools) and import sorting (ruff) find them from the project root
 """
 
 PACKAGES: tuple[str, ...] = ("core", "data_schema", "ingest", "calib", "sync", "extract",
-                             "split", "sim", "train", "pipeline")
+                             "split", "sim", "train", "live", "pipeline")

@@ -27,6 +27,8 @@ COMMANDS: dict[str, str] = {
     "train": "pipeline.train_cmd:train",
     "eval": "pipeline.eval_cmd:eval_",
     "export": "pipeline.export_cmd:export",
+    "live": "pipeline.live_cmd:live",
+    "replay": "pipeline.replay_cmd:replay",
     "inspect": "pipeline.inspect_cmd:inspect",
     "demo": "pipeline.demo_cmd:demo",
 }

@@ -1,0 +1,98 @@
+"""How `pipeline live` keeps up: a twin session replayed over QTM's real-time protocol by
+`pipeline replay` (its own process, as QTM is), recorded live, counted and timed.
+
+For the session (``--minutes`` of presses, the force through QTM's analog board at 1 kHz,
+markers at 500 Hz) replayed at ``--speed`` times real time, prints:
+
+* frames: sent by the server, received by the client, skipped by number (dropped), and that
+  the MCAP holds every one of them;
+* latency: per frame, from its arrival (the SDK's callback) to the end of its work (decode,
+  the journal, the tip's fit, the force tared and flagged, the view's log calls), median and
+  p99 in ms, with the recording on (the view's cost included) and, in a second replay, off;
+* lag: the wall time of the live session against the recording's own duration / speed.
+
+The host's speed figure (``../shared/tools/host_speed.py``) is printed beside, as for every
+wall time here. Run: ``python benchmarks/bench_live.py [--minutes 10] [--speed 1]
+[--workdir DIR]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from core.progress import set_quiet
+from ingest.mcap_io import read_raw_mcap
+from live.live_params import LiveParams
+from live.live_stage import MCAP_NAME, RRD_NAME, LiveSummary, run_live
+from sim.twin.synth_params import SynthParams
+from sim.twin.synth_stage import run_synth
+
+PRESS_S = 8.0                  # a twin press with its rest, about
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def replay(session: Path, speed: float) -> tuple[subprocess.Popen, int]:
+    """`pipeline replay` of ``session`` in its own process, serving one client; the port it
+    chose, from its "serving" line."""
+    proc = subprocess.Popen([sys.executable, "-m", "pipeline", "replay", str(session),
+                             "--port", "0", "--speed", str(speed), "--max-clients", "1"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stderr:
+        if "serving QTM RT on " in line:
+            return proc, int(line.split("serving QTM RT on ")[1].split()[0].rsplit(":", 1)[1])
+    raise RuntimeError(f"the replay did not start: {proc.communicate()}")
+
+
+def record(session: Path, out: Path, speed: float, view: bool) -> tuple[LiveSummary, int]:
+    """One live session of the replayed ``session``: its summary and the frames sent."""
+    proc, port = replay(session, speed)
+    summary = run_live(session, out, LiveParams(port=port, timeout_s=20),
+                       out / RRD_NAME if view else None)
+    stdout, _ = proc.communicate(timeout=60)
+    sent = int(stdout.split(" frames sent")[0].rsplit(" ", 1)[-1].replace(",", ""))
+    return summary, sent
+
+
+def report(name: str, s: LiveSummary, sent: int, duration_s: float, speed: float) -> None:
+    held = read_raw_mcap(s.mcap).markers.frames
+    lat = s.latency_ms
+    print(f"{name}: frames sent {sent}, received {s.counts.frames}, skipped "
+          f"{s.counts.skipped}, in the MCAP {held} ({'all' if held == sent else 'NOT all'}); "
+          f"latency median {np.median(lat):.3f} ms, p99 {np.percentile(lat, 99):.3f} ms, "
+          f"max {lat.max():.2f} ms (targets 5 / 20); wall {s.seconds:.1f} s for "
+          f"{duration_s / speed:.1f} s of replay (lag {s.seconds - duration_s / speed:+.1f} s);"
+          f" ended: {s.ended}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=10.0)
+    ap.add_argument("--speed", type=float, default=1.0)
+    ap.add_argument("--workdir", type=Path, default=None)
+    a = ap.parse_args()
+    set_quiet(True)
+    work = a.workdir or Path(tempfile.mkdtemp(prefix="bench_live_"))
+    presses = max(1, round(a.minutes * 60 / PRESS_S))
+    locations = max(1, min(25, presses // 4))
+    session = run_synth(None, work / "session", SynthParams(
+        seed=0, locations=locations, repeats=max(1, round(presses / locations)),
+        force_via="analog"))
+    host = subprocess.run([sys.executable, str(ROOT.parent / "shared/tools/host_speed.py")],
+                          capture_output=True, text=True).stdout.strip()
+    print(f"host: {host or 'host_speed.py not found'}; {presses} presses, speed {a.speed:g}x")
+    for name, view in (("with the recording", True), ("without", False)):
+        out = work / ("live_view" if view else "live_plain")
+        s, sent = record(session, out, a.speed, view)
+        duration = sent / 500.0
+        report(name, s, sent, duration, a.speed)
+        assert (out / MCAP_NAME).is_file()
+
+
+if __name__ == "__main__":
+    main()

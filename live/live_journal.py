@@ -1,0 +1,138 @@
+"""Everything a live session receives, on disk as it arrives, in a form a crash cannot spoil.
+
+While QTM streams, each second of markers and of the analog board's samples is appended to
+``session.mcap.part`` (beside the final file) as ingest's block messages
+(:mod:`data_schema.raw_mcap`): ``/live/markers`` (every 3D label QTM sends, metres, NaN when
+lost) and ``/live/analog`` (every channel of the force's board, in the units QTM states), each
+block its own chunk, flushed to the disk at once. A process killed, or a connection lost,
+leaves every complete block readable (:func:`read_journal` stops at the first record cut
+short). When the session ends, :func:`ingest_layout` turns the journal into ingest's streams,
+and the live runner writes ``session.mcap`` from them as ingest would have from the exports.
+
+The journal's first record, ``live_journal``, says what it holds: the server, the labels, the
+board, the rates and where each stream's sample numbers start.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from core.errors import BadInput
+from data_schema.raw_mcap import ENCODING, decode_block, encode_block
+
+MARKERS, ANALOG = "/live/markers", "/live/analog"
+RECORD = "live_journal"
+
+
+@dataclass
+class Stream:
+    """One stream's samples as they arrive: times (ns, the mocap's clock) and values (T, k)."""
+
+    time_ns: list[np.ndarray] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)
+    samples: int = 0
+
+    def add(self, time_ns: np.ndarray, values: np.ndarray) -> None:
+        """Samples times (n,) and values (n, k) after those before."""
+        self.time_ns.append(time_ns)
+        self.values.append(values)
+        self.samples += len(time_ns)
+
+    def arrays(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """All samples so far: times (T,) and values (T, k)."""
+        if not self.time_ns:
+            return np.empty(0, np.int64), np.empty((0, k))
+        return np.concatenate(self.time_ns), np.concatenate(self.values)
+
+
+class Journal:
+    """The append-only journal of one live session (``path``, an MCAP file)."""
+
+    def __init__(self, path: Path, header: dict[str, Any]) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path, self.header = path, header
+        self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed by close()
+        # a chunk per message: what is written is whole on the disk, a crash loses no block
+        self._writer = Writer(self._file, chunk_size=1, compression=CompressionType.NONE)
+        self._writer.start(profile="", library="phantom-pipeline live")
+        self._writer.add_metadata(RECORD, {"header": json.dumps(header)})
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[str, int] = {}
+        for topic in (MARKERS, ANALOG):
+            schema = self._writer.register_schema(topic, ENCODING, b"")
+            self._channels[topic] = self._writer.register_channel(topic, ENCODING, schema, {})
+            self._sequence[topic] = 0
+        self._sync()
+
+    def append(self, topic: str, time_ns: np.ndarray, values: np.ndarray) -> None:
+        """Write one block of a stream and flush it to the disk."""
+        if len(time_ns) == 0:
+            return
+        t0 = max(0, int(time_ns[0]))
+        self._writer.add_message(self._channels[topic], t0,
+                                 encode_block(np.asarray(time_ns, np.int64),
+                                              np.asarray(values, np.float64)),
+                                 t0, sequence=self._sequence[topic])
+        self._sequence[topic] += 1
+        self._sync()
+
+    def close(self) -> None:
+        """Finish the MCAP (its summary) and close it."""
+        self._writer.finish()
+        self._file.close()
+
+    def _sync(self) -> None:
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+
+@dataclass
+class JournalContent:
+    """What a journal holds: its header and each stream's samples."""
+
+    header: dict[str, Any]
+    streams: dict[str, tuple[np.ndarray, np.ndarray]]
+    complete: bool               # False: the file was cut short (a kill, a full disk)
+
+
+def read_journal(path: Path) -> JournalContent:
+    """Every complete block of a journal, in order; a record cut short ends the reading."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Footer, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    header: dict[str, Any] | None = None
+    topics: dict[int, str] = {}
+    blocks: dict[str, Stream] = {MARKERS: Stream(), ANALOG: Stream()}
+    complete = False
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f, skip_magic=False).records:
+                if isinstance(record, Metadata) and record.name == RECORD:
+                    header = json.loads(record.metadata["header"])
+                elif isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                elif isinstance(record, Message) and header is not None:
+                    k = _values_per_sample(header, topics[record.channel_id])
+                    blocks[topics[record.channel_id]].add(
+                        *decode_block(record.data, k, path, topics[record.channel_id]))
+                elif isinstance(record, Footer):
+                    complete = True
+        except (McapError, EOFError, ValueError, KeyError, struct.error, BadInput):
+            pass                    # a record cut short: everything before it is kept
+    if header is None:
+        raise BadInput(path, "not a live session's journal (no live_journal record)")
+    return JournalContent(header, {t: s.arrays(_values_per_sample(header, t))
+                                   for t, s in blocks.items()}, complete)
+
+
+def _values_per_sample(header: dict[str, Any], topic: str) -> int:
+    return 3 * len(header["labels"]) if topic == MARKERS else len(header["channels"])

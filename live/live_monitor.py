@@ -1,0 +1,93 @@
+"""Each frame as it arrives, turned into what the operator watches: the session's markers, the
+tip (fitted where the view draws the scene), the tared force and its flags, handed to the live
+view.
+
+The force's channels go to SI units by the same affine map ingest applies to an analog export
+(measured once from :func:`live.live_layout.to_force`, so a frame costs a product, not a
+parse); its bias comes from the unloaded start (:func:`live.live_calibration.force_tare`) once
+:data:`live.live_calibration.TARE_S` seconds have arrived, and the samples before it are shown
+then. A gauge within :data:`sync.force_conditioning.RAIL_TOLERANCE` of the amplifier's rail is
+flagged saturated, a wrench beyond the sensor's rating over range, frame by frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib.force_tare import Tare
+from data_schema.session import SessionConfig
+from ingest.analog import resolve_channels
+from live.live_calibration import TARE_S, TipModel, force_tare, wrench
+from live.live_layout import LiveLayout, to_force
+from live.live_view import LiveView
+from live.rt_client import Frame
+from sync.force_conditioning import RAIL_TOLERANCE, rails
+from sync.sync_params import SyncParams
+
+
+class Monitor:
+    """The per-frame work of a live session, and the view it feeds (``view`` None: the work
+    alone, as a benchmark's dry run)."""
+
+    def __init__(self, layout: LiveLayout, cfg: SessionConfig, tip: TipModel,
+                 view: LiveView | None, params: SyncParams | None = None) -> None:
+        names = cfg.mocap.phantom_markers + cfg.mocap.indenter_markers
+        self.index = np.array([layout.labels.index(n) for n in names])
+        self.phantom = len(cfg.mocap.phantom_markers)
+        self.layout, self.tip, self.view = layout, tip, view
+        self.params = params or SyncParams()
+        zero_row = np.zeros((1, len(layout.device.labels)))
+        zero, one = to_force(layout, zero_row, cfg), to_force(layout, zero_row + 1.0, cfg)
+        self._si = (zero.values[0], one.values[0] - zero.values[0])   # SI = a + b v
+        self._channels = resolve_channels(layout.analog_export(zero_row[:0]),
+                                          cfg.force.channels)
+        self.kind = cfg.force.kind
+        self._rails = rails(cfg.force.kind, layout.calibration)
+        self._limit = None if layout.calibration is None else \
+            np.asarray(layout.calibration.max_load, float)
+        self.tare: Tare | None = None
+        self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
+        self._early_samples = 0
+        self.saturated = self.over_range = 0
+
+    def frame(self, frame: Frame, time_ns: int, sample_ns: np.ndarray | None) -> None:
+        """One frame: its scene, and its force samples where it carries any."""
+        markers = frame.markers[self.index]
+        if self.view is not None:               # the tip where the scene is drawn
+            tip = self.tip.tips(markers[None, self.phantom:], self.params)[0] \
+                if self.view.due(time_ns) else None
+            self.view.frame(time_ns, markers, tip)
+        if frame.analog is not None:
+            self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
+
+    def _force(self, times: np.ndarray, values: np.ndarray) -> None:
+        """Force samples in SI units: shown once the tare is known (the early ones then)."""
+        if self.tare is None:
+            self._early.append((times, values))
+            self._early_samples += len(times)
+            if self._early_samples < TARE_S * self.layout.device.rate_hz:
+                return
+            times = np.concatenate([t for t, _ in self._early])
+            values = np.concatenate([v for _, v in self._early])
+            self._early = []
+            self.tare = force_tare(values, self.layout.device.rate_hz, self.layout.source)
+            if self.view is not None:
+                self.view.note(int(times[-1]), f"force tared over its first "
+                                               f"{self.tare.stop / self.layout.device.rate_hz:.2f}"
+                                               " s (unloaded start)")
+        w = wrench(values, self.tare, self.layout)
+        saturated = self._on_rail(values)
+        over = np.zeros(len(w), bool) if self._limit is None else \
+            (np.abs(w) > self._limit).any(axis=1)
+        self.saturated += int(saturated.sum())
+        self.over_range += int(over.sum())
+        if self.view is not None:
+            self.view.force(times, np.linalg.norm(w[:, :3], axis=1), saturated, over)
+
+    def _on_rail(self, volts: np.ndarray) -> np.ndarray:
+        if self._rails is None:
+            return np.zeros(len(volts), bool)
+        low, high = self._rails
+        margin = RAIL_TOLERANCE * (high - low)
+        return ((volts <= low + margin) | (volts >= high - margin)).any(axis=1)
+

@@ -1,0 +1,203 @@
+"""The live runner: a session folder and QTM's real-time stream in; the session's MCAP and its
+recording out, written as the frames arrive.
+
+Before the first frame: ``session.toml`` is read, QTM's parameters are held against it
+(:mod:`live.live_layout`) and the tip is calibrated (:mod:`live.live_calibration`); any of them
+that cannot be trusted is refused in one line, and nothing is written. Then every frame goes
+into the journal (``session.mcap.part``, :mod:`live.live_journal`) and to the monitor and view,
+until ``--duration``, Ctrl-C (or SIGTERM), QTM's end of the recording, a lost connection or a
+silent server. However it ended, the journal then becomes ``LIVE_DIR/session.mcap`` in
+ingest's layout (``phantom.raw_mcap``; ``pipeline sync`` runs on it as on an ingested file),
+with its provenance, and the journal is removed; the recording is renamed into place beside it.
+A damaged frame, or a frame that contradicts the parameters, ends the session the same way and
+is then refused in one line (exit 2): what arrived before it is kept.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from core.atomic import atomic_output
+from core.errors import BadInput
+from core.provenance import make_provenance
+from core.series import MarkerSeries, RawSession
+from data_schema.raw_mcap import SCHEMA, VERSION
+from data_schema.session import SessionConfig, read_session
+from ingest.ati_cal import read_ati_cal
+from ingest.detect import read_mocap
+from ingest.ingest_stage import session_inputs
+from ingest.mcap_io import write_raw_mcap
+from live.live_calibration import tip_model
+from live.live_journal import ANALOG, MARKERS, Journal, read_journal
+from live.live_layout import LiveLayout, live_layout, to_force
+from live.live_monitor import Monitor
+from live.live_params import LiveParams
+from live.live_recorder import Counts, Recorder
+from live.live_view import LiveView
+from live.qtm_parameters import AnalogDevice, parse_parameters
+from live.rt_client import Stream, decode_frame
+from sync.sync_params import SyncParams
+
+MCAP_NAME = "session.mcap"
+RRD_NAME = "session.rrd"
+
+
+@dataclass
+class LiveSummary:
+    """What a live session received, how it ended, and how long each frame's work took."""
+
+    source: str
+    counts: Counts
+    ended: str
+    mcap: Path
+    rrd: Path | None
+    seconds: float
+    latency_ms: np.ndarray = field(default_factory=lambda: np.empty(0))
+    refused: BadInput | None = None       # a frame refused mid-session (after the MCAP)
+
+
+def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
+             rrd: Path | None = None) -> LiveSummary:
+    """Record the live session of the session folder ``inputs`` into the folder ``out``
+    (``session.mcap``), with its recording ``rrd`` (None: none)."""
+    params = params or LiveParams()
+    cfg = read_session(inputs)
+    mcap = Path(out) / MCAP_NAME
+    part = mcap.with_name(mcap.name + ".part")
+    for path in (mcap, part):
+        if path.exists():
+            raise BadInput(path, "exists: a live session writes into a new folder (choose "
+                                 "another --out)")
+    summary = asyncio.run(_session(cfg, part, params, rrd))
+    summary.mcap = mcap
+    _finish(part, mcap, cfg, params)
+    return summary
+
+
+async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path | None
+                   ) -> LiveSummary:
+    """Connect, check, calibrate, then stream into the journal until the session ends."""
+    stream = Stream(params.host, params.port, params.timeout_s)
+    layout = live_layout(parse_parameters(await stream.connect(), stream.source), cfg)
+    try:
+        tip = tip_model(cfg, layout, params.calibration, SyncParams())
+    except BadInput:
+        await stream.close()
+        raise
+    part.parent.mkdir(parents=True, exist_ok=True)
+    journal = Journal(part, _header(layout))
+    with atomic_output(rrd) if rrd is not None else _nothing() as tmp:
+        view = None if tmp is None else LiveView(tmp, len(cfg.mocap.phantom_markers),
+                                                 params.spawn, params.serve)
+        summary = await _stream(stream, layout, cfg, tip, journal, view, params)
+        if view is not None:
+            view.note(0, f"ended: {summary.ended}")
+            view.close()
+    summary.rrd = rrd
+    return summary
+
+
+async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip, journal: Journal,
+                  view: LiveView | None, params: LiveParams) -> LiveSummary:
+    recorder = Recorder(layout, journal)
+    monitor = Monitor(layout, cfg, tip, view)
+    latency: list[float] = []
+    refused: list[BadInput] = []
+    if view is not None:
+        view.note(0, f"connected to {stream.source}: {len(layout.labels)} markers at "
+                     f"{layout.rate_hz:g} Hz, force on {layout.device.name} at "
+                     f"{layout.device.rate_hz:g} Hz; tip from {tip.source}")
+
+    def on_frame(data: bytes) -> None:
+        tic = time.perf_counter()
+        try:
+            frame = decode_frame(data, layout.device.device_id)
+            t, sample_ns, _ = recorder.add(frame)
+            monitor.frame(frame, t, sample_ns)
+        except ValueError as e:
+            refused.append(BadInput(stream.source, f"a damaged frame after frame "
+                                                   f"{recorder.last_number} ({e})"))
+            stream.stop("a damaged frame")
+        except BadInput as e:
+            refused.append(e)
+            stream.stop("a frame refused")
+        latency.append(time.perf_counter() - tic)
+
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stream.stop, f"stopped by {signal.Signals(sig).name}")
+    start = time.perf_counter()
+    try:
+        await stream.run(on_frame, params.duration_s)
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        await stream.close()
+        recorder.flush()
+        journal.close()
+    if stream.lost and not refused:
+        refused.append(BadInput(stream.source, f"the connection was lost after frame "
+                                               f"{recorder.counts.frames} of this session: "
+                                               "session.mcap holds every frame up to it"))
+    return LiveSummary(stream.source, recorder.counts, stream.ended or "?", Path(), None,
+                       time.perf_counter() - start, np.asarray(latency) * 1e3,
+                       refused[0] if refused else None)
+
+
+def _finish(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> None:
+    """The journal as ``session.mcap`` in ingest's layout, with its provenance; the journal
+    removed once the MCAP is in place."""
+    content = read_journal(part)
+    layout = _layout(content.header, cfg)
+    raw = raw_session(content.streams, layout, cfg)
+    prov = make_provenance("live", asdict(params), session_inputs(cfg), SCHEMA, VERSION)
+    write_raw_mcap(mcap, replace(raw, provenance=prov), {})
+    part.unlink()
+
+
+def raw_session(streams: dict[str, tuple[np.ndarray, np.ndarray]], layout: LiveLayout,
+                cfg: SessionConfig) -> RawSession:
+    """The journal's streams as ingest's raw session of the live capture: every marker QTM
+    sent, the force converted as ingest converts an analog export, the session's
+    calibration and pivot recording."""
+    t_m, v_m = streams[MARKERS]
+    t_a, v_a = streams[ANALOG]
+    markers = MarkerSeries(source=layout.source, time_ns=t_m, labels=list(layout.labels),
+                           positions=v_m.reshape(len(t_m), len(layout.labels), 3),
+                           rate_hz=layout.rate_hz)
+    force = replace(to_force(layout, v_a, cfg), time_ns=t_a)
+    return RawSession(
+        name=cfg.name, markers=markers, force=force,
+        phantom_markers=list(cfg.mocap.phantom_markers),
+        indenter_markers=list(cfg.mocap.indenter_markers), calibration=layout.calibration,
+        pivot=read_mocap(cfg.pivot_file) if cfg.pivot_file is not None else None,
+        phantom=cfg.phantom.as_json())
+
+
+def _header(layout: LiveLayout) -> dict:
+    """The journal's first record: what a reader needs to rebuild the layout."""
+    return {"source": layout.source, "rate_hz": layout.rate_hz, "labels": layout.labels,
+            "device": asdict(layout.device), "channels": layout.device.labels}
+
+
+def _layout(header: dict, cfg: SessionConfig) -> LiveLayout:
+    """The layout a journal's header records, with the session's calibration."""
+    calibration = read_ati_cal(cfg.force.calibration) if cfg.force.calibration else None
+    return LiveLayout(header["source"], float(header["rate_hz"]), list(header["labels"]),
+                      AnalogDevice(**header["device"]), calibration)
+
+
+class _nothing:
+    """A context that yields None (no recording asked)."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None

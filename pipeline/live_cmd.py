@@ -1,0 +1,65 @@
+"""``pipeline live``: the click layer over :func:`live.live_stage.run_live`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from live.live_params import LiveParams, parse_address
+from pipeline.options import Parsed, finite_float
+
+D = LiveParams
+
+
+@click.command()
+@click.argument("session_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--qtm", "address", type=Parsed("HOST[:PORT]", parse_address),
+              default=f"{D.host}:{D.port}", show_default=True,
+              help="QTM's real-time server (little-endian port; QTM's default 22223).")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="A new folder: session.mcap (the session as `pipeline ingest` writes it) "
+                   "and session.rrd (the live recording).")
+@click.option("--duration", "duration_s", type=finite_float(0, min_open=True, unit="s"),
+              default=None, help="Stop after this many seconds [default: until QTM stops, "
+                                 "Ctrl-C, or the connection ends].")
+@click.option("--timeout", "timeout_s", type=finite_float(0, 600, min_open=True, unit="s"),
+              default=D.timeout_s, show_default=True,
+              help="Seconds to wait for QTM to answer, and for the next frame.")
+@click.option("--calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None, help="A synced file (`pipeline sync`) whose tip calibration to "
+                                 "use instead of the session's pivot recording.")
+@click.option("--spawn", is_flag=True, help="Also show the recording in a rerun viewer.")
+@click.option("--serve", is_flag=True, help="Also serve the recording to a web browser.")
+@click.option("--no-rrd", is_flag=True, help="Write no recording.")
+def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: float | None,
+         timeout_s: float, calibration: Path | None, spawn: bool, serve: bool,
+         no_rrd: bool) -> None:
+    """Record a session live from QTM's real-time stream, and show it as it happens.
+
+    Reads SESSION_DIR's session.toml (the markers, the force's channels, kind and units, the
+    ATI .cal, the pivot recording) and QTM's parameters, and refuses in one line what does not
+    agree (a marker QTM lacks, analog units or a rate that contradict session.toml) before a
+    frame is read. Then streams 3D markers and the force's analog board until --duration,
+    Ctrl-C, QTM's end of the recording or a lost connection. Writes --out/session.mcap as
+    `pipeline ingest` would (every frame received, each stream on its clock; `pipeline sync`
+    runs on it), built from a journal written as the frames arrive (session.mcap.part: what a
+    kill leaves), and --out/session.rrd: markers, tip, the tared force at the mocap rate, lost
+    markers, saturation and over-range as they happen.
+    """
+    from live.live_stage import MCAP_NAME, RRD_NAME, run_live
+
+    host, port = address
+    params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
+                        calibration=calibration, spawn=spawn, serve=serve)
+    s = run_live(session_dir, out, params, None if no_rrd else out / RRD_NAME)
+    lat = s.latency_ms
+    timing = f"; per frame {np.median(lat):.2f} ms median, {np.percentile(lat, 99):.2f} ms " \
+             "p99" if lat.size else ""
+    click.echo(f"{out / MCAP_NAME}: {s.counts.frames} frames ({s.counts.skipped} skipped by "
+               f"number), {s.counts.samples} force samples from {s.source} in "
+               f"{s.seconds:.1f} s; ended: {s.ended}{timing}"
+               + (f"; recording {s.rrd}" if s.rrd else ""))
+    if s.refused is not None:
+        raise s.refused

@@ -1,0 +1,18 @@
+"""A twin session whose force comes through QTM's analog board, as a live session's does."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sim.twin.synth_params import SynthParams
+from sim.twin.synth_stage import run_synth
+
+
+@pytest.fixture(scope="session")
+def twin_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two presses at two places (seed 3), force through the analog board: about 20 s."""
+    out = tmp_path_factory.mktemp("live") / "session"
+    return run_synth(None, out, SynthParams(seed=3, locations=2, repeats=1,
+                                            force_via="analog"))

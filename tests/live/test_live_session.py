@@ -1,0 +1,193 @@
+"""``pipeline live`` against the replay server: the session it records is the session ingest
+reads from the exports, frame for frame; sync runs on it; what it refuses, it refuses before
+a frame is written, in one line; a connection lost mid-frame keeps every complete frame."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import shutil
+import struct
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from core.recording import rrd_entities
+from ingest.ingest_params import IngestParams
+from ingest.ingest_stage import run_ingest
+from ingest.mcap_io import read_raw_mcap
+from live.live_params import LiveParams
+from live.live_stage import MCAP_NAME, RRD_NAME, run_live
+from live.replay_parameters import parameters_xml
+from live.replay_params import ReplayParams
+from live.replay_server import ReplayServer
+from live.replay_source import read_replay_source
+from live.rt_packets import Component, PacketType, encode_text
+from pipeline.cli import cli
+from sync.sync import sync_session
+
+SPEED = 20.0                  # times real time: a 20 s twin session in about a second
+
+
+@contextlib.contextmanager
+def replaying(session: Path, speed: float = SPEED) -> Iterator[ReplayServer]:
+    """The replay server on a free port, in a thread of its own (run_live runs its own loop)."""
+    loop = asyncio.new_event_loop()
+    server = ReplayServer(read_replay_source(session), ReplayParams(port=0, speed=speed))
+    loop.run_until_complete(server.start())
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    try:
+        yield server
+    finally:
+        asyncio.run_coroutine_threadsafe(server.close(), loop).result(10)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(10)
+
+
+@pytest.fixture(scope="module")
+def recorded(twin_session: Path, tmp_path_factory: pytest.TempPathFactory):
+    """The twin session recorded live from the replay, and the same session ingested."""
+    out = tmp_path_factory.mktemp("recorded") / "live"
+    with replaying(twin_session) as server:
+        summary = run_live(twin_session, out, LiveParams(port=server.port, timeout_s=10),
+                           out / RRD_NAME)
+        sent = server.stats.frames_sent
+    ingested = out.parent / "ingested.mcap"
+    run_ingest(twin_session, ingested, IngestParams(), None)
+    return summary, sent, read_raw_mcap(out / MCAP_NAME), read_raw_mcap(ingested), out
+
+
+def test_every_frame_sent_is_recorded_once(recorded) -> None:
+    summary, sent, live, ingested, out = recorded
+    assert summary.counts.frames == sent == ingested.markers.frames
+    assert summary.counts.skipped == 0 and summary.refused is None
+    assert summary.ended == "QTM stopped playing the file"
+    assert not (out / (MCAP_NAME + ".part")).exists()      # the journal became the MCAP
+
+
+def test_the_live_session_is_the_ingested_session(recorded) -> None:
+    """Markers to float32 millimetres (what the protocol carries), the force's volts to
+    float32, the same clocks, channels, units, calibration and pivot recording."""
+    _, _, live, ingested, _ = recorded
+    lm, im = live.markers, ingested.markers
+    np.testing.assert_array_equal(lm.time_ns, im.time_ns)
+    assert lm.rate_hz == im.rate_hz and lm.labels == im.labels
+    np.testing.assert_array_equal(np.isnan(lm.positions), np.isnan(im.positions))
+    np.testing.assert_allclose(lm.positions, im.positions, atol=1e-7, equal_nan=True)
+    lf, inf = live.force, ingested.force
+    np.testing.assert_array_equal(lf.time_ns, inf.time_ns)
+    assert (lf.channels, lf.units, lf.kind, lf.rate_hz) == \
+        (inf.channels, inf.units, inf.kind, inf.rate_hz)
+    assert lf.meta["clock"] == inf.meta["clock"] == "mocap"
+    np.testing.assert_allclose(lf.values, inf.values, rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(live.calibration.matrix, ingested.calibration.matrix)
+    np.testing.assert_array_equal(live.pivot.positions, ingested.pivot.positions)
+    assert (live.phantom_markers, live.indenter_markers) == \
+        (ingested.phantom_markers, ingested.indenter_markers)
+
+
+def test_sync_finds_the_same_presses_on_the_live_session(recorded) -> None:
+    _, _, live, ingested, _ = recorded
+    a, b = sync_session(live), sync_session(ingested)
+    assert [(p.press.onset, p.press.release) for p in a.presses] == \
+        [(p.press.onset, p.press.release) for p in b.presses]
+    np.testing.assert_allclose(a.pivot.tip_body, b.pivot.tip_body, atol=1e-9)
+    for pa, pb in zip(a.presses, b.presses, strict=True):
+        np.testing.assert_allclose(pa.force_magnitude, pb.force_magnitude, atol=1e-4)
+
+
+def test_the_recording_shows_the_scene_the_force_and_the_status(recorded) -> None:
+    *_, out = recorded
+    entities = rrd_entities(out / RRD_NAME)
+    for path, archetype in (("/scene/phantom", "Points3D"), ("/scene/cluster", "Points3D"),
+                            ("/scene/tip", "Points3D"), ("/force/magnitude", "Scalars"),
+                            ("/quality/lost", "Scalars"), ("/quality/saturated", "Scalars"),
+                            ("/status", "TextLog")):
+        assert archetype in entities.get(path, set()), path
+
+
+def _session_copy(twin_session: Path, tmp_path: Path, old: str, new: str) -> Path:
+    folder = tmp_path / "edited"
+    shutil.copytree(twin_session, folder)
+    toml = folder / "session.toml"
+    assert old in toml.read_text()
+    toml.write_text(toml.read_text().replace(old, new))
+    return folder
+
+
+def _live(session: Path, port: int, out: Path, timeout: str = "10") -> tuple[int, str]:
+    res = CliRunner().invoke(cli, ["live", str(session), "--qtm", f"127.0.0.1:{port}",
+                                   "--out", str(out), "--timeout", timeout])
+    return res.exit_code, res.stderr
+
+
+@pytest.mark.parametrize(("old", "new", "words"), [
+    ('"P24"]', '"P99"]', "marker(s) named in session.toml not in file: P99"),
+    ('kind = "gauge"', 'kind = "wrench"', "as the file states, but force.units says N"),
+])
+def test_a_session_qtm_contradicts_is_refused_before_a_frame(twin_session, tmp_path, old,
+                                                             new, words) -> None:
+    session = _session_copy(twin_session, tmp_path, old, new)
+    with replaying(twin_session) as server:
+        code, err = _live(session, server.port, tmp_path / "out")
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_no_server_is_one_line(twin_session, tmp_path) -> None:
+    with replaying(twin_session) as server:
+        port = server.port
+    code, err = _live(twin_session, port, tmp_path / "out", timeout="1")
+    assert code == 2 and "no QTM real-time server answered within 1 s" in err
+    assert not (tmp_path / "out").exists()
+
+
+async def _cut_server(source, frames: int, cut: int) -> tuple[asyncio.AbstractServer, int]:
+    """A server that greets, answers the version and the parameters, then sends ``frames``
+    frames of ``source`` and the first ``cut`` bytes of the next, and hangs up."""
+    from live.replay_frames import frame_packet
+
+    async def client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        writer.write(encode_text(PacketType.COMMAND, "QTM RT Interface connected"))
+        for answer in ("Version set to 1.25", None):
+            await _command(reader)
+            text = parameters_xml(source, ("general", "3d", "analog"), "1.25") \
+                if answer is None else answer
+            kind = PacketType.XML if answer is None else PacketType.COMMAND
+            writer.write(encode_text(kind, text))
+        await _command(reader)
+        for i in range(frames + 1):
+            packet = frame_packet(source, i, [Component.THREE_D, Component.ANALOG])
+            writer.write(packet if i < frames else packet[:cut])
+        await writer.drain()
+        writer.close()
+
+    server = await asyncio.start_server(client, "127.0.0.1", 0)
+    return server, server.sockets[0].getsockname()[1]
+
+
+async def _command(reader: asyncio.StreamReader) -> None:
+    size, _ = struct.unpack("<II", await reader.readexactly(8))
+    await reader.readexactly(size - 8)
+
+
+def test_a_connection_lost_mid_frame_keeps_every_complete_frame(twin_session, tmp_path):
+    source, frames = read_replay_source(twin_session), 700
+    loop = asyncio.new_event_loop()
+    server, port = loop.run_until_complete(_cut_server(source, frames, cut=100))
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    try:
+        code, err = _live(twin_session, port, tmp_path / "out")
+    finally:
+        loop.call_soon_threadsafe(server.close)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(10)
+    assert code == 2 and "connection" in err and len(err.strip().splitlines()) == 1
+    kept = read_raw_mcap(tmp_path / "out" / MCAP_NAME)
+    assert kept.markers.frames == frames
