@@ -3,13 +3,13 @@
 One timeline, ``mocap_time`` (since the first frame received); +z up. Entities:
 
 * ``scene/phantom`` (blue) and ``scene/cluster`` (orange): the session's markers, at most
-  :data:`VIEW_HZ` times a second (what a person can see), lost ones left out;
-  ``scene/tip`` (red ball) once the tip is calibrated;
+  :data:`VIEW_HZ` times a second (what a person can see), lost ones left out, framed on the
+  phantom once it is seen; ``scene/tip`` (red ball);
 * ``force/magnitude``: the tared force magnitude (N) at the mocap rate, sent a frame's samples
   at a time (``send_columns``: the 1 kHz board never floods the viewer);
-* ``quality/lost``: markers of the session lost (logged where the count changes);
-  ``quality/saturated`` and ``quality/over_range``: 1 while a gauge sits on the amplifier's
-  rail or the force is beyond the sensor's rating (logged where they change), as it happens;
+* ``quality/lost``: the most markers of the session lost in a frame since the last drawing;
+  ``quality/saturated`` and ``quality/over_range``: 1 where a gauge sat on the amplifier's
+  rail or the force went beyond the sensor's rating since the last drawing;
 * ``status``: a TextLog of the session: connected, calibrated, the end and its reason.
 
 The recording goes to a file (always) and, on request, to a viewer spawned beside it
@@ -24,7 +24,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import declare_up, time_column
+from core.recording import declare_up, phantom_view, plot, time_column
 
 APP_ID = "phantom-live"
 TIMELINE = "mocap_time"
@@ -35,12 +35,16 @@ COLORS = {"phantom": (60, 140, 230), "cluster": (245, 140, 30), "tip": (230, 30,
           "over_range": (140, 0, 140)}
 
 
-def blueprint() -> rrb.Blueprint:
-    """The scene beside the force and the quality plots."""
+def blueprint(centre: np.ndarray | None = None, size: float = 0.1) -> rrb.Blueprint:
+    """The scene beside the force and the quality plots; the scene framed on the phantom
+    (``centre``, ``size`` m) once its markers are seen."""
+    scene = rrb.Spatial3DView(origin="scene", name="markers (phantom blue, cluster orange), "
+                                                  "tip red") if centre is None else \
+        phantom_view("markers (phantom blue, cluster orange), tip red", ["$origin/**"], centre,
+                     size, origin="scene")
     return rrb.Blueprint(rrb.Horizontal(
-        rrb.Spatial3DView(origin="scene", name="markers and tip"),
-        rrb.Vertical(rrb.TimeSeriesView(origin="force", name="force (N)"),
-                     rrb.TimeSeriesView(origin="quality", name="lost markers, flags")),
+        scene, rrb.Vertical(plot("force (N)", "force"),
+                            plot("lost markers, saturated, over range", "quality")),
         column_shares=[3, 2]))
 
 
@@ -61,7 +65,8 @@ class LiveView:
             rr.serve_web_viewer(open_browser=False)
         self.phantom = phantom
         self._next_scene = 0
-        self._last: dict[str, float] = {}
+        self._flags = {"lost": 0.0, "saturated": 0.0, "over_range": 0.0}
+        self._framed = False
         declare_up(self.rec, "scene")
         for name, color in COLORS.items():
             if name in ("force", "lost", "saturated", "over_range"):
@@ -74,14 +79,16 @@ class LiveView:
 
     def frame(self, time_ns: int, markers: np.ndarray, tip: np.ndarray | None) -> None:
         """One frame's session markers (M, 3) m (phantom first, then the cluster) and, when
-        :meth:`due`, its tip: the lost count where it changed, the scene when due."""
+        :meth:`due`, its tip; drawn with the quality plots when due."""
         lost = np.isnan(markers).any(axis=1)
-        self._changed("quality/lost", time_ns, float(lost.sum()))
+        self._flags["lost"] = max(self._flags["lost"], float(lost.sum()))
         if not self.due(time_ns):
             return
         self._next_scene = time_ns + int(1e9 / VIEW_HZ)
         self._at(time_ns)
         seen = ~lost
+        if not self._framed and seen[:self.phantom].sum() >= 3:
+            self._frame_phantom(markers[:self.phantom][seen[:self.phantom]])
         for name, part in (("phantom", slice(0, self.phantom)),
                            ("cluster", slice(self.phantom, None))):
             pts = markers[part][seen[part]]
@@ -90,23 +97,25 @@ class LiveView:
         if tip is not None and np.isfinite(tip).all():
             self.rec.log("scene/tip", rr.Points3D([tip], radii=2 * RADIUS_M,
                                                   colors=COLORS["tip"]))
+        for name, value in self._flags.items():   # the worst since the last drawing
+            self.rec.log(f"quality/{name}", rr.Scalars(value))
+            self._flags[name] = 0.0
 
     def force(self, time_ns: np.ndarray, magnitude: np.ndarray, saturated: np.ndarray,
               over_range: np.ndarray) -> None:
-        """A frame's force samples, magnitude (N) in one batch; the flags where they
-        changed (a step plot: 1 while on the rail or beyond the rating)."""
+        """A frame's force samples, magnitude (N) in one batch; the flags kept for the next
+        drawing (1 if any sample since the last was on the rail, or beyond the rating)."""
         self.rec.send_columns("force/magnitude", indexes=[time_column(TIMELINE, time_ns)],
                               columns=rr.Scalars.columns(scalars=magnitude))
-        for name, flag in (("saturated", saturated), ("over_range", over_range)):
-            self._changed(f"quality/{name}", int(time_ns[-1]), float(flag.any()))
+        self._flags["saturated"] = max(self._flags["saturated"], float(saturated.any()))
+        self._flags["over_range"] = max(self._flags["over_range"], float(over_range.any()))
 
-    def _changed(self, path: str, time_ns: int, value: float) -> None:
-        """Log ``value`` at ``path`` where it differs from the last logged."""
-        if self._last.get(path) == value:
-            return
-        self._last[path] = value
-        self._at(time_ns)
-        self.rec.log(path, rr.Scalars(value))
+    def _frame_phantom(self, phantom: np.ndarray) -> None:
+        """Frame the scene on the phantom's markers (seen once, at their first drawing)."""
+        self._framed = True
+        centre = phantom.mean(axis=0)
+        size = float(np.ptp(phantom[:, :2], axis=0).max()) or 0.1
+        self.rec.send_blueprint(blueprint(centre, size))
 
     def _at(self, time_ns: int) -> None:
         self.rec.set_time(TIMELINE, duration=np.timedelta64(int(time_ns), "ns"))

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from paths import REAL_SAMPLES  # noqa: E402
+from helpers.paths import REAL_SAMPLES  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -1,8 +1,8 @@
 """One refusal per file type, word for word, and the count of the bad-input cases of every
 (stage, file) pair, run after them all.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -14,10 +14,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from bad_input_checks import COUNTS, PAIRS, cli
-from file_damage import PickledCall, edit_ckpt, edit_ds, in_state, mcap_mutations, set_at, with_key
+from helpers.bad_input_checks import COUNTS, PAIRS, cli
+from helpers.file_damage import (
+    PickledCall,
+    edit_ckpt,
+    edit_ds,
+    in_state,
+    mcap_mutations,
+    set_at,
+    with_key,
+)
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def _refusal(folder: Path, clean: Path, mutation: Callable[[Path], None],

@@ -5,8 +5,8 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
-from cgnn_data import write_dent_states
 from click.testing import CliRunner
+from helpers.cgnn_data import write_dent_states
 
 from core.errors import BadInput
 from data_schema.states import validate_states

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from truth_checks import check_states_against_truth, truth_levels
+from helpers.truth_checks import check_states_against_truth, truth_levels
 
 from core.recording import rrd_entities
 from core.text import to_json

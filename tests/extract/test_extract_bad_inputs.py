@@ -1,7 +1,7 @@
 """pipeline extract against damaged copies of the synced file it reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -9,13 +9,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import h5py
-from bad_input_checks import Pair, arrays, cli, fuzz
-from file_damage import REFUSE, VALID, Mutation, del_attr, edit_ds, h5_mutations, set_attr
+from helpers.bad_input_checks import Pair, arrays, cli, fuzz
+from helpers.file_damage import REFUSE, VALID, Mutation, del_attr, edit_ds, h5_mutations, set_attr
 
 from data_schema.states import STATES, validate_states
 from data_schema.synced import PRESS_ATTRS, SYNCED
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def synced_mutations(path: Path) -> list[Mutation]:

@@ -14,9 +14,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from c3d_bytes import FRAMES, QUALISYS_C3D, qualisys_analog, rename_parameter, set_parameter
 from click.testing import CliRunner
-from truth_checks import check_states_against_truth
+from helpers.c3d_bytes import FRAMES, QUALISYS_C3D, qualisys_analog, rename_parameter, set_parameter
+from helpers.truth_checks import check_states_against_truth
 
 from core.errors import BadInput
 from ingest.analog import analog_force, channel_names, resolve_channels

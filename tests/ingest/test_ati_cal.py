@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from paths import REAL_SAMPLES
+from helpers.paths import REAL_SAMPLES
 
 from core.errors import BadInput
 from core.series import AtiCalibration

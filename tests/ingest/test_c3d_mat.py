@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 import scipy.io
-from paths import REAL_SAMPLES
+from helpers.paths import REAL_SAMPLES
 from scipy.io.matlab import matfile_version
 
 from core.errors import BadInput

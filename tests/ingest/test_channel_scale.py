@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from c3d_bytes import QUALISYS_C3D, qualisys_analog
 from click.testing import CliRunner
+from helpers.c3d_bytes import QUALISYS_C3D, qualisys_analog
 
 from core.errors import BadInput
 from data_schema.session import read_session

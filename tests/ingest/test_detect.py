@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.io
+from helpers.paths import REAL_SAMPLES
 from mcap.writer import Writer
-from paths import REAL_SAMPLES
 
 from core.errors import BadInput
 from ingest.ati_cal import read_ati_cal, write_ati_cal

@@ -18,8 +18,8 @@ import h5py
 import numpy as np
 import pytest
 import scipy.io
-from c3d_bytes import c3d_parameter
 from click.testing import CliRunner
+from helpers.c3d_bytes import c3d_parameter
 
 from core.errors import BadInput
 from core.series import MarkerSeries

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from paths import REAL_SAMPLES
+from helpers.paths import REAL_SAMPLES
 
 from core.provenance import sha256_file
 from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines

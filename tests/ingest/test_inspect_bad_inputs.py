@@ -1,7 +1,7 @@
 """pipeline inspect against damaged copies of a metrics file: its verdict is the check.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from bad_input_checks import Outcome, Pair, cli, fuzz
-from file_damage import SAME, Mutation, edit_json, json_cuts, with_key
+from helpers.bad_input_checks import Outcome, Pair, cli, fuzz
+from helpers.file_damage import SAME, Mutation, edit_json, json_cuts, with_key
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def metrics_mutations(path: Path) -> list[Mutation]:

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from paths import REAL_SAMPLES
+from helpers.paths import REAL_SAMPLES
 
 from ingest.inspect_stage import KEYS, run_inspect
 from pipeline.cli import cli

@@ -5,7 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from qtm_files import NEW_3D, OLD_3D, good_3d_lines, qtm_header, raw_rows, refused, write_tsv
+from helpers.qtm_files import (
+    NEW_3D,
+    OLD_3D,
+    good_3d_lines,
+    qtm_header,
+    raw_rows,
+    refused,
+    write_tsv,
+)
 
 from core.series import MarkerSeries
 from ingest.qtm_3d import read_qtm_3d

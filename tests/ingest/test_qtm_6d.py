@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from qtm_files import OLD_6D, qtm_header, raw_rows, refused, write_tsv
+from helpers.qtm_files import OLD_6D, qtm_header, raw_rows, refused, write_tsv
 
 from core.series import BodySeries
 from ingest.qtm_6d import read_qtm_6d

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from qtm_files import good_3d_lines, qtm_header, refused, write_tsv
+from helpers.qtm_files import good_3d_lines, qtm_header, refused, write_tsv
 
 from ingest.qtm_3d import read_qtm_3d
 

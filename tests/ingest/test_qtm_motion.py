@@ -4,7 +4,7 @@ files that are no 3D or 6D export refused."""
 from __future__ import annotations
 
 import pytest
-from qtm_files import NEW_3D, OLD_6D, refused
+from helpers.qtm_files import NEW_3D, OLD_6D, refused
 
 from core.series import BodySeries, MarkerSeries
 from ingest.qtm_motion import read_qtm_tsv

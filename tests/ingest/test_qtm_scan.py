@@ -4,7 +4,7 @@ that cannot be right refused with its line."""
 from __future__ import annotations
 
 import pytest
-from qtm_files import NEW_3D, OLD_6D, good_3d_lines, refused, write_tsv
+from helpers.qtm_files import NEW_3D, OLD_6D, good_3d_lines, refused, write_tsv
 
 from ingest.qtm_scan import parse_qtm_header
 

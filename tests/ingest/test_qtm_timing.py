@@ -5,7 +5,7 @@ the frames, an EVENT time out of range."""
 from __future__ import annotations
 
 import pytest
-from qtm_files import good_3d_lines, qtm_header, refused, write_tsv
+from helpers.qtm_files import good_3d_lines, qtm_header, refused, write_tsv
 
 
 def test_bad_non_increasing_time(tmp_path):

@@ -5,7 +5,7 @@ loses (and counts) what lies outside the frames."""
 from __future__ import annotations
 
 import numpy as np
-from raw_sessions import analytic_session
+from helpers.raw_sessions import analytic_session
 
 from live.replay_parameters import parameters_xml
 from live.replay_source import apportion, replay_source

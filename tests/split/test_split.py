@@ -12,9 +12,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from cgnn_data import write_dent_states
 from click.testing import CliRunner
-from paths import ROOT
+from helpers.cgnn_data import write_dent_states
+from helpers.paths import ROOT
 
 from core.errors import BadInput
 from core.recording import rrd_entities

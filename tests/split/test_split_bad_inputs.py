@@ -1,7 +1,7 @@
 """pipeline split against damaged copies of the states file it reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bad_input_checks import Pair, cli, fuzz
-from file_damage import states_mutations
+from helpers.bad_input_checks import Pair, cli, fuzz
+from helpers.file_damage import states_mutations
 
 from data_schema.json_docs import validate_folds
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def _manifest(path: Path) -> dict:

@@ -1,5 +1,5 @@
 """Which clock a session gets and why (:mod:`sync.clock_policy`), on the analytic session of
-``tests/raw_sessions.py`` (logger clock ``OFFSET + (1 + DRIFT ppm) t_m``, known): force from
+``tests/helpers/raw_sessions.py`` (logger clock ``OFFSET + (1 + DRIFT ppm) t_m``, known): force from
 the mocap's own analog board shares its clock; trigger pulses when recorded; the tip's motion
 against the force when they are not, when the line is dead, or when asked; each with the
 reason the calibration record keeps. And the overlap check, on hand-picked spans.
@@ -15,7 +15,7 @@ import copy
 
 import numpy as np
 import pytest
-from raw_sessions import DRIFT, LOG_RATE, OFFSET, RATE, analytic_session
+from helpers.raw_sessions import DRIFT, LOG_RATE, OFFSET, RATE, analytic_session
 
 from core.errors import BadInput
 from core.series import SHARED_CLOCK, RawSession

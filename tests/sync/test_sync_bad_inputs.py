@@ -1,17 +1,17 @@
 """pipeline sync against damaged copies of the raw MCAP it reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
 
-from bad_input_checks import Pair, arrays, cli, fuzz
-from file_damage import mcap_mutations
+from helpers.bad_input_checks import Pair, arrays, cli, fuzz
+from helpers.file_damage import mcap_mutations
 
 from data_schema.synced import SYNCED, validate_synced
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def test_sync_reads_raw_mcap(clean_lab, tmp_path) -> None:

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from raw_sessions import DRIFT, LOG_RATE, OFFSET, RATE, analytic_session
+from helpers.raw_sessions import DRIFT, LOG_RATE, OFFSET, RATE, analytic_session
 
 from core.errors import BadInput
 from core.recording import rrd_entities, rrd_has_blueprint

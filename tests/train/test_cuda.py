@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent_fold
+from helpers.cgnn_data import dent_fold
 
 from train.evaluation.evaluate import evaluate_runs
 from train.evaluation.references import DISPLACEMENT

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import DENT_NAMES, dent_fold, write_dent_split, write_dent_states
+from helpers.cgnn_data import DENT_NAMES, dent_fold, write_dent_split, write_dent_states
 
 import train.inference.predictor as predictor_module
 from core.errors import BadInput

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import onnx
 import pytest
-from cgnn_data import dent_fold
 from click.testing import CliRunner
+from helpers.cgnn_data import dent_fold
 
 from core.provenance import sha256_file
 from data_schema.json_docs import validate_metrics

@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from msm_reference import forces_by_edge_loop
+from helpers.msm_reference import forces_by_edge_loop
 from scipy.linalg import eig_banded
 
 from sim.msm.msm import (

@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from msm_reference import forces_by_edge_loop
+from helpers.msm_reference import forces_by_edge_loop
 
 from pipeline.cli import cli
 from sim.msm.msm import MSM, MSMParams, max_eigenfrequency, unit

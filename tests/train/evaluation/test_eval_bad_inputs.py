@@ -1,8 +1,8 @@
 """pipeline eval against damaged copies of the checkpoint, the folds and the states file it
 reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ import json
 from pathlib import Path
 
 import torch
-from bad_input_checks import Outcome, Pair, cli, fuzz, restamped
-from file_damage import checkpoint_mutations, folds_mutations, states_mutations
+from helpers.bad_input_checks import Outcome, Pair, cli, fuzz, restamped
+from helpers.file_damage import checkpoint_mutations, folds_mutations, states_mutations
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def _metrics(path: Path) -> dict:

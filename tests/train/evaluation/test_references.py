@@ -1,4 +1,4 @@
-"""The no-learning references against the closed-form dent (tests/cgnn_data.py)."""
+"""The no-learning references against the closed-form dent (tests/helpers/cgnn_data.py)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from cgnn_data import SIGMA, write_dent_split, write_dent_states
 from click.testing import CliRunner
+from helpers.cgnn_data import SIGMA, write_dent_split, write_dent_states
 
 from pipeline.cli import cli
 from train.data import Batch, example_pairs, load_states, make_batch, role_examples

@@ -1,7 +1,7 @@
 """pipeline export against damaged copies of the checkpoint it reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import onnx
-from bad_input_checks import Pair, cli, fuzz
-from file_damage import checkpoint_mutations
+from helpers.bad_input_checks import Pair, cli, fuzz
+from helpers.file_damage import checkpoint_mutations
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def _onnx_model(path: Path) -> bytes:

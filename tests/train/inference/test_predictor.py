@@ -10,8 +10,8 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent_fold
 from click.testing import CliRunner
+from helpers.cgnn_data import dent_fold
 
 from pipeline.cli import cli
 from train import Predictor

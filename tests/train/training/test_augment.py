@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent, dent_fold, write_dent_states
+from helpers.cgnn_data import dent, dent_fold, write_dent_states
 
 from train.data import load_states, make_batch
 from train.model.config import CGNNConfig

@@ -11,7 +11,7 @@ import pytest
 import torch
 import torch.distributed as dist
 import torch.multiprocessing as mp
-from cgnn_data import dent_fold
+from helpers.cgnn_data import dent_fold
 
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig

@@ -22,7 +22,7 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import DENT_NAMES, dent_fold
+from helpers.cgnn_data import DENT_NAMES, dent_fold
 from torch import nn
 
 from core.errors import BadInput
@@ -54,7 +54,7 @@ SMALL = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8
 
 @pytest.fixture(scope="module")
 def dent(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """The dent states (closed-form truth, ``tests/cgnn_data.py``) and a 2-fold manifest."""
+    """The dent states (closed-form truth, ``tests/helpers/cgnn_data.py``) and a 2-fold manifest."""
     return dent_fold(tmp_path_factory.mktemp("loop_dent"))
 
 

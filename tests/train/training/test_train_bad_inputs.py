@@ -1,8 +1,8 @@
 """pipeline train against damaged copies of the states file, the folds and the checkpoint
 (``--init``) it reads.
 
-The harness, the damage and the clean inputs: ``tests/bad_input_checks.py``,
-``tests/file_damage.py``, ``tests/bad_input_fixtures.py``.
+The harness, the damage and the clean inputs: ``tests/helpers/bad_input_checks.py``,
+``tests/helpers/file_damage.py``, ``tests/helpers/bad_input_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
-from bad_input_checks import TINY_RUN, Outcome, Pair, cli, fuzz, restamped
-from file_damage import checkpoint_mutations, folds_mutations, states_mutations
+from helpers.bad_input_checks import TINY_RUN, Outcome, Pair, cli, fuzz, restamped
+from helpers.file_damage import checkpoint_mutations, folds_mutations, states_mutations
 
-pytest_plugins = ["bad_input_fixtures"]
+pytest_plugins = ["helpers.bad_input_fixtures"]
 
 
 def _weights(run: Path) -> dict:

@@ -18,8 +18,8 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import write_dent_split, write_dent_states
 from click.testing import CliRunner
+from helpers.cgnn_data import write_dent_split, write_dent_states
 
 from core.errors import BadInput
 from core.protocol import THICKNESS_M

@@ -10,8 +10,8 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from cgnn_data import dent_fold, write_dent_states
 from click.testing import CliRunner
+from helpers.cgnn_data import dent_fold, write_dent_states
 
 from core.errors import BadInput
 from core.recording import rrd_entities

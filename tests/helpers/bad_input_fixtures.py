@@ -10,10 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from bad_input_checks import TINY_RUN, cli
-from cgnn_data import write_dent_states
-from raw_sessions import analytic_session
 
+from helpers.bad_input_checks import TINY_RUN, cli
+from helpers.cgnn_data import write_dent_states
+from helpers.raw_sessions import analytic_session
 from ingest.mcap_io import write_raw_mcap
 
 

@@ -4,5 +4,5 @@ from __future__ import annotations
 
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]               # the repository
+ROOT = Path(__file__).resolve().parents[2]               # the repository
 REAL_SAMPLES = ROOT.parent / "shared" / "real_samples"   # public lab exports, beside a clone

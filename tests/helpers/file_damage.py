@@ -27,10 +27,10 @@ from typing import Any
 import h5py
 import numpy as np
 import torch
-from raw_sessions import analytic_session
 
 from data_schema.hdf5 import H5Schema
 from data_schema.states import STATES
+from helpers.raw_sessions import analytic_session
 from ingest.mcap_io import write_raw_mcap
 
 REFUSE, SAME, VALID = "refuse", "same", "valid"

@@ -1,11 +1,12 @@
 """Every stage against damaged copies of every file it reads (seeded, fast): the harness of the
 bad-input tests (``tests/<package>/test_<stage>_bad_inputs.py``).
 
-For each (stage, file) pair a small valid file is built once (``tests/bad_input_fixtures.py``),
-then damaged one way per case (``tests/file_damage.py``), and the stage run on each copy through
-the CLI. No case may end in a traceback; a refusal is exit status 2 with exactly one line on
-stderr naming the file and no output left. The cases run are counted (``COUNTS``), and the count
-printed at the end (``tests/test_bad_inputs.py``).
+For each (stage, file) pair a small valid file is built once
+(``tests/helpers/bad_input_fixtures.py``), then damaged one way per case
+(``tests/helpers/file_damage.py``), and the stage run on each copy through the CLI. No case may end
+in a traceback; a refusal is exit status 2 with exactly one line on stderr naming the file and no
+output left. The cases run are counted (``COUNTS``), and the count printed at the end
+(``tests/test_bad_inputs.py``).
 """
 
 from __future__ import annotations
@@ -20,11 +21,11 @@ from typing import Any
 import numpy as np
 import torch
 from click.testing import CliRunner
-from file_damage import REFUSE, SAME, Mutation
 
 from core.errors import BadInput
 from core.provenance import sha256_file
 from data_schema.hdf5 import H5Schema, read_h5
+from helpers.file_damage import REFUSE, SAME, Mutation
 from pipeline.cli import cli as pipeline_cli
 
 COUNTS: dict[str, int] = {}              # (stage, file) -> cases run

@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from paths import REAL_SAMPLES
 
 from core.errors import BadInput
+from helpers.paths import REAL_SAMPLES
 from ingest.qtm_motion import read_qtm_tsv
 
 QTM = REAL_SAMPLES / "qtm"
