@@ -19,9 +19,10 @@ from data_schema.session import SessionConfig
 from ingest.analog import resolve_channels
 from live.live_calibration import TARE_S, TipModel, force_tare, wrench
 from live.live_layout import LiveLayout, to_force
+from live.live_presses import PressTracker
 from live.live_view import LiveView
 from live.rt_client import Frame
-from sync.force_conditioning import RAIL_TOLERANCE, rails
+from sync.force_conditioning import RAIL_TOLERANCE, noise_level, rails
 from sync.sync_params import SyncParams
 
 
@@ -46,17 +47,24 @@ class Monitor:
         self._limit = None if layout.calibration is None else \
             np.asarray(layout.calibration.max_load, float)
         self.tare: Tare | None = None
+        self.presses: PressTracker | None = None       # once the tare gives the contact
         self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
         self._early_samples = 0
+        self._peak_tip = False                 # the next frame's tip places the contact
         self.saturated = self.over_range = 0
 
     def frame(self, frame: Frame, time_ns: int, sample_ns: np.ndarray | None) -> None:
         """One frame: its scene, and its force samples where it carries any."""
         markers = frame.markers[self.index]
-        if self.view is not None:               # the tip where the scene is drawn
-            tip = self.tip.tips(markers[None, self.phantom:], self.params)[0] \
-                if self.view.due(time_ns) else None
-            self.view.frame(time_ns, markers, tip)
+        drawn = self.view is not None and self.view.due(time_ns)
+        tip = None
+        if drawn or self._peak_tip:              # the tip where it is shown or placed
+            tip = self.tip.tips(markers[None, self.phantom:], self.params)[0]
+        if self._peak_tip and self.presses is not None:
+            self.presses.place(tip)
+            self._peak_tip = False
+        if self.view is not None:
+            self.view.frame(time_ns, markers, tip if drawn else None)
         if frame.analog is not None:
             self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
 
@@ -71,18 +79,30 @@ class Monitor:
             values = np.concatenate([v for _, v in self._early])
             self._early = []
             self.tare = force_tare(values, self.layout.device.rate_hz, self.layout.source)
+            w = wrench(values, self.tare, self.layout)
+            noise = noise_level(w, self.tare)
+            p = self.params
+            self.presses = PressTracker(self.layout.device.rate_hz, p.detect_n,
+                                        max(p.contact_n, 5 * noise), p.location_radius_m)
             if self.view is not None:
                 self.view.note(int(times[-1]), f"force tared over its first "
                                                f"{self.tare.stop / self.layout.device.rate_hz:.2f}"
-                                               " s (unloaded start)")
+                                               f" s (unloaded start; noise {noise * 1e3:.1f} mN)")
         w = wrench(values, self.tare, self.layout)
         saturated = self._on_rail(values)
         over = np.zeros(len(w), bool) if self._limit is None else \
             (np.abs(w) > self._limit).any(axis=1)
         self.saturated += int(saturated.sum())
         self.over_range += int(over.sum())
+        magnitude = np.linalg.norm(w[:, :3], axis=1)
         if self.view is not None:
-            self.view.force(times, np.linalg.norm(w[:, :3], axis=1), saturated, over)
+            self.view.force(times, magnitude, saturated, over)
+        new_peak, done = self.presses.add(times, magnitude)
+        if new_peak:
+            self._peak_tip = True
+        for press in done:
+            if self.view is not None:
+                self.view.press(press, self.presses.locations)
 
     def _on_rail(self, volts: np.ndarray) -> np.ndarray:
         if self._rails is None:

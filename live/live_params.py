@@ -24,6 +24,7 @@ class LiveParams:
     calibration: Path | None = None      # a synced file whose tip calibration to use
     spawn: bool = False                  # a rerun viewer beside the recording
     serve: bool = False                  # the recording served to a browser
+    states: bool = True                  # sync and extract on the MCAP at the end
 
 
 def parse_address(text: str) -> tuple[str, int]:

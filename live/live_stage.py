@@ -29,6 +29,8 @@ from core.provenance import make_provenance
 from core.series import MarkerSeries, RawSession
 from data_schema.raw_mcap import SCHEMA, VERSION
 from data_schema.session import SessionConfig, read_session
+from extract.extract_params import ExtractParams
+from extract.extract_stage import run_extract
 from ingest.ati_cal import read_ati_cal
 from ingest.detect import read_mocap
 from ingest.ingest_stage import session_inputs
@@ -38,14 +40,18 @@ from live.live_journal import ANALOG, MARKERS, Journal, read_journal
 from live.live_layout import LiveLayout, live_layout, to_force
 from live.live_monitor import Monitor
 from live.live_params import LiveParams
+from live.live_presses import Location
 from live.live_recorder import Counts, Recorder
 from live.live_view import LiveView
 from live.qtm_parameters import AnalogDevice, parse_parameters
 from live.rt_client import Stream, decode_frame
 from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 MCAP_NAME = "session.mcap"
 RRD_NAME = "session.rrd"
+SYNCED_NAME = "session.h5"        # sync's, then extract's, on the MCAP at the session's end
+STATES_NAME = "states.h5"
 
 
 @dataclass
@@ -60,6 +66,9 @@ class LiveSummary:
     seconds: float
     latency_ms: np.ndarray = field(default_factory=lambda: np.empty(0))
     refused: BadInput | None = None       # a frame refused mid-session (after the MCAP)
+    locations: list[Location] = field(default_factory=list)   # pressed, as seen live
+    presses: int = 0
+    states: str = ""                      # what became of the session's states
 
 
 def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
@@ -77,7 +86,22 @@ def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
     summary = asyncio.run(_session(cfg, part, params, rrd))
     summary.mcap = mcap
     _finish(part, mcap, cfg, params)
+    if params.states and summary.presses and summary.refused is None:
+        summary.states = _states(mcap)
     return summary
+
+
+def _states(mcap: Path) -> str:
+    """The session's static states, by sync and extract on its MCAP with their defaults
+    (``session.h5``, ``states.h5`` beside it): the states ingest, sync and extract give on the
+    same recording. Said, not raised, where they refuse: the MCAP is the session."""
+    synced, states = mcap.with_name(SYNCED_NAME), mcap.with_name(STATES_NAME)
+    try:
+        run_sync(mcap, synced, SyncParams(), None)
+        ex = run_extract([synced], states, ExtractParams(), None)
+    except BadInput as e:
+        return f"no states ({e.line()})"
+    return f"{len(ex.arrays['states/points'])} states in {states}"
 
 
 async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path | None
@@ -145,9 +169,12 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip, j
         refused.append(BadInput(stream.source, f"the connection was lost after frame "
                                                f"{recorder.counts.frames} of this session: "
                                                "session.mcap holds every frame up to it"))
+    tracker = monitor.presses
     return LiveSummary(stream.source, recorder.counts, stream.ended or "?", Path(), None,
                        time.perf_counter() - start, np.asarray(latency) * 1e3,
-                       refused[0] if refused else None)
+                       refused[0] if refused else None,
+                       [] if tracker is None else tracker.locations,
+                       0 if tracker is None else tracker.presses)
 
 
 def _finish(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> None:

@@ -4,13 +4,17 @@ One timeline, ``mocap_time`` (since the first frame received); +z up. Entities:
 
 * ``scene/phantom`` (blue) and ``scene/cluster`` (orange): the session's markers, at most
   :data:`VIEW_HZ` times a second (what a person can see), lost ones left out, framed on the
-  phantom once it is seen; ``scene/tip`` (red ball);
+  phantom once it is seen; ``scene/tip`` (red ball); ``scene/coverage``: a ball per location
+  pressed (at its first press's tip), coloured by the highest force level reached there
+  (viridis, 0 to :data:`COVERAGE_N` N) and labelled "location: presses x, top level", updated
+  as each press ends;
 * ``force/magnitude``: the tared force magnitude (N) at the mocap rate, sent a frame's samples
   at a time (``send_columns``: the 1 kHz board never floods the viewer);
 * ``quality/lost``: the most markers of the session lost in a frame since the last drawing;
   ``quality/saturated`` and ``quality/over_range``: 1 where a gauge sat on the amplifier's
   rail or the force went beyond the sensor's rating since the last drawing;
-* ``status``: a TextLog of the session: connected, calibrated, the end and its reason.
+* ``status``: a TextLog of the session: connected, calibrated, each press as it ends (its
+  location, peak, the levels reached there), the end and its reason.
 
 The recording goes to a file (always) and, on request, to a viewer spawned beside it
 (``--spawn``) or served to a browser (``--serve``).
@@ -24,11 +28,13 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import declare_up, phantom_view, plot, time_column
+from core.recording import colormap, declare_up, phantom_view, plot, time_column
+from live.live_presses import Location, PressDone
 
 APP_ID = "phantom-live"
 TIMELINE = "mocap_time"
 VIEW_HZ = 30.0
+COVERAGE_N = 7.5               # the coverage's colours span 0 to this level (the MSM's top)
 RADIUS_M = 0.0015
 COLORS = {"phantom": (60, 140, 230), "cluster": (245, 140, 30), "tip": (230, 30, 30),
           "force": (40, 170, 80), "lost": (150, 150, 150), "saturated": (230, 30, 30),
@@ -119,6 +125,20 @@ class LiveView:
 
     def _at(self, time_ns: int) -> None:
         self.rec.set_time(TIMELINE, duration=np.timedelta64(int(time_ns), "ns"))
+
+    def press(self, press: PressDone, locations: list[Location]) -> None:
+        """A press that ended: a status line, and the coverage of every location (a ball at
+        its first press's tip, coloured by the highest level reached, labelled)."""
+        loc = locations[press.location]
+        self.note(press.end_ns, f"press {press.number} at location {press.location + 1}: "
+                                f"peak {press.peak_n:.2f} N, levels up to "
+                                f"{loc.top_level:g} N there ({loc.presses} presses)")
+        top = np.array([lo.top_level for lo in locations])
+        self.rec.log("scene/coverage", rr.Points3D(
+            [lo.tip for lo in locations], radii=3 * RADIUS_M,
+            colors=colormap(top / COVERAGE_N),
+            labels=[f"{i + 1}: {lo.presses} x, {lo.top_level:g} N" for i, lo in
+                    enumerate(locations)]))
 
     def note(self, time_ns: int, text: str, level: str = rr.TextLogLevel.INFO) -> None:
         """A line of the session's status."""

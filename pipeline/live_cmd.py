@@ -32,9 +32,12 @@ D = LiveParams
                                  "use instead of the session's pivot recording.")
 @click.option("--spawn", is_flag=True, help="Also show the recording in a rerun viewer.")
 @click.option("--serve", is_flag=True, help="Also serve the recording to a web browser.")
+@click.option("--states/--no-states", default=D.states, show_default=True,
+              help="At the end, sync and extract the session (LIVE_DIR/session.h5, states.h5) "
+                   "as `pipeline sync` and `pipeline extract` would.")
 @click.option("--no-rrd", is_flag=True, help="Write no recording.")
 def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: float | None,
-         timeout_s: float, calibration: Path | None, spawn: bool, serve: bool,
+         timeout_s: float, calibration: Path | None, spawn: bool, serve: bool, states: bool,
          no_rrd: bool) -> None:
     """Record a session live from QTM's real-time stream, and show it as it happens.
 
@@ -46,20 +49,23 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
     `pipeline ingest` would (every frame received, each stream on its clock; `pipeline sync`
     runs on it), built from a journal written as the frames arrive (session.mcap.part: what a
     kill leaves), and --out/session.rrd: markers, tip, the tared force at the mocap rate, lost
-    markers, saturation and over-range as they happen.
+    markers, saturation and over-range as they happen, each press as it ends and the coverage
+    of the locations pressed (presses, highest level). With --states (the default), sync and
+    extract then run on the MCAP: --out/session.h5 and states.h5, as those commands write them.
     """
     from live.live_stage import MCAP_NAME, RRD_NAME, run_live
 
     host, port = address
     params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
-                        calibration=calibration, spawn=spawn, serve=serve)
+                        calibration=calibration, spawn=spawn, serve=serve, states=states)
     s = run_live(session_dir, out, params, None if no_rrd else out / RRD_NAME)
     lat = s.latency_ms
     timing = f"; per frame {np.median(lat):.2f} ms median, {np.percentile(lat, 99):.2f} ms " \
              "p99" if lat.size else ""
     click.echo(f"{out / MCAP_NAME}: {s.counts.frames} frames ({s.counts.skipped} skipped by "
                f"number), {s.counts.samples} force samples from {s.source} in "
-               f"{s.seconds:.1f} s; ended: {s.ended}{timing}"
+               f"{s.seconds:.1f} s; ended: {s.ended}; {s.presses} presses at "
+               f"{len(s.locations)} locations{timing}" + (f"; {s.states}" if s.states else "")
                + (f"; recording {s.rrd}" if s.rrd else ""))
     if s.refused is not None:
         raise s.refused

@@ -17,11 +17,15 @@ import pytest
 from click.testing import CliRunner
 
 from core.recording import rrd_entities
+from data_schema.hdf5 import read_h5
+from data_schema.states import STATES
+from extract.extract_params import ExtractParams
+from extract.extract_stage import run_extract
 from ingest.ingest_params import IngestParams
 from ingest.ingest_stage import run_ingest
 from ingest.mcap_io import read_raw_mcap
 from live.live_params import LiveParams
-from live.live_stage import MCAP_NAME, RRD_NAME, run_live
+from live.live_stage import MCAP_NAME, RRD_NAME, STATES_NAME, run_live
 from live.replay_parameters import parameters_xml
 from live.replay_params import ReplayParams
 from live.replay_server import ReplayServer
@@ -29,6 +33,8 @@ from live.replay_source import read_replay_source
 from live.rt_packets import Component, PacketType, encode_text
 from pipeline.cli import cli
 from sync.sync import sync_session
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
 SPEED = 20.0                  # times real time: a 20 s twin session in about a second
 
@@ -101,12 +107,34 @@ def test_sync_finds_the_same_presses_on_the_live_session(recorded) -> None:
         np.testing.assert_allclose(pa.force_magnitude, pb.force_magnitude, atol=1e-4)
 
 
+def test_presses_seen_live_are_syncs_and_the_states_are_extracts(recorded, tmp_path) -> None:
+    """The presses and locations counted live are those sync finds afterwards; the states
+    written at the end are those ingest, sync and extract give on the exports: the same
+    presses and levels, points within 0.05 mm."""
+    summary, _, _, ingested, out = recorded
+    offline = tmp_path / "offline"
+    offline.mkdir()
+    run_sync(out.parent / "ingested.mcap", offline / "s.h5", SyncParams(), None)
+    run_extract([offline / "s.h5"], offline / "states.h5", ExtractParams(), None)
+    synced = sync_session(ingested)
+    assert summary.presses == len(synced.presses)
+    assert len(summary.locations) == len(synced.location_centres)
+    live, _ = read_h5(out / STATES_NAME, STATES)
+    want, _ = read_h5(offline / "states.h5", STATES)
+    assert summary.states.startswith(f"{len(want['states/points'])} states")
+    for key in ("states/step", "states/sequence", "states/location", "single/start",
+                "single/end", "multi/start", "multi/end"):
+        np.testing.assert_array_equal(live[key], want[key], err_msg=key)
+    np.testing.assert_allclose(live["states/points"], want["states/points"], atol=5e-5)
+
+
 def test_the_recording_shows_the_scene_the_force_and_the_status(recorded) -> None:
     *_, out = recorded
     entities = rrd_entities(out / RRD_NAME)
     for path, archetype in (("/scene/phantom", "Points3D"), ("/scene/cluster", "Points3D"),
                             ("/scene/tip", "Points3D"), ("/force/magnitude", "Scalars"),
                             ("/quality/lost", "Scalars"), ("/quality/saturated", "Scalars"),
+                            ("/scene/coverage", "Points3D"),
                             ("/status", "TextLog")):
         assert archetype in entities.get(path, set()), path
 
