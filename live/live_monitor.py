@@ -12,13 +12,18 @@ flagged saturated, a wrench beyond the sensor's rating over range, frame by fram
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from calib.force_tare import Tare
+from calib.rest_plane import rest_surface
 from data_schema.session import SessionConfig
+from extract.phantom_frame import to_phantom_frame
 from ingest.analog import resolve_channels
 from live.live_calibration import TARE_S, TipModel, force_tare, wrench
 from live.live_layout import LiveLayout, to_force
+from live.live_model import LiveModel
 from live.live_presses import PressTracker
 from live.live_view import LiveView
 from live.rt_client import Frame
@@ -31,11 +36,13 @@ class Monitor:
     alone, as a benchmark's dry run)."""
 
     def __init__(self, layout: LiveLayout, cfg: SessionConfig, tip: TipModel,
-                 view: LiveView | None, params: SyncParams | None = None) -> None:
+                 view: LiveView | None, params: SyncParams | None = None,
+                 model: LiveModel | None = None) -> None:
         names = cfg.mocap.phantom_markers + cfg.mocap.indenter_markers
         self.index = np.array([layout.labels.index(n) for n in names])
         self.phantom = len(cfg.mocap.phantom_markers)
-        self.layout, self.tip, self.view = layout, tip, view
+        self.layout, self.tip, self.view, self.model = layout, tip, view, model
+        self.cfg = cfg
         self.params = params or SyncParams()
         zero_row = np.zeros((1, len(layout.device.labels)))
         zero, one = to_force(layout, zero_row, cfg), to_force(layout, zero_row + 1.0, cfg)
@@ -51,20 +58,33 @@ class Monitor:
         self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
         self._early_samples = 0
         self._peak_tip = False                 # the next frame's tip places the contact
+        self._rest: list[np.ndarray] = []      # markers before the tare (the rest, with a model)
+        self._force_now = 0.0
+        self._started = False                  # a contact began: the next frame is its start
         self.saturated = self.over_range = 0
 
     def frame(self, frame: Frame, time_ns: int, sample_ns: np.ndarray | None) -> None:
         """One frame: its scene, and its force samples where it carries any."""
         markers = frame.markers[self.index]
+        if self.model is not None and self.tare is None:
+            self._rest.append(markers)
         drawn = self.view is not None and self.view.due(time_ns)
+        contact = self.presses is not None and self.presses.in_contact
         tip = None
-        if drawn or self._peak_tip:              # the tip where it is shown or placed
+        if drawn or self._peak_tip or self._started:   # the tip where it is shown or used
             tip = self.tip.tips(markers[None, self.phantom:], self.params)[0]
         if self._peak_tip and self.presses is not None:
             self.presses.place(tip)
             self._peak_tip = False
+        if self._started and self.model is not None:
+            self.model.start(markers[:self.phantom], tip, self._force_now)
+        self._started = False
         if self.view is not None:
             self.view.frame(time_ns, markers, tip if drawn else None)
+            if drawn and contact and self.model is not None:
+                reading = self.model.at(markers[:self.phantom], tip, self._force_now)
+                if reading is not None:
+                    self.view.model(time_ns, reading)
         if frame.analog is not None:
             self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
 
@@ -84,6 +104,8 @@ class Monitor:
             p = self.params
             self.presses = PressTracker(self.layout.device.rate_hz, p.detect_n,
                                         max(p.contact_n, 5 * noise), p.location_radius_m)
+            if self.model is not None:
+                self.model.to_phantom = self._phantom_frame()
             if self.view is not None:
                 self.view.note(int(times[-1]), f"force tared over its first "
                                                f"{self.tare.stop / self.layout.device.rate_hz:.2f}"
@@ -97,12 +119,29 @@ class Monitor:
         magnitude = np.linalg.norm(w[:, :3], axis=1)
         if self.view is not None:
             self.view.force(times, magnitude, saturated, over)
+        self._force_now = float(magnitude[-1])
+        was = self.presses.in_contact
         new_peak, done = self.presses.add(times, magnitude)
+        self._started = not was and self.presses.in_contact
         if new_peak:
             self._peak_tip = True
         for press in done:
             if self.view is not None:
                 self.view.press(press, self.presses.locations)
+
+    def _phantom_frame(self) -> np.ndarray:
+        """Lab -> phantom frame from the markers at rest before the tare: sync's rest plane
+        (:func:`calib.rest_plane.rest_surface`) and extract's axes and origin."""
+        rest = np.stack(self._rest)
+        self._rest = []
+        phantom, cluster = rest[:, :self.phantom], rest[:, self.phantom:]
+        tips = self.tip.tips(cluster, self.params)
+        point, normal = rest_surface(phantom, cluster, tips, self.layout.source)
+        with warnings.catch_warnings():          # a marker never seen at rest: NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            still = np.nanmedian(phantom, axis=0)
+        return to_phantom_frame(still, list(self.cfg.mocap.phantom_markers), point, normal,
+                                self.cfg.phantom)
 
     def _on_rail(self, volts: np.ndarray) -> np.ndarray:
         if self._rails is None:

@@ -22,6 +22,7 @@ class LiveParams:
     duration_s: float | None = None      # stop after this long (None: until QTM stops)
     timeout_s: float = 5.0               # no answer or no frame for this long ends it
     calibration: Path | None = None      # a synced file whose tip calibration to use
+    model: Path | None = None            # a trained run whose answer to show beside the press
     spawn: bool = False                  # a rerun viewer beside the recording
     serve: bool = False                  # the recording served to a browser
     states: bool = True                  # sync and extract on the MCAP at the end

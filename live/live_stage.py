@@ -35,9 +35,10 @@ from ingest.ati_cal import read_ati_cal
 from ingest.detect import read_mocap
 from ingest.ingest_stage import session_inputs
 from ingest.mcap_io import write_raw_mcap
-from live.live_calibration import tip_model
+from live.live_calibration import TipModel, tip_model
 from live.live_journal import ANALOG, MARKERS, Journal, read_journal
 from live.live_layout import LiveLayout, live_layout, to_force
+from live.live_model import LiveModel
 from live.live_monitor import Monitor
 from live.live_params import LiveParams
 from live.live_presses import Location
@@ -111,6 +112,8 @@ async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path
     layout = live_layout(parse_parameters(await stream.connect(), stream.source), cfg)
     try:
         tip = tip_model(cfg, layout, params.calibration, SyncParams())
+        model = None if params.model is None else \
+            LiveModel(params.model, list(cfg.mocap.phantom_markers))
     except BadInput:
         await stream.close()
         raise
@@ -118,8 +121,9 @@ async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path
     journal = Journal(part, _header(layout))
     with atomic_output(rrd) if rrd is not None else _nothing() as tmp:
         view = None if tmp is None else LiveView(tmp, len(cfg.mocap.phantom_markers),
-                                                 params.spawn, params.serve)
-        summary = await _stream(stream, layout, cfg, tip, journal, view, params)
+                                                 params.spawn, params.serve,
+                                                 model is not None)
+        summary = await _stream(stream, layout, cfg, tip, journal, view, params, model)
         if view is not None:
             view.note(0, f"ended: {summary.ended}")
             view.close()
@@ -127,10 +131,12 @@ async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path
     return summary
 
 
-async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip, journal: Journal,
-                  view: LiveView | None, params: LiveParams) -> LiveSummary:
+async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: TipModel,
+                  journal: Journal, view: LiveView | None, params: LiveParams,
+                  model: LiveModel | None) -> LiveSummary:
+    """Every frame into the journal and the monitor until the stream ends."""
     recorder = Recorder(layout, journal)
-    monitor = Monitor(layout, cfg, tip, view)
+    monitor = Monitor(layout, cfg, tip, view, model=model)
     latency: list[float] = []
     refused: list[BadInput] = []
     if view is not None:

@@ -13,6 +13,9 @@ One timeline, ``mocap_time`` (since the first frame received); +z up. Entities:
 * ``quality/lost``: the most markers of the session lost in a frame since the last drawing;
   ``quality/saturated`` and ``quality/over_range``: 1 where a gauge sat on the amplifier's
   rail or the force went beyond the sensor's rating since the last drawing;
+* with ``--model``: ``scene/model`` (green), the model's surface for the tip now (region
+  mode), and ``model/ld_mm``, ``model/force_error_n``: its L_d against the markers measured
+  and its force error, as each press goes on; its envelope warnings in ``status``;
 * ``status``: a TextLog of the session: connected, calibrated, each press as it ends (its
   location, peak, the levels reached there), the end and its reason.
 
@@ -29,6 +32,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from core.recording import colormap, declare_up, phantom_view, plot, time_column
+from live.live_model import Reading
 from live.live_presses import Location, PressDone
 
 APP_ID = "phantom-live"
@@ -38,27 +42,29 @@ COVERAGE_N = 7.5               # the coverage's colours span 0 to this level (th
 RADIUS_M = 0.0015
 COLORS = {"phantom": (60, 140, 230), "cluster": (245, 140, 30), "tip": (230, 30, 30),
           "force": (40, 170, 80), "lost": (150, 150, 150), "saturated": (230, 30, 30),
+          "model": (90, 220, 120), "ld_mm": (90, 220, 120), "force_error_n": (230, 200, 60),
           "over_range": (140, 0, 140)}
 
 
-def blueprint(centre: np.ndarray | None = None, size: float = 0.1) -> rrb.Blueprint:
-    """The scene beside the force and the quality plots; the scene framed on the phantom
-    (``centre``, ``size`` m) once its markers are seen."""
-    scene = rrb.Spatial3DView(origin="scene", name="markers (phantom blue, cluster orange), "
-                                                  "tip red") if centre is None else \
-        phantom_view("markers (phantom blue, cluster orange), tip red", ["$origin/**"], centre,
-                     size, origin="scene")
-    return rrb.Blueprint(rrb.Horizontal(
-        scene, rrb.Vertical(plot("force (N)", "force"),
-                            plot("lost markers, saturated, over range", "quality")),
-        column_shares=[3, 2]))
+def blueprint(centre: np.ndarray | None = None, size: float = 0.1,
+              model: bool = False) -> rrb.Blueprint:
+    """The scene beside the force and the quality plots (and the model's, with one); the
+    scene framed on the phantom (``centre``, ``size`` m) once its markers are seen."""
+    name = "markers (phantom blue, cluster orange), tip red" + \
+        (", model green" if model else "")
+    scene = rrb.Spatial3DView(origin="scene", name=name) if centre is None else \
+        phantom_view(name, ["$origin/**"], centre, size, origin="scene")
+    plots = [plot("force (N)", "force"), plot("lost markers, saturated, over range", "quality")]
+    if model:
+        plots.append(plot("model: L_d (mm), force error (N)", "model"))
+    return rrb.Blueprint(rrb.Horizontal(scene, rrb.Vertical(*plots), column_shares=[3, 2]))
 
 
 class LiveView:
     """The live recording stream (file, and viewer where asked)."""
 
     def __init__(self, path: Path, phantom: int, spawn: bool = False,
-                 serve: bool = False) -> None:
+                 serve: bool = False, model: bool = False) -> None:
         self.rec = rr.RecordingStream(APP_ID)
         sinks: list = [rr.FileSink(str(path))]
         if spawn:
@@ -66,17 +72,20 @@ class LiveView:
             sinks.append(rr.GrpcSink())
         if serve:
             sinks.append(rr.GrpcServerSink())
-        self.rec.set_sinks(*sinks, default_blueprint=blueprint())
+        self.rec.set_sinks(*sinks, default_blueprint=blueprint(model=model))
+        self.with_model = model
         if serve:
             rr.serve_web_viewer(open_browser=False)
         self.phantom = phantom
         self._next_scene = 0
         self._flags = {"lost": 0.0, "saturated": 0.0, "over_range": 0.0}
         self._framed = False
+        self._warned: set[str] = set()
         declare_up(self.rec, "scene")
         for name, color in COLORS.items():
-            if name in ("force", "lost", "saturated", "over_range"):
-                where = "force/magnitude" if name == "force" else f"quality/{name}"
+            if name in ("force", "lost", "saturated", "over_range", "ld_mm", "force_error_n"):
+                where = {"force": "force/magnitude", "ld_mm": "model/ld_mm",
+                         "force_error_n": "model/force_error_n"}.get(name, f"quality/{name}")
                 self.rec.log(where, rr.SeriesLines(colors=[color], names=[name]), static=True)
 
     def due(self, time_ns: int) -> bool:
@@ -121,7 +130,7 @@ class LiveView:
         self._framed = True
         centre = phantom.mean(axis=0)
         size = float(np.ptp(phantom[:, :2], axis=0).max()) or 0.1
-        self.rec.send_blueprint(blueprint(centre, size))
+        self.rec.send_blueprint(blueprint(centre, size, self.with_model))
 
     def _at(self, time_ns: int) -> None:
         self.rec.set_time(TIMELINE, duration=np.timedelta64(int(time_ns), "ns"))
@@ -139,6 +148,19 @@ class LiveView:
             colors=colormap(top / COVERAGE_N),
             labels=[f"{i + 1}: {lo.presses} x, {lo.top_level:g} N" for i, lo in
                     enumerate(locations)]))
+
+    def model(self, time_ns: int, reading: Reading) -> None:
+        """The model's surface for the tip now beside the markers, its L_d and force error,
+        and its envelope warnings (each once a press)."""
+        self._at(time_ns)
+        self.rec.log("scene/model", rr.Points3D(reading.predicted, radii=RADIUS_M,
+                                                colors=COLORS["model"]))
+        self.rec.log("model/ld_mm", rr.Scalars(reading.ld_mm))
+        self.rec.log("model/force_error_n", rr.Scalars(reading.force_error_n))
+        for text in reading.warnings:
+            if text not in self._warned:
+                self._warned.add(text)
+                self.rec.log("status", rr.TextLog(text, level=rr.TextLogLevel.WARN))
 
     def note(self, time_ns: int, text: str, level: str = rr.TextLogLevel.INFO) -> None:
         """A line of the session's status."""

@@ -30,6 +30,10 @@ D = LiveParams
 @click.option("--calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None, help="A synced file (`pipeline sync`) whose tip calibration to "
                                  "use instead of the session's pivot recording.")
+@click.option("--model", type=click.Path(exists=True, path_type=Path), default=None,
+              help="A trained run (`pipeline train`; its folder or a checkpoint) trained on "
+                   "this phantom's markers: its surface for the tip now beside the markers, "
+                   "its L_d and force error, as each press goes on.")
 @click.option("--spawn", is_flag=True, help="Also show the recording in a rerun viewer.")
 @click.option("--serve", is_flag=True, help="Also serve the recording to a web browser.")
 @click.option("--states/--no-states", default=D.states, show_default=True,
@@ -37,8 +41,8 @@ D = LiveParams
                    "as `pipeline sync` and `pipeline extract` would.")
 @click.option("--no-rrd", is_flag=True, help="Write no recording.")
 def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: float | None,
-         timeout_s: float, calibration: Path | None, spawn: bool, serve: bool, states: bool,
-         no_rrd: bool) -> None:
+         timeout_s: float, calibration: Path | None, model: Path | None, spawn: bool,
+         serve: bool, states: bool, no_rrd: bool) -> None:
     """Record a session live from QTM's real-time stream, and show it as it happens.
 
     Reads SESSION_DIR's session.toml (the markers, the force's channels, kind and units, the
@@ -57,7 +61,8 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
 
     host, port = address
     params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
-                        calibration=calibration, spawn=spawn, serve=serve, states=states)
+                        calibration=calibration, model=model, spawn=spawn, serve=serve,
+                        states=states)
     s = run_live(session_dir, out, params, None if no_rrd else out / RRD_NAME)
     lat = s.latency_ms
     timing = f"; per frame {np.median(lat):.2f} ms median, {np.percentile(lat, 99):.2f} ms " \

@@ -12,7 +12,7 @@ from sim.twin.synth_stage import run_synth
 
 @pytest.fixture(scope="session")
 def twin_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Two presses at two places (seed 3), force through the analog board: about 20 s."""
+    """Four presses at four places (seed 3), force through the analog board: about 35 s."""
     out = tmp_path_factory.mktemp("live") / "session"
-    return run_synth(None, out, SynthParams(seed=3, locations=2, repeats=1,
+    return run_synth(None, out, SynthParams(seed=3, locations=4, repeats=1,
                                             force_via="analog"))

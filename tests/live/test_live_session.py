@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers.bad_input_checks import TINY_RUN
+from helpers.cgnn_data import write_dent_states
 
 from core.recording import rrd_entities
 from data_schema.hdf5 import read_h5
@@ -219,3 +221,42 @@ def test_a_connection_lost_mid_frame_keeps_every_complete_frame(twin_session, tm
     assert code == 2 and "connection" in err and len(err.strip().splitlines()) == 1
     kept = read_raw_mcap(tmp_path / "out" / MCAP_NAME)
     assert kept.markers.frames == frames
+
+
+def _tiny_run(states: Path, out: Path) -> Path:
+    """One optimiser step of the paper's network on ``states``: a model of its markers."""
+    runner = CliRunner()
+    for args in (("split", states, "--out", out / "splits.json", "--folds", "3", "--ratio",
+                  "1:1:1", "--group", "sequence", "--no-rrd"),
+                 ("train", "--data", states, "--splits", out / "splits.json", "--out",
+                  out / "run", *TINY_RUN)):
+        res = runner.invoke(cli, [str(a) for a in args])
+        assert res.exit_code == 0, res.output
+    return out / "run"
+
+
+def test_the_models_answer_is_shown_beside_each_press(recorded, twin_session, tmp_path):
+    """A model of this phantom's markers (trained on the session's own states, one step: the
+    view is checked, not the model) answers at each drawing of a press: its surface, its L_d
+    against the markers and its force error are in the recording."""
+    *_, out = recorded
+    run = _tiny_run(out / STATES_NAME, tmp_path)
+    with replaying(twin_session) as server:
+        summary = run_live(twin_session, tmp_path / "live", LiveParams(
+            port=server.port, timeout_s=10, model=run, states=False), tmp_path / "live.rrd")
+    assert summary.refused is None and summary.presses == recorded[0].presses
+    entities = rrd_entities(tmp_path / "live.rrd")
+    for path, archetype in (("/scene/model", "Points3D"), ("/model/ld_mm", "Scalars"),
+                            ("/model/force_error_n", "Scalars")):
+        assert archetype in entities.get(path, set()), path
+
+
+def test_a_model_of_another_phantoms_markers_is_refused(twin_session, tmp_path) -> None:
+    write_dent_states(tmp_path / "dent.h5", places=3, steps=4)
+    run = _tiny_run(tmp_path / "dent.h5", tmp_path)
+    with replaying(twin_session) as server:
+        res = CliRunner().invoke(cli, ["live", str(twin_session), "--qtm",
+                                       f"127.0.0.1:{server.port}", "--out",
+                                       str(tmp_path / "out"), "--model", str(run)])
+    assert res.exit_code == 2 and "another phantom's markers" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
