@@ -17,7 +17,9 @@ from data_schema.hdf5 import write_h5
 from data_schema.states import STATES
 from extract.static_states import example_pairs
 from split.split_stage import build_manifest, default_plan, write_manifest
+from train.model.config import CGNNConfig
 
+TINY = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8, 8, 8))  # fast
 SIGMA = 0.015
 GRID = 7
 DENT_NAMES = [f"D{k:02d}" for k in range(GRID * GRID)]   # the dent file's point names

@@ -5,9 +5,7 @@ truth, and the refusals (one line, exit 2, nothing written)."""
 
 from __future__ import annotations
 
-import hashlib
 import json
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -16,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers.c3d_bytes import FRAMES, QUALISYS_C3D, qualisys_analog, rename_parameter, set_parameter
+from helpers.spoiled_session import ingest_spoiled
 from helpers.truth_checks import check_states_against_truth
 
 from core.errors import BadInput
@@ -244,13 +243,6 @@ def test_twin_analog_exports_name_the_gauges(analog_session):
     np.testing.assert_allclose(c3d.values, tsv.values, atol=5e-7)     # float32 vs 6 decimals
 
 
-def _folder_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(folder.rglob("*")):
-        h.update(p.name.encode() + (p.read_bytes() if p.is_file() else b""))
-    return h.hexdigest()
-
-
 def _toml(folder: Path, old: str, new: str) -> None:
     toml = folder / "session.toml"
     assert old in toml.read_text()
@@ -339,18 +331,8 @@ def _folder(out: Path) -> Path:
                                    _rate_not_a_multiple, _rate_disagrees, _other_capture,
                                    _numbers_for_a_log])
 def test_bad_analog_input_is_one_line_exit_2_nothing_written(analog_folder, tmp_path, spoil):
-    folder = tmp_path / "s"
-    shutil.copytree(analog_folder, folder)
-    said = spoil(folder)
-    before = _folder_hash(folder)
-    out = tmp_path / "out" / "raw.mcap"
-    res = _cli("ingest", folder, "--out", out)
-    assert res.exit_code == 2, (res.output, res.stderr, res.exception)
-    lines = res.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"error: {folder}/") and said in lines[0], \
-        lines
-    assert not out.parent.exists() or not list(out.parent.iterdir())
-    assert _folder_hash(folder) == before
+    line, said, folder = ingest_spoiled(analog_folder, tmp_path, spoil)
+    assert line.startswith(f"error: {folder}/") and said in line, line
 
 
 def test_same_seed_same_analog_bytes_and_routes_replace_each_other(analog_folder, tmp_path):

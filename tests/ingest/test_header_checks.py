@@ -7,8 +7,6 @@ file written by hand; the real exports themselves must still be read.
 
 from __future__ import annotations
 
-import hashlib
-import shutil
 import struct
 from collections.abc import Callable
 from pathlib import Path
@@ -18,8 +16,8 @@ import h5py
 import numpy as np
 import pytest
 import scipy.io
-from click.testing import CliRunner
 from helpers.c3d_bytes import c3d_parameter
+from helpers.spoiled_session import ingest_spoiled
 
 from core.errors import BadInput
 from core.series import MarkerSeries
@@ -27,7 +25,6 @@ from ingest.c3d import read_c3d
 from ingest.qtm_3d import read_qtm_3d
 from ingest.qtm_mat import read_qtm_mat, write_mat73, write_qtm_mat
 from ingest.qtm_motion import read_qtm_tsv
-from pipeline.cli import cli
 
 pytestmark = pytest.mark.usefixtures("real_samples")
 
@@ -459,25 +456,8 @@ def _spoil_c3d(folder: Path) -> str:
     return "indentation.c3d: POINT:RATE says 250 Hz but the header says 500 Hz"
 
 
-def _folder_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(folder.rglob("*")):
-        h.update(p.name.encode() + (p.read_bytes() if p.is_file() else b""))
-    return h.hexdigest()
-
-
 @pytest.mark.parametrize("spoil", [_spoil_tsv, _spoil_6d, _spoil_mat, _spoil_c3d],
                          ids=["tsv_3d", "tsv_6d", "qtm_mat", "c3d"])
 def test_ingest_says_one_line_exits_2_and_writes_nothing(twin_session, tmp_path, spoil):
-    folder = tmp_path / "session"
-    shutil.copytree(twin_session, folder)
-    said = spoil(folder)
-    before = _folder_hash(folder)
-    out = tmp_path / "out" / "raw.mcap"
-    res = CliRunner().invoke(cli, ["-q", "ingest", str(folder), "--out", str(out)])
-    assert res.exit_code == 2, (res.output, res.stderr, res.exception)
-    lines = res.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"error: {folder}/{said}"), lines
-    assert "Traceback" not in res.stderr
-    assert not out.parent.exists() or not list(out.parent.iterdir())
-    assert _folder_hash(folder) == before
+    line, said, folder = ingest_spoiled(twin_session, tmp_path, spoil)
+    assert line.startswith(f"error: {folder}/{said}"), line

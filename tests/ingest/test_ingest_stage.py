@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import shutil
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers.paths import REAL_SAMPLES
+from helpers.spoiled_session import folder_hash
 
 from core.provenance import sha256_file
 from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
@@ -110,13 +110,6 @@ def session(tmp_path) -> tuple[Path, np.ndarray, np.ndarray]:
     shutil.copy(REAL / "ati" / "nano17_FT14048_SI-50-0.5.cal", folder / "FT14048.cal")
     write_toml(folder)
     return folder, pos, values
-
-
-def folder_hash(folder: Path) -> str:
-    h = hashlib.sha256()
-    for p in sorted(folder.rglob("*")):
-        h.update(p.name.encode() + (p.read_bytes() if p.is_file() else b""))
-    return h.hexdigest()
 
 
 def run(args: list[str]):

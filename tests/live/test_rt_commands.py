@@ -5,35 +5,27 @@ from __future__ import annotations
 
 import pytest
 
-from live.rt_commands import (
-    GetCurrentFrame,
-    GetParameters,
-    Plain,
-    Refused,
-    StopStreaming,
-    StreamFrames,
-    Version,
-    parse_command,
-)
+import live.rt_commands as rc
 from live.rt_packets import Component as C
 
 
 @pytest.mark.parametrize("text, command", [
-    ("Version 1.25", Version("1.25")),
-    ("version", Version(None)),
-    ("GetParameters General 3D Analog Force", GetParameters(("general", "3d", "analog", "force"))),
-    ("getparameters force 3d", GetParameters(("3d", "force"))),
-    ("GetParameters All", GetParameters(("general", "3d", "analog", "force"))),
+    ("Version 1.25", rc.Version("1.25")),
+    ("version", rc.Version(None)),
+    ("GetParameters General 3D Analog Force",
+     rc.GetParameters(("general", "3d", "analog", "force"))),
+    ("getparameters force 3d", rc.GetParameters(("3d", "force"))),
+    ("GetParameters All", rc.GetParameters(("general", "3d", "analog", "force"))),
     ("StreamFrames AllFrames 3D 3DNoLabels Analog Force",
-     StreamFrames((C.THREE_D, C.THREE_D_NO_LABELS, C.ANALOG, C.FORCE))),
-    ("streamframes frequencydivisor:5 analog", StreamFrames((C.ANALOG,), divisor=5)),
-    ("StreamFrames Frequency:100 3d 3d", StreamFrames((C.THREE_D,), frequency_hz=100.0)),
-    ("StreamFrames Stop", StopStreaming()),
-    ("GetCurrentFrame 3D Analog", GetCurrentFrame((C.THREE_D, C.ANALOG))),
-    ("ByeBye", Plain("byebye")), ("GetState", Plain("getstate")),
+     rc.StreamFrames((C.THREE_D, C.THREE_D_NO_LABELS, C.ANALOG, C.FORCE))),
+    ("streamframes frequencydivisor:5 analog", rc.StreamFrames((C.ANALOG,), divisor=5)),
+    ("StreamFrames Frequency:100 3d 3d", rc.StreamFrames((C.THREE_D,), frequency_hz=100.0)),
+    ("StreamFrames Stop", rc.StopStreaming()),
+    ("GetCurrentFrame 3D Analog", rc.GetCurrentFrame((C.THREE_D, C.ANALOG))),
+    ("ByeBye", rc.Plain("byebye")), ("GetState", rc.Plain("getstate")),
 ])
 def test_commands_are_read(text, command):
-    assert parse_command(text) == command
+    assert rc.parse_command(text) == command
 
 
 @pytest.mark.parametrize("text, words", [
@@ -48,11 +40,11 @@ def test_commands_are_read(text, command):
     ("Version 1.25 1.26", "Parse error"),
 ])
 def test_what_is_not_served_is_refused(text, words):
-    with pytest.raises(Refused, match=words):
-        parse_command(text)
+    with pytest.raises(rc.Refused, match=words):
+        rc.parse_command(text)
 
 
 def test_frequency_becomes_a_step_at_the_recording_rate():
-    assert StreamFrames((C.THREE_D,), frequency_hz=100.0).step(500.0) == 5
-    assert StreamFrames((C.THREE_D,), frequency_hz=1e6).step(500.0) == 1
-    assert StreamFrames((C.THREE_D,), divisor=3).step(500.0) == 3
+    assert rc.StreamFrames((C.THREE_D,), frequency_hz=100.0).step(500.0) == 5
+    assert rc.StreamFrames((C.THREE_D,), frequency_hz=1e6).step(500.0) == 1
+    assert rc.StreamFrames((C.THREE_D,), divisor=3).step(500.0) == 3

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers.cgnn_data import TINY
 
 from core.errors import BadInput
 from train.model.cgnn import CGNN
@@ -23,12 +24,11 @@ from train.training.checkpoint import check_checkpoint, load_checkpoint, model_f
 from train.training.train_params import TrainOptions
 from train.training.variant import Variant
 
-SMALL = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8, 8, 8))
 NORM = Normaliser((0.05, 0.05, 0.0), 0.03, disp_scale=0.002, force_scale=0.5, extent=0.08,
                   envelope=Envelope(1e-3, 5e-3, -4e-3, 8e-3, -1.0, 3.0, 0.5e-3))
 
 
-def _state(config: CGNNConfig = SMALL, seed: int = 0) -> dict:
+def _state(config: CGNNConfig = TINY, seed: int = 0) -> dict:
     """A checkpoint as the train runner writes one: a seeded small network's weights, its
     config, the normaliser, and the run's meta."""
     torch.manual_seed(seed)
@@ -66,13 +66,13 @@ def test_a_saved_checkpoint_loads_back_whole(tmp_path: Path) -> None:
     assert set(loaded["model"]) == set(state["model"])
     for name, w in state["model"].items():
         assert torch.equal(loaded["model"][name], w), name
-    assert CGNNConfig.from_dict(loaded["config"]) == SMALL
+    assert CGNNConfig.from_dict(loaded["config"]) == TINY
     assert Normaliser.from_dict(loaded["norm"]) == NORM
     assert loaded["meta"] == state["meta"]
     assert (loaded["epoch"], loaded["best_val"]) == (3, 0.25)
     model, norm = model_from(loaded)
     torch.manual_seed(0)
-    reference = CGNN(SMALL).eval()
+    reference = CGNN(TINY).eval()
     x, c = torch.rand(1, 20, 3) * 0.1, torch.rand(1, 6) * 0.1
     with torch.no_grad():
         for got, want in zip(model(x, c), reference(x, c), strict=True):

@@ -22,7 +22,7 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from helpers.cgnn_data import DENT_NAMES, dent_fold
+from helpers.cgnn_data import DENT_NAMES, TINY, dent_fold
 from torch import nn
 
 from core.errors import BadInput
@@ -48,8 +48,6 @@ from train.training.loop import (
     stopped_early,
 )
 from train.training.train_params import TrainOptions
-
-SMALL = CGNNConfig(edge_widths=((8, 8),) * 3, disp_widths=(16,), force_widths=(8, 8, 8))
 
 
 @pytest.fixture(scope="module")
@@ -304,7 +302,7 @@ def test_run_meta_of_a_fine_tuned_run_names_its_init_and_the_variant_it_came_fro
     pre = {"model": "cGNN", "train_data": "MSM", "rotate": False, "aug": True,
            "pretrained": None, "offsets": "none"}
     init = Path("pre.pt")
-    meta = run_meta(data, splits, init, TrainOptions(), SMALL, "0" * 64,
+    meta = run_meta(data, splits, init, TrainOptions(), TINY, "0" * 64,
                     {"meta": {"variant": pre}})
     assert meta["init"] == str(tmp_path.resolve() / "pre.pt")
     assert meta["variant"] == {"model": "cGNN", "train_data": "Exp", "rotate": False,
