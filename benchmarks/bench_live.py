@@ -7,13 +7,15 @@ markers at 500 Hz) replayed at ``--speed`` times real time, prints:
 * frames: sent by the server, received by the client, skipped by number (dropped), and that
   the MCAP holds every one of them;
 * latency: per frame, from its arrival (the SDK's callback) to the end of its work (decode,
-  the journal, the tip's fit, the force tared and flagged, the view's log calls), median and
-  p99 in ms, with the recording on (the view's cost included) and, in a second replay, off;
+  the journal, the tip's fit, the force tared and flagged, the presses, the view's log calls,
+  and with ``--model RUN`` the model's answer while a press goes on), median and p99 in ms,
+  for each session of ``--runs``: ``model`` (the recording and the model), ``view`` (the
+  recording), ``plain`` (neither), each its own replay;
 * lag: the wall time of the live session against the recording's own duration / speed.
 
 The host's speed figure (``../shared/tools/host_speed.py``) is printed beside, as for every
 wall time here. Run: ``python benchmarks/bench_live.py [--minutes 10] [--speed 1]
-[--workdir DIR]``.
+[--runs model,view,plain --model RUN] [--workdir DIR]``.
 """
 
 from __future__ import annotations
@@ -49,10 +51,12 @@ def replay(session: Path, speed: float) -> tuple[subprocess.Popen, int]:
     raise RuntimeError(f"the replay did not start: {proc.communicate()}")
 
 
-def record(session: Path, out: Path, speed: float, view: bool) -> tuple[LiveSummary, int]:
+def record(session: Path, out: Path, speed: float, view: bool, model: Path | None
+           ) -> tuple[LiveSummary, int]:
     """One live session of the replayed ``session``: its summary and the frames sent."""
     proc, port = replay(session, speed)
-    summary = run_live(session, out, LiveParams(port=port, timeout_s=20),
+    summary = run_live(session, out, LiveParams(port=port, timeout_s=20, model=model,
+                                                states=False),
                        out / RRD_NAME if view else None)
     stdout, _ = proc.communicate(timeout=60)
     sent = int(stdout.split(" frames sent")[0].rsplit(" ", 1)[-1].replace(",", ""))
@@ -75,6 +79,11 @@ def main() -> None:
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--speed", type=float, default=1.0)
     ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--model", type=Path, default=None,
+                    help="a run trained on the twin's markers (e.g. the demo's runs/exp_tl_fold0)")
+    ap.add_argument("--runs", default="view,plain",
+                    help="which sessions: model (the recording and --model), view (the "
+                         "recording), plain (neither)")
     a = ap.parse_args()
     set_quiet(True)
     work = a.workdir or Path(tempfile.mkdtemp(prefix="bench_live_"))
@@ -86,11 +95,13 @@ def main() -> None:
     host = subprocess.run([sys.executable, str(ROOT.parent / "shared/tools/host_speed.py")],
                           capture_output=True, text=True).stdout.strip()
     print(f"host: {host or 'host_speed.py not found'}; {presses} presses, speed {a.speed:g}x")
-    for name, view in (("with the recording", True), ("without", False)):
-        out = work / ("live_view" if view else "live_plain")
-        s, sent = record(session, out, a.speed, view)
-        duration = sent / 500.0
-        report(name, s, sent, duration, a.speed)
+    runs = {"model": ("with the recording and the model", True, a.model),
+            "view": ("with the recording", True, None), "plain": ("without", False, None)}
+    for key in a.runs.split(","):
+        name, view, model = runs[key]
+        out = work / f"live_{key}"
+        s, sent = record(session, out, a.speed, view, model)
+        report(name, s, sent, sent / 500.0, a.speed)
         assert (out / MCAP_NAME).is_file()
 
 

@@ -12,15 +12,13 @@ epoch. ``rotate`` turns each training example about the surface normal by
 a random angle (drawn from the same generator), so the model cannot lean on where on the
 phantom a press was. A non-finite or exploding loss stops the run naming epoch and batch.
 
-Training that cannot learn says so: a fold without validation examples is refused unless
-``no_val`` says so; training examples in which nothing moves (no point by a micrometre, the
-force not by a millinewton: below any lab's noise) are refused before training; a training
-loss that does not move over the first epochs is a warning, kept in the checkpoints' meta
-("notes") and the recording.
+Training that cannot learn says so: the fold's examples are refused where they cannot teach
+(:mod:`train.training.fold_data`); a training loss that does not move over the first epochs is
+a warning, kept in the checkpoints' meta ("notes") and the recording.
 
-The runner names the files (:class:`RunFiles`) and writes the checkpoints (``save``: atomically,
-with their provenance, :mod:`train.training.train_stage`); this module only appends ``log.csv``. The
-defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
+The runner names the files (:class:`RunFiles`) and writes the checkpoints (``save``:
+atomically, with their provenance, :mod:`train.training.train_stage`); this module only appends
+``log.csv``. The defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
 """
 
 from __future__ import annotations
@@ -34,7 +32,6 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 from torch.nn.parallel import DistributedDataParallel
 
@@ -42,29 +39,22 @@ from core.errors import BadInput
 from core.progress import say, warn
 from data_schema.states import point_names
 from train.data import (
-    Batch,
     StateTensors,
-    fold_pairs,
-    load_manifest,
-    load_states,
     make_batch,
 )
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.normalise import Envelope, Normaliser, highest_tip
+from train.model.normalise import Normaliser
 from train.model.si_units import loss_sum, mean_distance, predict
 from train.training.augment import about_normal, move_batch
 from train.training.checkpoint import load_checkpoint
 from train.training.distributed import DistContext, from_env
+from train.training.fold_data import fit_normaliser, fold_examples
 from train.training.train_params import TrainOptions
 from train.training.variant import make_variant
 
 LOSSES = ("paper", "balanced")
 EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
-# Nothing to learn: no point of any training example moves by STILL_M and the force changes by
-# less than STILL_N, both below any lab's noise (markers ~0.1 mm, the force sensor ~10 mN).
-STILL_M = 1e-6
-STILL_N = 1e-3
 # A loss that does not move: the loss of a fixed probe of training examples (all points, no
 # augmentation: no sampling noise) changed by less than STALL_REL of itself from before
 # training to the end of the first STALL_EPOCHS epochs (or of the run, when shorter). A run
@@ -119,24 +109,6 @@ def check_options(opts: TrainOptions) -> None:
         raise BadInput(None, f"--loss must be one of {', '.join(LOSSES)}, got {opts.loss!r}")
 
 
-def check_learnable(states: StateTensors, pairs: torch.Tensor, data: Path, fold: int,
-                    chunk: int = 256) -> None:
-    """Refuse training examples in which nothing moves: no point by ``STILL_M`` and the force
-    not by ``STILL_N`` (a model trained on them learns "nothing moves", silently)."""
-    moved = changed = 0.0
-    for rows in pairs.split(chunk):
-        s, e = rows[:, 0], rows[:, 1]
-        both = states.valid[s] & states.valid[e]
-        d = (states.points[e] - states.points[s]).norm(dim=-1) * both
-        moved = max(moved, float(d.max()))
-        changed = max(changed, float((states.force[e] - states.force[s]).abs().max()))
-    if moved < STILL_M and changed < STILL_N:
-        raise BadInput(data, f"nothing to learn: in the {len(pairs)} training examples of "
-                             f"fold {fold} no point moves more than {moved * 1e6:.3g} um and "
-                             f"the force changes by at most {changed * 1e3:.3g} mN (below "
-                             f"{STILL_M * 1e6:g} um and {STILL_N * 1e3:g} mN, any lab's noise)")
-
-
 def probe_loss(run: Run, opts: TrainOptions) -> float:
     """The loss of the trained weights on the first ``STALL_PROBE`` training examples."""
     return evaluate_pairs(run.model, run.norm, run.states, run.train[:STALL_PROBE], opts.alpha,
@@ -158,29 +130,6 @@ def note_warning(run: Run, text: str) -> None:
     """A warning line on stderr (even with --quiet), kept in the checkpoints' meta."""
     warn(text)
     run.meta.setdefault("notes", []).append(f"warning: {text}")
-
-
-def fit_normaliser(states: StateTensors, pairs: torch.Tensor, seed: int, most: int = 2000
-                   ) -> Normaliser:
-    """Statistics of (at most ``most``, seeded) training examples, with the training envelope
-    (:func:`training_envelope`)."""
-    rng = np.random.default_rng(seed)
-    keep = pairs[np.sort(rng.choice(len(pairs), min(most, len(pairs)), replace=False))]
-    b = make_batch(states, keep)
-    m = b.mask.numpy()
-    norm = Normaliser.fit(b.points.numpy(), m, (b.target - b.points).numpy(), b.dforce.numpy())
-    return replace(norm, envelope=training_envelope(states, pairs, b))
-
-
-def training_envelope(states: StateTensors, pairs: torch.Tensor, sample: Batch) -> Envelope:
-    """What the training examples span: press lengths, tip depths and forces of every one
-    (the no-motion gate's shortest press must leave each of them whole), the tip's height
-    above the surface of ``sample``'s, and the highest point of every start state."""
-    s, e = pairs[:, 0], pairs[:, 1]
-    cond = torch.cat([states.tip[s], states.tip[e]], dim=1).numpy()
-    gap = highest_tip(sample.points.numpy(), sample.mask.numpy(), sample.cond[:, :3].numpy())
-    top = float(states.points[s][..., 2][states.valid[s]].max())
-    return Envelope.fit(cond, (states.force[e] - states.force[s]).numpy(), gap, top)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -231,27 +180,6 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
         resume(run, files.last, device)
     run.states, run.train, run.val = states.to(device), train.to(device), val.to(device)
     return run
-
-
-def fold_examples(data: Path, splits: Path, opts: TrainOptions
-                  ) -> tuple[StateTensors, torch.Tensor, torch.Tensor, str]:
-    """The states, the fold's training and validation pairs (E, 2), and the data's sha256
-    the manifest names; a fold without training examples, or without validation unless
-    ``no_val``, or whose training examples do not move, is refused."""
-    doc = load_manifest(splits, data)
-    states = load_states(data)
-    train = fold_pairs(states, doc, opts.fold, "train", data, opts.train_groups)
-    val = fold_pairs(states, doc, opts.fold, "val")
-    if len(train) == 0:
-        raise BadInput(splits, f"fold {opts.fold} has no training example")
-    if len(val) == 0 and not opts.no_val:
-        raise BadInput(splits, f"fold {opts.fold} has no validation example, so best.pt "
-                               "could only be chosen by the training loss: split with a "
-                               "validation share, or give --no-val (best.pt = the last epoch)")
-    if opts.no_val:
-        val = val[:0]
-    check_learnable(states, train, data, opts.fold)
-    return states, train, val, doc["data"]["sha256"]
 
 
 def run_meta(data: Path, splits: Path, init: Path | None, opts: TrainOptions,

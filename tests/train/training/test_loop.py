@@ -1,6 +1,6 @@
 """The training loop's parts (:mod:`train.training.loop`) against hand numbers: the step
 size's schedule, each epoch's seeded draws, the stall warning, the options' guard, early
-stopping and the best epoch, a fold's examples, what a run's checkpoints record of it, the
+stopping and the best epoch, what a run's checkpoints record of it, the
 validation metrics, and the per-epoch files.
 
 Whole runs (learning, resuming, a resumed run of other options refused, patience, ema) are
@@ -11,18 +11,15 @@ Whole runs (learning, resuming, a resumed run of other options refused, patience
 from __future__ import annotations
 
 import csv
-import hashlib
-import json
 import math
 from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
 
-import h5py
 import numpy as np
 import pytest
 import torch
-from helpers.cgnn_data import DENT_NAMES, TINY, dent_fold
+from helpers.cgnn_data import DENT_NAMES, TINY
 from torch import nn
 
 from core.errors import BadInput
@@ -38,7 +35,6 @@ from train.training.loop import (
     _track_best,
     check_options,
     evaluate_pairs,
-    fold_examples,
     learning_rate,
     resolve_device,
     run_meta,
@@ -48,13 +44,6 @@ from train.training.loop import (
     stopped_early,
 )
 from train.training.train_params import TrainOptions
-
-
-@pytest.fixture(scope="module")
-def dent(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """The dent states (closed-form truth, ``tests/helpers/cgnn_data.py``) and a 2-fold manifest."""
-    return dent_fold(tmp_path_factory.mktemp("loop_dent"))
-
 
 # --- the step size ---------------------------------------------------------------------------
 
@@ -206,69 +195,6 @@ def test_without_validation_the_last_epoch_is_the_best() -> None:
     for epoch in (1, 2):
         _track_best(run, epoch, math.nan, last=True)
         assert run.best_epoch == epoch and math.isnan(run.best_val)
-
-
-# --- a fold's examples -----------------------------------------------------------------------
-
-def _manifest_pairs(data: Path, splits: Path, fold: int, role: str) -> np.ndarray:
-    """A role's (start, end) state pairs read straight from the files: single then multi."""
-    doc = json.loads(splits.read_text())
-    part = doc["folds"][fold][role]
-    with h5py.File(data) as f:
-        return np.concatenate([np.stack([f[f"{s}/start"][()][part[s]], f[f"{s}/end"][()][part[s]]],
-                                        1) for s in ("single", "multi")])
-
-
-@pytest.mark.parametrize("fold", [0, 1])
-def test_a_fold_s_examples_are_the_manifest_s(dent: tuple[Path, Path], fold: int) -> None:
-    """Training and validation pairs are the manifest's ids through the file's pairs; the
-    digest is the states file's sha256."""
-    data, splits = dent
-    states, train, val, sha = fold_examples(data, splits, TrainOptions(fold=fold))
-    np.testing.assert_array_equal(train.numpy(), _manifest_pairs(data, splits, fold, "train"))
-    np.testing.assert_array_equal(val.numpy(), _manifest_pairs(data, splits, fold, "val"))
-    assert sha == hashlib.sha256(data.read_bytes()).hexdigest()
-    assert states.points.shape == (len(states.valid), len(DENT_NAMES), 3)
-
-
-def test_no_val_leaves_the_validation_examples_out(dent: tuple[Path, Path]) -> None:
-    """--no-val on a fold that has validation examples: none are used (best.pt is then the
-    last epoch, not chosen on examples the run was told not to use)."""
-    _, train, val, _ = fold_examples(*dent, TrainOptions(no_val=True))
-    assert len(val) == 0 and val.shape == (0, 2)
-    assert len(train) == len(_manifest_pairs(*dent, 0, "train"))
-
-
-def _edited(dent: tuple[Path, Path], tmp_path: Path, role: str) -> Path:
-    """The manifest with fold 0's ``role`` emptied (its groups too)."""
-    doc = json.loads(dent[1].read_text())
-    doc["folds"][0][role] = {"groups": [], "single": [], "multi": []}
-    if role == "train":
-        doc["folds"][0]["train_subsets"] = []
-    path = tmp_path / f"no_{role}.json"
-    path.write_text(json.dumps(doc))
-    return path
-
-
-def test_a_fold_without_training_examples_is_refused(dent: tuple[Path, Path],
-                                                     tmp_path: Path) -> None:
-    """Nothing to train on is refused naming the manifest, even with --no-val."""
-    splits = _edited(dent, tmp_path, "train")
-    with pytest.raises(BadInput) as e:
-        fold_examples(dent[0], splits, TrainOptions(no_val=True))
-    assert str(e.value) == f"{splits}: fold 0 has no training example"
-
-
-def test_a_fold_without_validation_examples_is_refused_unless_no_val(
-        dent: tuple[Path, Path], tmp_path: Path) -> None:
-    """No validation examples: refused naming the manifest and --no-val; with --no-val trained."""
-    splits = _edited(dent, tmp_path, "val")
-    with pytest.raises(BadInput) as e:
-        fold_examples(dent[0], splits, TrainOptions())
-    assert e.value.path == str(splits) and "fold 0 has no validation example" in e.value.what
-    assert "--no-val" in e.value.what and "\n" not in e.value.what
-    _, train, val, _ = fold_examples(dent[0], splits, TrainOptions(no_val=True))
-    assert len(train) > 0 and len(val) == 0
 
 
 # --- what a run's checkpoints record of it ---------------------------------------------------

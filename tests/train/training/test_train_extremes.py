@@ -27,7 +27,7 @@ from core.recording import rrd_entities
 from pipeline.cli import cli
 from train.data import example_pairs, load_manifest, load_states, role_examples
 from train.training.checkpoint import load_checkpoint
-from train.training.loop import check_learnable
+from train.training.fold_data import check_learnable
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
 
