@@ -4,7 +4,7 @@ The peer is the same network (same widths, same weights, same heads) with each g
 done the PyG way: kNN from torch (cdist + topk) turned into an edge list, then
 ``torch_geometric.nn.EdgeConv(nn, aggr="mean")``, which runs the whole MLP once per edge. Ours
 applies the first linear per point before gathering and the second after the mean (same
-function: tests/train/test_model.py checks it against PyG within 1e-5).
+function: tests/train/model/test_cgnn.py checks it against PyG within 1e-5).
 
 Measured in one run, medians over repeats:
 - batch-1 latency through :class:`train.Predictor` (ONNX Runtime and torch backends) at 26,

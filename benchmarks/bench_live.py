@@ -36,6 +36,7 @@ from sim.twin.synth_params import SynthParams
 from sim.twin.synth_stage import run_synth
 
 PRESS_S = 8.0                  # a twin press with its rest, about
+MAX_LOCATIONS = 15             # places 15 mm apart that fit on the twin's phantom
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -88,7 +89,7 @@ def main() -> None:
     set_quiet(True)
     work = a.workdir or Path(tempfile.mkdtemp(prefix="bench_live_"))
     presses = max(1, round(a.minutes * 60 / PRESS_S))
-    locations = max(1, min(25, presses // 4))
+    locations = max(1, min(MAX_LOCATIONS, presses // 4))
     session = run_synth(None, work / "session", SynthParams(
         seed=0, locations=locations, repeats=max(1, round(presses / locations)),
         force_via="analog"))

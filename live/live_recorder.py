@@ -76,6 +76,11 @@ class Recorder:
                 self.journal.append(topic, *stream.arrays(k))
             self._pending[topic] = Stream()
 
+    @property
+    def last_time_ns(self) -> int:
+        """The time of the last frame recorded (0 before any)."""
+        return 0 if self.last_number is None else self._frame_time(self.last_number)
+
     def _frame_time(self, number: int) -> int:
         return int(round((number - self.first_number) * (1e9 / self.layout.rate_hz)))
 

@@ -16,6 +16,7 @@ is then refused in one line (exit 2): what arrived before it is kept.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -109,8 +110,9 @@ async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path
                    ) -> LiveSummary:
     """Connect, check, calibrate, then stream into the journal until the session ends."""
     stream = Stream(params.host, params.port, params.timeout_s)
-    layout = live_layout(parse_parameters(await stream.connect(), stream.source), cfg)
+    xml = await stream.connect()
     try:
+        layout = live_layout(parse_parameters(xml, stream.source), cfg)
         tip = tip_model(cfg, layout, params.calibration, SyncParams())
         model = None if params.model is None else \
             LiveModel(params.model, list(cfg.mocap.phantom_markers))
@@ -119,13 +121,12 @@ async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path
         raise
     part.parent.mkdir(parents=True, exist_ok=True)
     journal = Journal(part, _header(layout))
-    with atomic_output(rrd) if rrd is not None else _nothing() as tmp:
+    with atomic_output(rrd) if rrd is not None else contextlib.nullcontext() as tmp:
         view = None if tmp is None else LiveView(tmp, len(cfg.mocap.phantom_markers),
                                                  params.spawn, params.serve,
                                                  model is not None)
         summary = await _stream(stream, layout, cfg, tip, journal, view, params, model)
         if view is not None:
-            view.note(0, f"ended: {summary.ended}")
             view.close()
     summary.rrd = rrd
     return summary
@@ -171,6 +172,8 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: T
         await stream.close()
         recorder.flush()
         journal.close()
+    if view is not None:
+        view.note(recorder.last_time_ns, f"ended: {stream.ended}")
     if stream.lost and not refused:
         refused.append(BadInput(stream.source, f"the connection was lost after frame "
                                                f"{recorder.counts.frames} of this session: "
@@ -224,13 +227,3 @@ def _layout(header: dict, cfg: SessionConfig) -> LiveLayout:
     calibration = read_ati_cal(cfg.force.calibration) if cfg.force.calibration else None
     return LiveLayout(header["source"], float(header["rate_hz"]), list(header["labels"]),
                       AnalogDevice(**header["device"]), calibration)
-
-
-class _nothing:
-    """A context that yields None (no recording asked)."""
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None

@@ -4,7 +4,7 @@ For each point i the layer rebuilds a k-nearest-neighbour graph on its input fea
 point itself included, so k = 5 is the point and 4 others), sends each neighbour j the message
 h(x_i, x_j - x_i) and averages the messages (paper, eq. 1, mean aggregation). h is a two-layer
 MLP ``Linear(2F, H) -> ReLU -> Linear(H, O)``: exactly what PyTorch Geometric's
-``EdgeConv(nn=layer.mlp, aggr="mean")`` computes (tests/train/test_model.py checks it).
+``EdgeConv(nn=layer.mlp, aggr="mean")`` computes (tests/train/model/test_cgnn.py checks it).
 
 Two identities make it fast, with no change to the function:
 - the first linear of h(x_i, x_j - x_i) is ``(Wa - Wb) x_i + Wb x_j + b``: both terms are
