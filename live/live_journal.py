@@ -32,7 +32,7 @@ RECORD = "live_journal"
 
 
 @dataclass
-class Stream:
+class Samples:
     """One stream's samples as they arrive: times (ns, the mocap's clock) and values (T, k)."""
 
     time_ns: list[np.ndarray] = field(default_factory=list)
@@ -111,7 +111,7 @@ def read_journal(path: Path) -> JournalContent:
 
     header: dict[str, Any] | None = None
     topics: dict[int, str] = {}
-    blocks: dict[str, Stream] = {MARKERS: Stream(), ANALOG: Stream()}
+    blocks: dict[str, Samples] = {MARKERS: Samples(), ANALOG: Samples()}
     complete = False
     with open(path, "rb") as f:
         try:

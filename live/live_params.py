@@ -26,6 +26,7 @@ class LiveParams:
     spawn: bool = False                  # a rerun viewer beside the recording
     serve: bool = False                  # the recording served to a browser
     states: bool = True                  # sync and extract on the MCAP at the end
+    recover: bool = False                # finish a killed session's journal, stream nothing
 
 
 def parse_address(text: str) -> tuple[str, int]:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.errors import BadInput
-from live.live_journal import ANALOG, MARKERS, Journal, Stream
+from live.live_journal import ANALOG, MARKERS, Journal, Samples
 from live.live_layout import LiveLayout
 from live.rt_client import Frame
 
@@ -40,8 +40,8 @@ class Recorder:
     first_number: int | None = None
     first_sample: int | None = None
     last_number: int | None = None
-    _pending: dict[str, Stream] = field(default_factory=lambda: {MARKERS: Stream(),
-                                                                 ANALOG: Stream()})
+    _pending: dict[str, Samples] = field(default_factory=lambda: {MARKERS: Samples(),
+                                                                 ANALOG: Samples()})
 
     def add(self, frame: Frame) -> tuple[int, np.ndarray | None, np.ndarray | None]:
         """Record one frame; returns its time (ns) and the analog samples' times and values
@@ -74,7 +74,7 @@ class Recorder:
             if stream.samples and self.journal is not None:
                 k = stream.values[0].shape[1]
                 self.journal.append(topic, *stream.arrays(k))
-            self._pending[topic] = Stream()
+            self._pending[topic] = Samples()
 
     @property
     def last_time_ns(self) -> int:

@@ -81,15 +81,34 @@ def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
     cfg = read_session(inputs)
     mcap = Path(out) / MCAP_NAME
     part = mcap.with_name(mcap.name + ".part")
+    if params.recover:
+        return _recover(part, mcap, cfg, params)
     for path in (mcap, part):
         if path.exists():
             raise BadInput(path, "exists: a live session writes into a new folder (choose "
-                                 "another --out)")
+                                 "another --out; a journal a killed session left is "
+                                 "finished with --recover)")
     summary = asyncio.run(_session(cfg, part, params, rrd))
     summary.mcap = mcap
     _finish(part, mcap, cfg, params)
     if params.states and summary.presses and summary.refused is None:
         summary.states = _states(mcap)
+    return summary
+
+
+def _recover(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> LiveSummary:
+    """The journal a killed session left (``session.mcap.part``), every complete block of it,
+    finished as ``session.mcap``; nothing is streamed."""
+    if not part.is_file():
+        raise BadInput(part, "no journal of a killed session here: nothing to recover")
+    if mcap.exists():
+        raise BadInput(mcap, "exists: the session was finished already")
+    content = read_journal(part)
+    _finish(part, mcap, cfg, params)
+    frames = len(content.streams[MARKERS][0])
+    summary = LiveSummary(content.header["source"], Counts(frames, 0,
+                                                          len(content.streams[ANALOG][0])),
+                          "recovered from the journal of a killed session", mcap, None, 0.0)
     return summary
 
 

@@ -39,10 +39,13 @@ D = LiveParams
 @click.option("--states/--no-states", default=D.states, show_default=True,
               help="At the end, sync and extract the session (LIVE_DIR/session.h5, states.h5) "
                    "as `pipeline sync` and `pipeline extract` would.")
+@click.option("--recover", is_flag=True,
+              help="Connect to nothing: finish the journal a killed session left in --out "
+                   "(session.mcap.part, every complete block) as --out/session.mcap.")
 @click.option("--no-rrd", is_flag=True, help="Write no recording.")
 def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: float | None,
          timeout_s: float, calibration: Path | None, model: Path | None, spawn: bool,
-         serve: bool, states: bool, no_rrd: bool) -> None:
+         serve: bool, states: bool, recover: bool, no_rrd: bool) -> None:
     """Record a session live from QTM's real-time stream, and show it as it happens.
 
     Reads SESSION_DIR's session.toml (the markers, the force's channels, kind and units, the
@@ -62,8 +65,8 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
     host, port = address
     params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
                         calibration=calibration, model=model, spawn=spawn, serve=serve,
-                        states=states)
-    s = run_live(session_dir, out, params, None if no_rrd else out / RRD_NAME)
+                        states=states, recover=recover)
+    s = run_live(session_dir, out, params, None if no_rrd or recover else out / RRD_NAME)
     lat = s.latency_ms
     timing = f"; per frame {np.median(lat):.2f} ms median, {np.percentile(lat, 99):.2f} ms " \
              "p99" if lat.size else ""

@@ -7,8 +7,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import shutil
+import signal
 import struct
+import subprocess
+import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,6 +21,7 @@ import pytest
 from click.testing import CliRunner
 from helpers.bad_input_checks import TINY_RUN
 from helpers.cgnn_data import write_dent_states
+from helpers.paths import ROOT
 
 from core.recording import rrd_entities
 from data_schema.hdf5 import read_h5
@@ -260,3 +265,31 @@ def test_a_model_of_another_phantoms_markers_is_refused(twin_session, tmp_path) 
                                        str(tmp_path / "out"), "--model", str(run)])
     assert res.exit_code == 2 and "another phantom's markers" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_a_killed_session_is_recovered_from_its_journal(twin_session, recorded, tmp_path):
+    """SIGKILL mid-stream leaves only the journal; ``--recover`` finishes it as the MCAP: every
+    complete block, the session's first frames exactly as recorded uninterrupted."""
+    out = tmp_path / "killed"
+    part = out / (MCAP_NAME + ".part")
+    with replaying(twin_session, speed=2.0) as server:
+        proc = subprocess.Popen([sys.executable, "-m", "pipeline", "-q", "live",
+                                 str(twin_session), "--qtm", f"127.0.0.1:{server.port}",
+                                 "--out", str(out)], cwd=ROOT)
+        deadline = time.monotonic() + 60
+        while (not part.is_file() or part.stat().st_size < 2_000_000) and \
+                time.monotonic() < deadline:
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert not (out / MCAP_NAME).exists()
+    res = CliRunner().invoke(cli, ["live", str(twin_session), "--out", str(out), "--recover"])
+    assert res.exit_code == 0, res.stderr
+    kept = read_raw_mcap(out / MCAP_NAME)
+    whole = recorded[2]
+    n = kept.markers.frames
+    assert 500 <= n < whole.markers.frames and not part.exists()
+    np.testing.assert_array_equal(kept.markers.positions, whole.markers.positions[:n])
+    np.testing.assert_array_equal(kept.force.values, whole.force.values[:len(kept.force.values)])
+    again = CliRunner().invoke(cli, ["live", str(twin_session), "--out", str(out), "--recover"])
+    assert again.exit_code == 2 and "nothing to recover" in again.stderr
