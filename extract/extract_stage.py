@@ -23,7 +23,7 @@ from data_schema.states import STATES, validate_states
 from extract.extract import Extracted, extract
 from extract.extract_params import ExtractParams
 from extract.extract_view import write_extract_recording
-from extract.synced_presses import read_synced
+from extract.synced_presses import Session, read_synced
 
 
 def run_extract(inputs: Sequence[str | Path], out: str | Path,
@@ -34,16 +34,23 @@ def run_extract(inputs: Sequence[str | Path], out: str | Path,
     synced, params = inputs, params or ExtractParams()
     sessions = [read_synced(path, params.size_m) for path in synced]
     ex = extract(sessions, params)
+    write_states(ex, sessions, params, make_provenance("extract", asdict(params), synced,
+                                                       STATES.name, STATES.version), out, rrd)
+    return ex
+
+
+def write_states(ex: Extracted, sessions: Sequence[Session], params: ExtractParams,
+                 provenance: dict, out: str | Path, rrd: str | Path | None) -> None:
+    """The states file (validated) and its recording, both or neither (``pipeline live``
+    writes its online states here too)."""
     first = sessions[0]
-    prov = make_provenance("extract", asdict(params), synced, STATES.name, STATES.version)
-    attrs = {**_attrs(ex, params, prov), "point_names": json.dumps(first.point_names),
+    attrs = {**_attrs(ex, params, provenance), "point_names": json.dumps(first.point_names),
              "footprint_m": np.asarray(first.layout.size_m, dtype=float)}
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         write_h5(tmp_out, STATES, ex.arrays, attrs)
         validate_states(tmp_out)
         if tmp_rrd is not None:
             write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m)
-    return ex
 
 
 def _attrs(ex: Extracted, params: ExtractParams, provenance: dict) -> dict[str, Any]:

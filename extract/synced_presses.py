@@ -57,16 +57,28 @@ def read_synced(path: str | Path, size_m: tuple[float, float] | None = None) -> 
         locations = [int(f["presses"][k].attrs["location"]) for k in keys]
         names = [attr_text(v) for v in f["point_names"][()]]
         layout = _layout(f.attrs.get("phantom"), size_m)
-        try:
-            transform = to_phantom_frame(_rest_markers(raw), names[:-1], cal["surface_point"][()],
-                                         cal["surface_normal"][()], layout)
-        except BadInput as e:
-            raise BadInput(path, e.what) from None
         name = attr_text(f.attrs.get("name", Path(path).stem))
         noise = _force_noise(attr_text(f.attrs["calibration"]))
-    for p in raw:
+        point, normal = cal["surface_point"][()], cal["surface_normal"][()]
+    return session_from_presses(Path(path), name, raw, locations, names, point, normal, layout,
+                                noise)
+
+
+def session_from_presses(path: Path, name: str, presses: list[Press], locations: list[int],
+                         names: list[str], surface_point: np.ndarray,
+                         surface_normal: np.ndarray, layout: PhantomLayout, noise_n: float
+                         ) -> Session:
+    """A session's presses (lab frame) in its phantom frame: fixed by the surface markers' rest
+    before the presses and the rest plane sync fitted (``pipeline live`` hands its presses
+    over here too)."""
+    try:
+        transform = to_phantom_frame(_rest_markers(presses), names[:-1], surface_point,
+                                     surface_normal, layout)
+    except BadInput as e:
+        raise BadInput(path, e.what) from None
+    for p in presses:
         p.points = apply_transform(transform, p.points)
-    return Session(Path(path), name, transform, raw, locations, names, layout, noise)
+    return Session(path, name, transform, presses, locations, names, layout, noise_n)
 
 
 def _layout(attr: object, size_m: tuple[float, float] | None) -> PhantomLayout:

@@ -25,6 +25,7 @@ from live.live_calibration import TARE_S, TipModel, force_tare, wrench
 from live.live_layout import LiveLayout, to_force
 from live.live_model import LiveModel
 from live.live_presses import PressTracker
+from live.live_states import Conditioning, History, OnlineStates, Surface
 from live.live_view import LiveView
 from live.rt_client import Frame
 from sync.force_conditioning import RAIL_TOLERANCE, noise_level, rails
@@ -55,10 +56,11 @@ class Monitor:
             np.asarray(layout.calibration.max_load, float)
         self.tare: Tare | None = None
         self.presses: PressTracker | None = None       # once the tare gives the contact
+        self.states: OnlineStates | None = None        # ... and the phantom's rest
+        self.history = History()
         self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
         self._early_samples = 0
-        self._peak_tip = False                 # the next frame's tip places the contact
-        self._rest: list[np.ndarray] = []      # markers before the tare (the rest, with a model)
+        self._rest: list[np.ndarray] = []      # markers before the tare: the phantom's rest
         self._force_now = 0.0
         self._started = False                  # a contact began: the next frame is its start
         self.saturated = self.over_range = 0
@@ -66,16 +68,14 @@ class Monitor:
     def frame(self, frame: Frame, time_ns: int, sample_ns: np.ndarray | None) -> None:
         """One frame: its scene, and its force samples where it carries any."""
         markers = frame.markers[self.index]
-        if self.model is not None and self.tare is None:
+        self.history.add_frame(time_ns, markers)
+        if self.tare is None:
             self._rest.append(markers)
         drawn = self.view is not None and self.view.due(time_ns)
         contact = self.presses is not None and self.presses.in_contact
         tip = None
-        if drawn or self._peak_tip or self._started:   # the tip where it is shown or used
+        if drawn or self._started:                     # the tip where it is shown or used
             tip = self.tip.tips(markers[None, self.phantom:], self.params)[0]
-        if self._peak_tip and self.presses is not None:
-            self.presses.place(tip)
-            self._peak_tip = False
         if self._started and self.model is not None:
             self.model.start(markers[:self.phantom], tip, self._force_now)
         self._started = False
@@ -87,6 +87,10 @@ class Monitor:
                     self.view.model(time_ns, reading)
         if frame.analog is not None:
             self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
+        if self.states is not None:
+            for taken in self.states.poll(time_ns):
+                if self.view is not None:
+                    self.view.taken(time_ns, taken, self.states)
 
     def _force(self, times: np.ndarray, values: np.ndarray) -> None:
         """Force samples in SI units: shown once the tare is known (the early ones then)."""
@@ -99,17 +103,7 @@ class Monitor:
             values = np.concatenate([v for _, v in self._early])
             self._early = []
             self.tare = force_tare(values, self.layout.device.rate_hz, self.layout.source)
-            w = wrench(values, self.tare, self.layout)
-            noise = noise_level(w, self.tare)
-            p = self.params
-            self.presses = PressTracker(self.layout.device.rate_hz, p.detect_n,
-                                        max(p.contact_n, 5 * noise), p.location_radius_m)
-            if self.model is not None:
-                self.model.to_phantom = self._phantom_frame()
-            if self.view is not None:
-                self.view.note(int(times[-1]), f"force tared over its first "
-                                               f"{self.tare.stop / self.layout.device.rate_hz:.2f}"
-                                               f" s (unloaded start; noise {noise * 1e3:.1f} mN)")
+            self._calibrated(int(times[-1]), values)
         w = wrench(values, self.tare, self.layout)
         saturated = self._on_rail(values)
         over = np.zeros(len(w), bool) if self._limit is None else \
@@ -119,19 +113,36 @@ class Monitor:
         magnitude = np.linalg.norm(w[:, :3], axis=1)
         if self.view is not None:
             self.view.force(times, magnitude, saturated, over)
+        self.history.add_force(times, values, saturated | over)
         self._force_now = float(magnitude[-1])
         was = self.presses.in_contact
-        new_peak, done = self.presses.add(times, magnitude)
+        done = self.presses.add(times, magnitude)
         self._started = not was and self.presses.in_contact
-        if new_peak:
-            self._peak_tip = True
         for press in done:
+            self.states.ended(press)
             if self.view is not None:
-                self.view.press(press, self.presses.locations)
+                self.view.press(press)
 
-    def _phantom_frame(self) -> np.ndarray:
-        """Lab -> phantom frame from the markers at rest before the tare: sync's rest plane
-        (:func:`calib.rest_plane.rest_surface`) and extract's axes and origin."""
+    def _calibrated(self, time_ns: int, values: np.ndarray) -> None:
+        """Once the tare is known: the contact level, the phantom's rest, the online states."""
+        w = wrench(values, self.tare, self.layout)
+        noise = noise_level(w, self.tare)
+        p = self.params
+        contact = max(p.contact_n, 5 * noise)
+        self.presses = PressTracker(self.layout.device.rate_hz, p.detect_n, contact)
+        surface = self._surface()
+        self.states = OnlineStates(self.cfg, self.layout, self.tip, self.history, surface,
+                                   Conditioning(self.tare, noise, contact), p)
+        if self.model is not None:
+            self.model.to_phantom = surface.transform
+        if self.view is not None:
+            self.view.note(time_ns, f"force tared over its first "
+                                    f"{self.tare.stop / self.layout.device.rate_hz:.2f} s "
+                                    f"(unloaded start; noise {noise * 1e3:.1f} mN)")
+
+    def _surface(self) -> Surface:
+        """The phantom's rest plane and frame from the markers at rest before the tare: sync's
+        rest plane (:func:`calib.rest_plane.rest_surface`), extract's axes and origin."""
         rest = np.stack(self._rest)
         self._rest = []
         phantom, cluster = rest[:, :self.phantom], rest[:, self.phantom:]
@@ -140,8 +151,8 @@ class Monitor:
         with warnings.catch_warnings():          # a marker never seen at rest: NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             still = np.nanmedian(phantom, axis=0)
-        return to_phantom_frame(still, list(self.cfg.mocap.phantom_markers), point, normal,
-                                self.cfg.phantom)
+        return Surface(point, normal, to_phantom_frame(still, list(self.cfg.mocap.phantom_markers),
+                                                       point, normal, self.cfg.phantom))
 
     def _on_rail(self, volts: np.ndarray) -> np.ndarray:
         if self._rails is None:

@@ -27,6 +27,7 @@ class LiveParams:
     serve: bool = False                  # the recording served to a browser
     states: bool = True                  # sync and extract on the MCAP at the end
     recover: bool = False                # finish a killed session's journal, stream nothing
+    reconnect_s: float = 0.0             # after a lost connection, try again this long
 
 
 def parse_address(text: str) -> tuple[str, int]:

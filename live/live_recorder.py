@@ -22,11 +22,13 @@ FLUSH_S = 1.0                 # seconds of samples per journal block
 
 @dataclass
 class Counts:
-    """What arrived: frames, frame numbers skipped, analog samples."""
+    """What arrived: frames, frame numbers skipped, analog samples, and the frames a server
+    sent again after a reconnection (recorded once)."""
 
     frames: int = 0
     skipped: int = 0
     samples: int = 0
+    resent: int = 0
 
 
 @dataclass
@@ -40,12 +42,18 @@ class Recorder:
     first_number: int | None = None
     first_sample: int | None = None
     last_number: int | None = None
+    resuming: bool = False          # after a reconnection: frames up to the last are had
     _pending: dict[str, Samples] = field(default_factory=lambda: {MARKERS: Samples(),
                                                                  ANALOG: Samples()})
 
-    def add(self, frame: Frame) -> tuple[int, np.ndarray | None, np.ndarray | None]:
+    def add(self, frame: Frame) -> tuple[int, np.ndarray | None, np.ndarray | None] | None:
         """Record one frame; returns its time (ns) and the analog samples' times and values
-        (None where it carried none)."""
+        (None where it carried none); None for a frame recorded before a reconnection."""
+        if self.resuming:
+            if frame.number <= self.last_number:
+                self.counts.resent += 1
+                return None
+            self.resuming = False
         self._check(frame)
         if self.first_number is None:
             self.first_number = frame.number

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 
 from core.atomic import atomic_output
 from core.errors import BadInput
@@ -30,8 +31,9 @@ from core.provenance import make_provenance
 from core.series import MarkerSeries, RawSession
 from data_schema.raw_mcap import SCHEMA, VERSION
 from data_schema.session import SessionConfig, read_session
-from extract.extract_params import ExtractParams
-from extract.extract_stage import run_extract
+from data_schema.states import STATES
+from extract.extract import extract
+from extract.extract_stage import write_states
 from ingest.ati_cal import read_ati_cal
 from ingest.detect import read_mocap
 from ingest.ingest_stage import session_inputs
@@ -42,18 +44,17 @@ from live.live_layout import LiveLayout, live_layout, to_force
 from live.live_model import LiveModel
 from live.live_monitor import Monitor
 from live.live_params import LiveParams
-from live.live_presses import Location
 from live.live_recorder import Counts, Recorder
+from live.live_states import Coverage, OnlineStates, coverage
 from live.live_view import LiveView
 from live.qtm_parameters import AnalogDevice, parse_parameters
 from live.rt_client import Stream, decode_frame
 from sync.sync_params import SyncParams
-from sync.sync_stage import run_sync
 
 MCAP_NAME = "session.mcap"
 RRD_NAME = "session.rrd"
-SYNCED_NAME = "session.h5"        # sync's, then extract's, on the MCAP at the session's end
-STATES_NAME = "states.h5"
+STATES_NAME = "states.h5"         # the states taken online
+RETRY_S = 0.5                     # between attempts to reconnect
 
 
 @dataclass
@@ -68,9 +69,10 @@ class LiveSummary:
     seconds: float
     latency_ms: np.ndarray = field(default_factory=lambda: np.empty(0))
     refused: BadInput | None = None       # a frame refused mid-session (after the MCAP)
-    locations: list[Location] = field(default_factory=list)   # pressed, as seen live
+    locations: list[Coverage] = field(default_factory=list)   # pressed, as seen live
     presses: int = 0
     states: str = ""                      # what became of the session's states
+    online: OnlineStates | None = None    # the presses and states taken as they ended
 
 
 def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
@@ -91,8 +93,8 @@ def run_live(inputs: Path, out: Path, params: LiveParams | None = None,
     summary = asyncio.run(_session(cfg, part, params, rrd))
     summary.mcap = mcap
     _finish(part, mcap, cfg, params)
-    if params.states and summary.presses and summary.refused is None:
-        summary.states = _states(mcap)
+    if params.states and summary.online is not None and summary.refused is None:
+        summary.states = _states(summary.online, mcap, params)
     return summary
 
 
@@ -112,17 +114,24 @@ def _recover(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> 
     return summary
 
 
-def _states(mcap: Path) -> str:
-    """The session's static states, by sync and extract on its MCAP with their defaults
-    (``session.h5``, ``states.h5`` beside it): the states ingest, sync and extract give on the
-    same recording. Said, not raised, where they refuse: the MCAP is the session."""
-    synced, states = mcap.with_name(SYNCED_NAME), mcap.with_name(STATES_NAME)
+def _states(online: OnlineStates, mcap: Path, params: LiveParams) -> str:
+    """The states taken online, written as extract writes a states file
+    (``states.h5`` beside the MCAP). Said, not raised, where extract refuses them: the MCAP is
+    the session."""
+    out = mcap.with_name(STATES_NAME)
+    if not online.taken:
+        return "no states (no press was taken)"
+    ex_params = online.extract
     try:
-        run_sync(mcap, synced, SyncParams(), None)
-        ex = run_extract([synced], states, ExtractParams(), None)
+        session = online.session(mcap)
+        ex = extract([session], ex_params)
+        prov = make_provenance("live", asdict(params), [mcap], STATES.name, STATES.version)
+        write_states(ex, [session], ex_params, prov, out, None)
     except BadInput as e:
         return f"no states ({e.line()})"
-    return f"{len(ex.arrays['states/points'])} states in {states}"
+    missed = f" ({online.missed} presses sync's rules did not confirm)" if online.missed else ""
+    return f"{len(ex.arrays['states/points'])} states of {len(online.taken)} presses in {out}" \
+        + missed
 
 
 async def _session(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path | None
@@ -168,41 +177,94 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: T
         tic = time.perf_counter()
         try:
             frame = decode_frame(data, layout.device.device_id)
-            t, sample_ns, _ = recorder.add(frame)
-            monitor.frame(frame, t, sample_ns)
+            got = recorder.add(frame)
+            if got is not None:
+                monitor.frame(frame, got[0], got[1])
         except ValueError as e:
             refused.append(BadInput(stream.source, f"a damaged frame after frame "
                                                    f"{recorder.last_number} ({e})"))
-            stream.stop("a damaged frame")
+            current[0].stop("a damaged frame")
         except BadInput as e:
             refused.append(e)
-            stream.stop("a frame refused")
+            current[0].stop("a frame refused")
         latency.append(time.perf_counter() - tic)
 
+    current = [stream]
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stream.stop, f"stopped by {signal.Signals(sig).name}")
+        loop.add_signal_handler(sig, lambda s=sig: current[0].stop(
+            f"stopped by {signal.Signals(s).name}"))
     start = time.perf_counter()
     try:
-        await stream.run(on_frame, params.duration_s)
+        while True:
+            left = None if params.duration_s is None else \
+                params.duration_s - (time.perf_counter() - start)
+            await current[0].run(on_frame, left)
+            if not (current[0].lost and params.reconnect_s > 0 and not refused):
+                break
+            try:
+                again = await _reconnect(current[0], layout, cfg, params, view, recorder)
+            except BadInput as e:
+                refused.append(e)
+                break
+            if again is None:
+                break
+            current[0] = again
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
-        await stream.close()
+        await current[0].close()
         recorder.flush()
         journal.close()
+    stream = current[0]
     if view is not None:
         view.note(recorder.last_time_ns, f"ended: {stream.ended}")
     if stream.lost and not refused:
+        again = f" (no answer for --reconnect {params.reconnect_s:g} s)" \
+            if params.reconnect_s > 0 else ""
         refused.append(BadInput(stream.source, f"the connection was lost after frame "
-                                               f"{recorder.counts.frames} of this session: "
-                                               "session.mcap holds every frame up to it"))
-    tracker = monitor.presses
+                                               f"{recorder.counts.frames} of this session"
+                                               f"{again}: session.mcap holds every frame up "
+                                               "to it"))
+    online = monitor.states
     return LiveSummary(stream.source, recorder.counts, stream.ended or "?", Path(), None,
                        time.perf_counter() - start, np.asarray(latency) * 1e3,
                        refused[0] if refused else None,
-                       [] if tracker is None else tracker.locations,
-                       0 if tracker is None else tracker.presses)
+                       [] if online is None else coverage(online.taken),
+                       0 if monitor.presses is None else monitor.presses.presses, online=online)
+
+
+async def _reconnect(lost: Stream, layout: LiveLayout, cfg: SessionConfig, params: LiveParams,
+                     view: LiveView | None, recorder: Recorder) -> Stream | None:
+    """A new connection to the same server within ``params.reconnect_s``, streaming the same
+    capture (the same parameters, else refused): the frames it sends again are dropped, the
+    rest go on into the same journal. None when nothing answers in time."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + params.reconnect_s
+    if view is not None:
+        view.note(recorder.last_time_ns, f"{lost.ended}: reconnecting (up to "
+                                         f"{params.reconnect_s:g} s)", rr.TextLogLevel.WARN)
+    while loop.time() < deadline:
+        stream = Stream(params.host, params.port, min(params.timeout_s,
+                                                      max(deadline - loop.time(), 0.1)))
+        try:
+            xml = await stream.connect()
+        except BadInput:
+            await asyncio.sleep(RETRY_S)
+            continue
+        again = live_layout(parse_parameters(xml, stream.source), cfg)
+        if (again.labels, again.rate_hz, again.device) != \
+                (layout.labels, layout.rate_hz, layout.device):
+            await stream.close()
+            raise BadInput(stream.source, "reconnected, but QTM now streams another capture "
+                                          "(its markers, rate or analog board changed): "
+                                          "session.mcap holds the frames before")
+        recorder.resuming = True
+        if view is not None:
+            view.note(recorder.last_time_ns, f"reconnected to {stream.source}: frames up to "
+                                             f"{recorder.last_number} are not recorded twice")
+        return stream
+    return None
 
 
 def _finish(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> None:

@@ -33,7 +33,8 @@ import rerun.blueprint as rrb
 
 from core.recording import colormap, declare_up, phantom_view, plot, time_column
 from live.live_model import Reading
-from live.live_presses import Location, PressDone
+from live.live_presses import PressDone
+from live.live_states import LivePress, OnlineStates, coverage
 
 APP_ID = "phantom-live"
 TIMELINE = "mocap_time"
@@ -135,19 +136,27 @@ class LiveView:
     def _at(self, time_ns: int) -> None:
         self.rec.set_time(TIMELINE, duration=np.timedelta64(int(time_ns), "ns"))
 
-    def press(self, press: PressDone, locations: list[Location]) -> None:
-        """A press that ended: a status line, and the coverage of every location (a ball at
-        its first press's tip, coloured by the highest level reached, labelled)."""
-        loc = locations[press.location]
-        self.note(press.end_ns, f"press {press.number} at location {press.location + 1}: "
-                                f"peak {press.peak_n:.2f} N, levels up to "
-                                f"{loc.top_level:g} N there ({loc.presses} presses)")
-        top = np.array([lo.top_level for lo in locations])
+    def press(self, press: PressDone) -> None:
+        """A press that ended: a status line."""
+        self.note(press.end_ns, f"press {press.number} ended: peak {press.peak_n:.2f} N")
+
+    def taken(self, time_ns: int, taken: LivePress, states: OnlineStates) -> None:
+        """A press's states: a status line, and the coverage of every location (a ball at
+        its presses' contact point, coloured by the highest level read there, labelled with
+        its presses, top level and states)."""
+        step = states.extract.step_n
+        st = taken.states
+        read = (f"{len(st.step)} states, levels {st.step.min() * step:g}-"
+                f"{st.step.max() * step:g} N" if len(st.step) else "no states (its force "
+                "was saturated or over range)" if taken.press.untrusted_force else "no states")
+        self.note(time_ns, f"press {taken.number} at location {taken.location + 1}: {read}",
+                  rr.TextLogLevel.INFO if len(st.step) else rr.TextLogLevel.WARN)
+        places = coverage(states.taken)
+        top = np.array([c.top_level(step) for c in places])
         self.rec.log("scene/coverage", rr.Points3D(
-            [lo.tip for lo in locations], radii=3 * RADIUS_M,
-            colors=colormap(top / COVERAGE_N),
-            labels=[f"{i + 1}: {lo.presses} x, {lo.top_level:g} N" for i, lo in
-                    enumerate(locations)]))
+            [c.centre for c in places], radii=3 * RADIUS_M, colors=colormap(top / COVERAGE_N),
+            labels=[f"{i + 1}: {c.presses} x, {c.states.sum()} states to {top[i]:g} N"
+                    for i, c in enumerate(places)]))
 
     def model(self, time_ns: int, reading: Reading) -> None:
         """The model's surface for the tip now beside the markers, its L_d and force error,

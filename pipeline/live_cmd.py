@@ -19,8 +19,8 @@ D = LiveParams
               default=f"{D.host}:{D.port}", show_default=True,
               help="QTM's real-time server (little-endian port; QTM's default 22223).")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="A new folder: session.mcap (the session as `pipeline ingest` writes it) "
-                   "and session.rrd (the live recording).")
+              help="A new folder: session.mcap (the session as `pipeline ingest` writes it), "
+                   "session.rrd (the live recording) and states.h5 (the states taken live).")
 @click.option("--duration", "duration_s", type=finite_float(0, min_open=True, unit="s"),
               default=None, help="Stop after this many seconds [default: until QTM stops, "
                                  "Ctrl-C, or the connection ends].")
@@ -37,15 +37,20 @@ D = LiveParams
 @click.option("--spawn", is_flag=True, help="Also show the recording in a rerun viewer.")
 @click.option("--serve", is_flag=True, help="Also serve the recording to a web browser.")
 @click.option("--states/--no-states", default=D.states, show_default=True,
-              help="At the end, sync and extract the session (LIVE_DIR/session.h5, states.h5) "
-                   "as `pipeline sync` and `pipeline extract` would.")
+              help="Write the static states taken press by press as the session goes on "
+                   "(sync's and extract's rules) to --out/states.h5 at the end.")
 @click.option("--recover", is_flag=True,
               help="Connect to nothing: finish the journal a killed session left in --out "
                    "(session.mcap.part, every complete block) as --out/session.mcap.")
+@click.option("--reconnect", "reconnect_s", type=finite_float(0, 3600, unit="s"),
+              default=D.reconnect_s, show_default=True,
+              help="After a lost connection, keep trying to reconnect this long and go on "
+                   "into the same session.mcap (frames the server sends again are recorded "
+                   "once); 0: a lost connection ends the session.")
 @click.option("--no-rrd", is_flag=True, help="Write no recording.")
 def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: float | None,
          timeout_s: float, calibration: Path | None, model: Path | None, spawn: bool,
-         serve: bool, states: bool, recover: bool, no_rrd: bool) -> None:
+         serve: bool, states: bool, recover: bool, reconnect_s: float, no_rrd: bool) -> None:
     """Record a session live from QTM's real-time stream, and show it as it happens.
 
     Reads SESSION_DIR's session.toml (the markers, the force's channels, kind and units, the
@@ -57,21 +62,24 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
     runs on it), built from a journal written as the frames arrive (session.mcap.part: what a
     kill leaves), and --out/session.rrd: markers, tip, the tared force at the mocap rate, lost
     markers, saturation and over-range as they happen, each press as it ends and the coverage
-    of the locations pressed (presses, highest level). With --states (the default), sync and
-    extract then run on the MCAP: --out/session.h5 and states.h5, as those commands write them.
+    of the locations pressed (presses, states, highest level read). Each press's static states
+    are taken 1.5 s after it ends, with sync's and extract's rules; with --states (the default)
+    they are written at the end to --out/states.h5 (what `pipeline sync` and `pipeline extract`
+    give on session.mcap).
     """
     from live.live_stage import MCAP_NAME, RRD_NAME, run_live
 
     host, port = address
     params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
                         calibration=calibration, model=model, spawn=spawn, serve=serve,
-                        states=states, recover=recover)
+                        states=states, recover=recover, reconnect_s=reconnect_s)
     s = run_live(session_dir, out, params, None if no_rrd or recover else out / RRD_NAME)
     lat = s.latency_ms
     timing = f"; per frame {np.median(lat):.2f} ms median, {np.percentile(lat, 99):.2f} ms " \
              "p99" if lat.size else ""
+    resent = f", {s.counts.resent} sent again after reconnecting" if s.counts.resent else ""
     click.echo(f"{out / MCAP_NAME}: {s.counts.frames} frames ({s.counts.skipped} skipped by "
-               f"number), {s.counts.samples} force samples from {s.source} in "
+               f"number{resent}), {s.counts.samples} force samples from {s.source} in "
                f"{s.seconds:.1f} s; ended: {s.ended}; {s.presses} presses at "
                f"{len(s.locations)} locations{timing}" + (f"; {s.states}" if s.states else "")
                + (f"; recording {s.rrd}" if s.rrd else ""))

@@ -115,11 +115,17 @@ def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
                 ) -> list[PressRecord]:
     """Each press with ``margin`` frames either side (never into a neighbouring press)."""
     out = []
-    n = len(series["time_ns"])
-    for k, pr in enumerate(presses):
-        lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
-        hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else n)
-        local = Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat)
+    for k in range(len(presses)):
+        local, lo, hi = cut_span(presses, k, len(series["time_ns"]), margin)
         out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
                                rest=np.zeros((2, 6))))
     return out
+
+
+def cut_span(presses: list[Press], k: int, frames: int, margin: int) -> tuple[Press, int, int]:
+    """Press ``k`` of a series of ``frames`` frames cut out with ``margin`` frames either side,
+    never into a neighbouring press: the press on the cut's frames, and the cut [lo, hi)."""
+    pr = presses[k]
+    lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
+    hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else frames)
+    return Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat), lo, hi

@@ -115,9 +115,9 @@ def test_sync_finds_the_same_presses_on_the_live_session(recorded) -> None:
 
 
 def test_presses_seen_live_are_syncs_and_the_states_are_extracts(recorded, tmp_path) -> None:
-    """The presses and locations counted live are those sync finds afterwards; the states
-    written at the end are those ingest, sync and extract give on the exports: the same
-    presses and levels, points within 0.05 mm."""
+    """The presses, locations and states taken live, press by press as the session went on,
+    are those ingest, sync and extract give on the exports afterwards: the same presses and
+    levels, points within 0.05 mm, forces within 1 mN."""
     summary, _, _, ingested, out = recorded
     offline = tmp_path / "offline"
     offline.mkdir()
@@ -133,6 +133,8 @@ def test_presses_seen_live_are_syncs_and_the_states_are_extracts(recorded, tmp_p
                 "single/end", "multi/start", "multi/end"):
         np.testing.assert_array_equal(live[key], want[key], err_msg=key)
     np.testing.assert_allclose(live["states/points"], want["states/points"], atol=5e-5)
+    np.testing.assert_allclose(live["states/force"], want["states/force"], atol=1e-3)
+    assert [c.presses for c in summary.locations] == [1, 1, 1, 1]
 
 
 def test_the_recording_shows_the_scene_the_force_and_the_status(recorded) -> None:
@@ -226,6 +228,63 @@ def test_a_connection_lost_mid_frame_keeps_every_complete_frame(twin_session, tm
     assert code == 2 and "connection" in err and len(err.strip().splitlines()) == 1
     kept = read_raw_mcap(tmp_path / "out" / MCAP_NAME)
     assert kept.markers.frames == frames
+
+
+async def _flaky_proxy(port: int, cut: int) -> tuple[asyncio.AbstractServer, int]:
+    """A proxy to the server on ``port`` whose first connection is hung up after ``cut`` bytes
+    from the server (mid-frame); later connections pass everything."""
+    seen = []
+
+    async def pipe(src: asyncio.StreamReader, dst: asyncio.StreamWriter,
+                   limit: int | None) -> None:
+        sent = 0
+        with contextlib.suppress(ConnectionError):
+            while data := await src.read(65536):
+                if limit is not None and sent + len(data) >= limit:
+                    dst.write(data[:limit - sent])
+                    break
+                dst.write(data)
+                sent += len(data)
+                await dst.drain()
+        dst.close()
+
+    async def client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        seen.append(writer)
+        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", port)
+        down = asyncio.ensure_future(pipe(up_reader, writer, cut if len(seen) == 1 else None))
+        up = asyncio.ensure_future(pipe(reader, up_writer, None))
+        await down
+        up_writer.close()
+        up.cancel()
+
+    server = await asyncio.start_server(client, "127.0.0.1", 0)
+    return server, server.sockets[0].getsockname()[1]
+
+
+def test_a_reconnection_goes_on_into_the_same_session(twin_session, recorded, tmp_path):
+    """The connection cut mid-frame, ``--reconnect`` connects again and the server starts
+    over: every frame is recorded once, the MCAP is the uninterrupted session's, and the
+    states taken live are too."""
+    whole, states = recorded[2], recorded[4] / STATES_NAME
+    with replaying(twin_session) as server:
+        loop = asyncio.new_event_loop()
+        proxy, port = loop.run_until_complete(_flaky_proxy(server.port, cut=1_500_000))
+        thread = threading.Thread(target=loop.run_forever, daemon=True)
+        thread.start()
+        try:
+            summary = run_live(twin_session, tmp_path / "out", LiveParams(
+                port=port, timeout_s=10, reconnect_s=10), None)
+        finally:
+            loop.call_soon_threadsafe(proxy.close)
+            loop.call_soon_threadsafe(loop.stop)
+            thread.join(10)
+    assert summary.refused is None and summary.counts.resent > 1000
+    kept = read_raw_mcap(tmp_path / "out" / MCAP_NAME)
+    np.testing.assert_array_equal(kept.markers.positions, whole.markers.positions)
+    np.testing.assert_array_equal(kept.force.values, whole.force.values)
+    got, _ = read_h5(tmp_path / "out" / STATES_NAME, STATES)
+    want, _ = read_h5(states, STATES)
+    np.testing.assert_array_equal(got["states/points"], want["states/points"])
 
 
 def _tiny_run(states: Path, out: Path) -> Path:

@@ -118,10 +118,9 @@ def test_the_session_is_held_against_qtms_labels_and_boards(twin_session: Path) 
         live_layout(QtmParameters(SOURCE, 500.0, labels, []), cfg)
 
 
-def test_presses_are_found_as_the_samples_arrive_and_placed_by_the_tip() -> None:
+def test_presses_are_found_as_the_samples_arrive() -> None:
     """Three raised cosines on a 1 kHz force, fed a frame (2 samples) at a time: peaks 6, 0.4
-    (below detect: a touch) and 3 N, the first and third 4 mm apart (one location), a flicker
-    below contact inside the first (one contact)."""
+    (below detect: a touch) and 3 N, a flicker below contact inside the first (one contact)."""
     from live.live_presses import PressTracker
 
     rate, t = 1000.0, np.arange(12000) / 1000.0
@@ -130,15 +129,11 @@ def test_presses_are_found_as_the_samples_arrive_and_placed_by_the_tip() -> None
         inside = (t >= start) & (t < start + 2.0)
         force[inside] = peak * 0.5 * (1 - np.cos(np.pi * (t[inside] - start)))
     force[1500:1510] = 0.0                        # 10 ms below contact: the same contact
-    tips = {1.0: [0.05, 0.05, 0.0], 5.0: [0.09, 0.09, 0.0], 8.0: [0.054, 0.05, 0.0]}
-    tracker, done = PressTracker(rate, detect_n=0.5, contact_n=0.05, radius_m=0.01), []
+    tracker, done = PressTracker(rate, detect_n=0.5, contact_n=0.05), []
     times = np.round(t * 1e9).astype(np.int64)
     for i in range(0, len(t), 2):
-        new_peak, ended = tracker.add(times[i:i + 2], force[i:i + 2])
-        if new_peak:
-            tracker.place(np.array(tips[max(k for k in tips if k <= t[i])]))
-        done += ended
-    assert [(d.number, d.location) for d in done] == [(1, 0), (2, 0)]
+        done += tracker.add(times[i:i + 2], force[i:i + 2])
+    assert [d.number for d in done] == [1, 2]
     assert [round(d.peak_n, 3) for d in done] == [6.0, 3.0]
-    assert len(tracker.locations) == 1 and tracker.locations[0].presses == 2
-    assert tracker.locations[0].top_level == 6.0
+    assert [d.peak_ns for d in done] == [2_000_000_000, 9_000_000_000]
+    assert abs(done[0].start_ns - 1.0e9) < 0.2e9 and abs(done[1].end_ns - 10.0e9) < 0.2e9

@@ -1,0 +1,250 @@
+"""Static states of each press while the session goes on, by sync's and extract's rules.
+
+A press's states need a little of what follows it: the re-tare reads the rest after the
+release, and the filters reach past it. So a press is taken :data:`AFTER_S` after it ended
+(:class:`live.live_presses.PressTracker` says when), from the stretch of the session around
+it (from :data:`BEFORE_S` before its contact, never before the previous press's end, to
+:data:`AFTER_S` after it), kept in :class:`History`. That stretch goes through sync's steps
+(:func:`press_record`): every frame's tip (:meth:`live.live_calibration.TipModel.tips`), short
+marker gaps filled, the tip low-passed, the force tared with the session's tare, re-tared from
+the rest around the press, low-passed and sampled at the frame times, the press found by
+sync's segmentation, placed by its contact point and given a location as sync gives it. Then
+extract reads its states (:func:`extract.static_states.press_states`) in the phantom frame.
+The filters, the gap filler and the re-tare work locally, so on a stretch this long they give
+what they give on the whole session: the same presses and levels as ``pipeline sync`` and
+``pipeline extract`` on the session's MCAP (checked by ``tests/live/test_live_session.py``).
+
+At the end :meth:`OnlineStates.session` hands the presses to extract as a synced file's would
+be, with the phantom frame fitted as extract fits it (:func:`extract.synced_presses.
+session_from_presses`).
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from calib.force_tare import Tare, rest_baseline
+from data_schema.session import SessionConfig
+from extract.extract_params import ExtractParams
+from extract.phantom_frame import apply_transform
+from extract.static_states import Press, PressStates, press_states
+from extract.synced_presses import Session, session_from_presses
+from live.live_calibration import TipModel, wrench
+from live.live_layout import LiveLayout
+from live.live_presses import PressDone
+from sync.gaps import fill_gaps
+from sync.presses import Press as Loaded
+from sync.presses import assign_locations, cut_span, segment_presses
+from sync.resample import antialiased_interpolant
+from sync.smooth import lowpass_track
+from sync.surface import contact_points
+from sync.sync_params import SyncParams
+
+BEFORE_S = 1.5      # of the session before a contact its press is read with (re-tare, margins)
+AFTER_S = 1.5       # ... and after its end: the press is taken this long after it ended
+FORCE_PAD_S = 0.2   # force samples beyond the frames' stretch (the resampler's reach)
+KEEP_S = 30.0       # the history kept while no press waits (the longest press it can take)
+
+
+@dataclass
+class History:
+    """The session's recent frames (phantom markers, then the cluster's) and force samples
+    (SI values before the tare; flagged saturated or over range), oldest first."""
+
+    frames: list[tuple[int, np.ndarray]] = field(default_factory=list)
+    force: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+
+    def add_frame(self, time_ns: int, markers: np.ndarray) -> None:
+        self.frames.append((time_ns, markers))
+
+    def add_force(self, times_ns: np.ndarray, values: np.ndarray, flagged: np.ndarray) -> None:
+        self.force.append((times_ns, values, flagged))
+
+    def stretch(self, start_ns: int, stop_ns: int) -> tuple[np.ndarray, ...]:
+        """Frame times, markers (T, M, 3), force times, values and flags between the two."""
+        times = np.array([t for t, _ in self.frames], np.int64)
+        keep = np.flatnonzero((times >= start_ns) & (times <= stop_ns))
+        markers = np.stack([self.frames[i][1] for i in keep])
+        pad = int(FORCE_PAD_S * 1e9)
+        f_t = np.concatenate([t for t, _, _ in self.force])
+        inside = (f_t >= start_ns - pad) & (f_t <= stop_ns + pad)
+        values = np.concatenate([v for _, v, _ in self.force])[inside]
+        flags = np.concatenate([f for _, _, f in self.force])[inside]
+        return times[keep], markers, f_t[inside], values, flags
+
+    def forget(self, before_ns: int) -> None:
+        """Drop what lies before ``before_ns`` (frames arrive in time order)."""
+        times = [t for t, _ in self.frames]
+        self.frames = self.frames[bisect.bisect_left(times, before_ns):]
+        self.force = [f for f in self.force if len(f[0]) and f[0][-1] >= before_ns]
+
+    def older_than(self, time_ns: int) -> bool:
+        """Whether the oldest frame kept is before ``time_ns``."""
+        return bool(self.frames) and self.frames[0][0] < time_ns
+
+
+@dataclass(frozen=True)
+class Surface:
+    """The phantom at rest: its plane in the lab (a point and the normal out of it), and the
+    lab -> phantom frame transform (4, 4) the live view uses."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    transform: np.ndarray
+
+
+@dataclass(frozen=True)
+class Conditioning:
+    """What the force's samples go through before they become a press's force: the session's
+    tare, its noise (N) and contact level (N)."""
+
+    tare: Tare
+    noise_n: float
+    contact_n: float
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A press cut out of its stretch with sync's margins: its loaded span on the cut's frames,
+    their times (ns), points (lab frame, the tip last) and force magnitude (N)."""
+
+    press: Loaded
+    time_ns: np.ndarray
+    points: np.ndarray
+    force_magnitude: np.ndarray
+
+
+@dataclass
+class LivePress:
+    """A press taken online: extract's press in the lab frame, where it touched, its location
+    id, and its states in the phantom frame (empty for a press whose force is untrusted)."""
+
+    number: int
+    press: Press
+    centre: np.ndarray
+    location: int
+    states: PressStates
+
+
+@dataclass
+class Coverage:
+    """A location pressed: where (its presses' mean contact point, lab frame), how many
+    presses, and its states per force level (index k: k x the level spacing)."""
+
+    centre: np.ndarray
+    presses: int
+    states: np.ndarray
+
+    def top_level(self, step_n: float) -> float:
+        """The highest force level (N) read at this location (0: only the rest)."""
+        seen = np.flatnonzero(self.states)
+        return float(seen[-1]) * step_n if seen.size else 0.0
+
+
+def coverage(taken: list[LivePress]) -> list[Coverage]:
+    """Every location pressed so far, in the order they were first pressed."""
+    out: dict[int, list[LivePress]] = {}
+    for t in taken:
+        out.setdefault(t.location, []).append(t)
+    result = []
+    for loc in sorted(out):
+        here = out[loc]
+        steps = np.concatenate([t.states.step for t in here]).astype(int)
+        result.append(Coverage(np.mean([t.centre for t in here], axis=0), len(here),
+                               np.bincount(steps, minlength=1)))
+    return result
+
+
+class OnlineStates:
+    """Presses queued as they end, taken once their stretch is complete."""
+
+    def __init__(self, cfg: SessionConfig, layout: LiveLayout, tip: TipModel, history: History,
+                 surface: Surface, force: Conditioning, sync: SyncParams | None = None,
+                 extract: ExtractParams | None = None) -> None:
+        self.cfg, self.layout, self.tip, self.surface, self.force = cfg, layout, tip, surface, force
+        self.sync, self.extract = sync or SyncParams(), extract or ExtractParams()
+        self.phantom = len(cfg.mocap.phantom_markers)
+        self.history = history
+        self.waiting: list[PressDone] = []
+        self.taken: list[LivePress] = []
+        self.missed = 0                      # presses sync's rules did not find in the stretch
+        self._last_end = 0
+
+    def ended(self, press: PressDone) -> None:
+        """A press the tracker saw end: taken once :data:`AFTER_S` more has arrived."""
+        self.waiting.append(press)
+
+    def poll(self, now_ns: int) -> list[LivePress]:
+        """The presses whose stretch is complete at ``now_ns``, taken."""
+        due = [p for p in self.waiting if now_ns >= p.end_ns + AFTER_S * 1e9]
+        self.waiting = [p for p in self.waiting if p not in due]
+        out = [taken for p in due if (taken := self._take(p)) is not None]
+        keep_from = min([p.start_ns for p in self.waiting], default=now_ns) - \
+            int((BEFORE_S + KEEP_S) * 1e9)
+        if self.history.older_than(keep_from - int(KEEP_S * 1e9)):   # now and then: cheap
+            self.history.forget(keep_from)
+        return out
+
+    def _take(self, done: PressDone) -> LivePress | None:
+        start = max(done.start_ns - int(BEFORE_S * 1e9), self._last_end)
+        self._last_end = done.end_ns
+        found = press_record(self.history.stretch(start, done.end_ns + int(AFTER_S * 1e9)),
+                             done, self)
+        if found is None:
+            self.missed += 1
+            return None
+        rec, untrusted = found
+        centre = contact_points(rec.points[:, -1], [rec.press], self.surface.point,
+                                self.surface.normal)[0]
+        centres = np.array([t.centre for t in self.taken] + [centre])
+        location = int(assign_locations(centres, self.sync.location_radius_m)[0][-1])
+        press = Press(time_s=rec.time_ns * 1e-9, points=rec.points, force=rec.force_magnitude,
+                      onset=rec.press.onset, peak=rec.press.peak, untrusted_force=untrusted)
+        in_frame = replace(press, points=apply_transform(self.surface.transform, press.points))
+        states = press_states(in_frame, self.extract,
+                              levels=not untrusted and press.peak > press.onset)
+        self.taken.append(LivePress(done.number, press, centre, location, states))
+        return self.taken[-1]
+
+    def session(self, path: Path) -> Session:
+        """The presses taken, as extract reads a synced file's (the phantom frame fitted from
+        their rest, as extract fits it)."""
+        names = list(self.cfg.mocap.phantom_markers) + ["tip"]
+        return session_from_presses(path, self.cfg.name, [replace(t.press) for t in self.taken],
+                                    [t.location for t in self.taken], names,
+                                    self.surface.point, self.surface.normal, self.cfg.phantom,
+                                    self.force.noise_n)
+
+
+def press_record(stretch: tuple[np.ndarray, ...], done: PressDone, on: OnlineStates
+                 ) -> tuple[Cut, bool] | None:
+    """The press ``done`` in its stretch of the session, by sync's steps: its record (lab
+    frame, cut with sync's margins) and whether a force sample near its loaded span was
+    saturated or over range; None where sync's segmentation finds no complete press at its
+    peak."""
+    t_ns, markers, f_ns, values, flags = stretch
+    p, rate = on.sync, on.layout.rate_hz
+    t_m, t_f = t_ns * 1e-9, f_ns * 1e-9
+    tip = on.tip.tips(markers[:, on.phantom:], p)
+    points, _ = fill_gaps(t_m, np.concatenate([markers[:, :on.phantom], tip[:, None]], axis=1),
+                          p.max_gap_s)
+    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
+    w = wrench(values, on.force.tare, on.layout)
+    if p.retare:
+        w = w - rest_baseline(t_f, w, on.force.contact_n,
+                              max(on.force.contact_n, 0.5 * p.detect_n)).at(t_f)
+    magnitude = np.linalg.norm(antialiased_interpolant(t_f, w, rate, p.passband)(t_m)[:, :3],
+                               axis=1)
+    presses, _ = segment_presses(magnitude, rate, p.detect_n, on.force.contact_n)
+    peak_s = done.peak_ns * 1e-9
+    hit = [k for k, pr in enumerate(presses) if t_m[pr.onset] <= peak_s <= t_m[pr.release - 1]]
+    if not hit:
+        return None
+    local, lo, hi = cut_span(presses, hit[0], len(t_ns), int(round(p.margin_s * rate)))
+    loaded = presses[hit[0]]
+    span = (t_f >= t_m[loaded.onset] - FORCE_PAD_S) & (t_f <= t_m[loaded.release - 1] + FORCE_PAD_S)
+    return Cut(local, t_ns[lo:hi], points[lo:hi], magnitude[lo:hi]), bool(flags[span].any())
