@@ -58,6 +58,7 @@ def blueprint(centre: np.ndarray | None = None, size: float = 0.1,
     plots = [plot("force (N)", "force"), plot("lost markers, saturated, over range", "quality")]
     if model:
         plots.append(plot("model: L_d (mm), force error (N)", "model"))
+    plots.append(rrb.TextLogView(origin="status", name="status: presses, their states, warnings"))
     return rrb.Blueprint(rrb.Horizontal(scene, rrb.Vertical(*plots), column_shares=[3, 2]))
 
 

@@ -352,3 +352,26 @@ def test_a_killed_session_is_recovered_from_its_journal(twin_session, recorded, 
     np.testing.assert_array_equal(kept.force.values, whole.force.values[:len(kept.force.values)])
     again = CliRunner().invoke(cli, ["live", str(twin_session), "--out", str(out), "--recover"])
     assert again.exit_code == 2 and "nothing to recover" in again.stderr
+
+
+def test_a_lab_with_another_marker_layout(tmp_path) -> None:
+    """20 markers scattered on the phantom (the twin's ``--markers scattered:20``): the live
+    session checks, records and takes states of that layout as the offline stages do."""
+    from sim.twin.synth_params import SynthParams
+    from sim.twin.synth_stage import run_synth
+
+    session = run_synth(None, tmp_path / "session", SynthParams(
+        seed=5, locations=2, repeats=1, force_via="analog", markers="scattered:20"))
+    with replaying(session) as server:
+        summary = run_live(session, tmp_path / "live", LiveParams(port=server.port,
+                                                                  timeout_s=10), None)
+    ingested = tmp_path / "ingested.mcap"
+    run_ingest(session, ingested, IngestParams(), None)
+    run_sync(ingested, tmp_path / "s.h5", SyncParams(), None)
+    run_extract([tmp_path / "s.h5"], tmp_path / "states.h5", ExtractParams(), None)
+    live, _ = read_h5(tmp_path / "live" / STATES_NAME, STATES)
+    want, _ = read_h5(tmp_path / "states.h5", STATES)
+    assert summary.refused is None and live["states/points"].shape[1] == 21
+    for key in ("states/step", "states/sequence", "states/location"):
+        np.testing.assert_array_equal(live[key], want[key], err_msg=key)
+    np.testing.assert_allclose(live["states/points"], want["states/points"], atol=5e-5)
