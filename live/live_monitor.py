@@ -25,7 +25,7 @@ from live.live_calibration import TARE_S, TipModel, force_tare, wrench
 from live.live_layout import LiveLayout, to_force
 from live.live_model import LiveModel
 from live.live_presses import PressTracker
-from live.live_states import Conditioning, History, OnlineStates, Surface
+from live.live_states import Conditioning, History, LivePress, OnlineStates, Surface
 from live.live_view import LiveView
 from live.rt_client import Frame
 from sync.force_conditioning import RAIL_TOLERANCE, noise_level, rails
@@ -57,7 +57,7 @@ class Monitor:
         self.tare: Tare | None = None
         self.presses: PressTracker | None = None       # once the tare gives the contact
         self.states: OnlineStates | None = None        # ... and the phantom's rest
-        self.history = History()
+        self.history = History(len(names), len(layout.device.labels))
         self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
         self._early_samples = 0
         self._rest: list[np.ndarray] = []      # markers before the tare: the phantom's rest
@@ -88,9 +88,17 @@ class Monitor:
         if frame.analog is not None:
             self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
         if self.states is not None:
-            for taken in self.states.poll(time_ns):
-                if self.view is not None:
-                    self.view.taken(time_ns, taken, self.states)
+            self._show(time_ns, self.states.poll(time_ns))
+
+    def finish(self, time_ns: int) -> None:
+        """The session ended at ``time_ns``: the presses still to be taken, taken."""
+        if self.states is not None:
+            self._show(time_ns, self.states.finish(time_ns))
+
+    def _show(self, time_ns: int, taken: list[LivePress]) -> None:
+        if self.view is not None:
+            for press in taken:
+                self.view.taken(time_ns, press, self.states)
 
     def _force(self, times: np.ndarray, values: np.ndarray) -> None:
         """Force samples in SI units: shown once the tare is known (the early ones then)."""

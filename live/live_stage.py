@@ -217,6 +217,7 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: T
         recorder.flush()
         journal.close()
     stream = current[0]
+    monitor.finish(recorder.last_time_ns)
     if view is not None:
         view.note(recorder.last_time_ns, f"ended: {stream.ended}")
     if stream.lost and not refused:

@@ -21,8 +21,8 @@ session_from_presses`).
 
 from __future__ import annotations
 
-import bisect
-from dataclasses import dataclass, field, replace
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,41 +50,75 @@ FORCE_PAD_S = 0.2   # force samples beyond the frames' stretch (the resampler's 
 KEEP_S = 30.0       # the history kept while no press waits (the longest press it can take)
 
 
-@dataclass
-class History:
-    """The session's recent frames (phantom markers, then the cluster's) and force samples
-    (SI values before the tare; flagged saturated or over range), oldest first."""
+class Ring:
+    """Rows stamped in increasing time (ns), kept in one array that grows as needed: appending
+    a row is a copy into place, a stretch of time a slice."""
 
-    frames: list[tuple[int, np.ndarray]] = field(default_factory=list)
-    force: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    def __init__(self, shape: tuple[int, ...], capacity: int = 4096) -> None:
+        self.time = np.empty(capacity, np.int64)
+        self.rows = np.empty((capacity, *shape))
+        self.size = 0
 
-    def add_frame(self, time_ns: int, markers: np.ndarray) -> None:
-        self.frames.append((time_ns, markers))
+    def add(self, times_ns: np.ndarray, rows: np.ndarray) -> None:
+        n = len(times_ns)
+        if self.size + n > len(self.time):
+            grow = max(2 * len(self.time), self.size + n)
+            self.time = np.resize(self.time, grow)
+            self.rows = np.resize(self.rows, (grow, *self.rows.shape[1:]))
+        self.time[self.size:self.size + n] = times_ns
+        self.rows[self.size:self.size + n] = rows
+        self.size += n
 
-    def add_force(self, times_ns: np.ndarray, values: np.ndarray, flagged: np.ndarray) -> None:
-        self.force.append((times_ns, values, flagged))
-
-    def stretch(self, start_ns: int, stop_ns: int) -> tuple[np.ndarray, ...]:
-        """Frame times, markers (T, M, 3), force times, values and flags between the two."""
-        times = np.array([t for t, _ in self.frames], np.int64)
-        keep = np.flatnonzero((times >= start_ns) & (times <= stop_ns))
-        markers = np.stack([self.frames[i][1] for i in keep])
-        pad = int(FORCE_PAD_S * 1e9)
-        f_t = np.concatenate([t for t, _, _ in self.force])
-        inside = (f_t >= start_ns - pad) & (f_t <= stop_ns + pad)
-        values = np.concatenate([v for _, v, _ in self.force])[inside]
-        flags = np.concatenate([f for _, _, f in self.force])[inside]
-        return times[keep], markers, f_t[inside], values, flags
+    def between(self, start_ns: int, stop_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the times and rows from ``start_ns`` to ``stop_ns`` (both included)."""
+        t = self.time[:self.size]
+        a, b = np.searchsorted(t, start_ns, "left"), np.searchsorted(t, stop_ns, "right")
+        return t[a:b].copy(), self.rows[a:b].copy()
 
     def forget(self, before_ns: int) -> None:
-        """Drop what lies before ``before_ns`` (frames arrive in time order)."""
-        times = [t for t, _ in self.frames]
-        self.frames = self.frames[bisect.bisect_left(times, before_ns):]
-        self.force = [f for f in self.force if len(f[0]) and f[0][-1] >= before_ns]
+        """Drop the rows before ``before_ns``."""
+        a = int(np.searchsorted(self.time[:self.size], before_ns, "left"))
+        keep = self.size - a
+        self.time[:keep] = self.time[a:self.size]
+        self.rows[:keep] = self.rows[a:self.size]
+        self.size = keep
+
+    @property
+    def oldest_ns(self) -> int | None:
+        return int(self.time[0]) if self.size else None
+
+
+class History:
+    """The session's recent frames (phantom markers, then the cluster's) and force samples
+    (SI values before the tare, then 1 where saturated or over range), oldest first."""
+
+    def __init__(self, markers: int, channels: int) -> None:
+        self.frames = Ring((markers, 3))
+        self.force = Ring((channels + 1,))
+
+    def add_frame(self, time_ns: int, markers: np.ndarray) -> None:
+        self.frames.add(np.array([time_ns]), markers[None])
+
+    def add_force(self, times_ns: np.ndarray, values: np.ndarray, flagged: np.ndarray) -> None:
+        self.force.add(times_ns, np.column_stack([values, flagged]))
+
+    def stretch(self, start_ns: int, stop_ns: int) -> tuple[np.ndarray, ...]:
+        """Frame times, markers (T, M, 3), force times, values and flags between the two (the
+        force :data:`FORCE_PAD_S` beyond them: the resampler's reach)."""
+        t_m, markers = self.frames.between(start_ns, stop_ns)
+        pad = int(FORCE_PAD_S * 1e9)
+        t_f, force = self.force.between(start_ns - pad, stop_ns + pad)
+        return t_m, markers, t_f, force[:, :-1], force[:, -1] > 0
+
+    def forget(self, before_ns: int) -> None:
+        """Drop what lies before ``before_ns``."""
+        self.frames.forget(before_ns)
+        self.force.forget(before_ns)
 
     def older_than(self, time_ns: int) -> bool:
         """Whether the oldest frame kept is before ``time_ns``."""
-        return bool(self.frames) and self.frames[0][0] < time_ns
+        oldest = self.frames.oldest_ns
+        return oldest is not None and oldest < time_ns
 
 
 @dataclass(frozen=True)
@@ -160,7 +194,9 @@ def coverage(taken: list[LivePress]) -> list[Coverage]:
 
 
 class OnlineStates:
-    """Presses queued as they end, taken once their stretch is complete."""
+    """Presses queued as they end, taken once their stretch is complete: sync's and extract's
+    steps on a worker thread (a press costs some 50-200 ms, 25-100 frames at 500 Hz: the
+    frames go on meanwhile), the results taken back in order."""
 
     def __init__(self, cfg: SessionConfig, layout: LiveLayout, tip: TipModel, history: History,
                  surface: Surface, force: Conditioning, sync: SyncParams | None = None,
@@ -173,42 +209,73 @@ class OnlineStates:
         self.taken: list[LivePress] = []
         self.missed = 0                      # presses sync's rules did not find in the stretch
         self._last_end = 0
+        self._pool = ThreadPoolExecutor(max_workers=1)
+        self._running: list[tuple[PressDone, Future]] = []
 
     def ended(self, press: PressDone) -> None:
         """A press the tracker saw end: taken once :data:`AFTER_S` more has arrived."""
         self.waiting.append(press)
 
     def poll(self, now_ns: int) -> list[LivePress]:
-        """The presses whose stretch is complete at ``now_ns``, taken."""
+        """The presses taken by ``now_ns`` (in the order they ended); those whose stretch is
+        complete are handed to the worker."""
         due = [p for p in self.waiting if now_ns >= p.end_ns + AFTER_S * 1e9]
+        for press in due:
+            self._submit(press, press.end_ns + int(AFTER_S * 1e9))
         self.waiting = [p for p in self.waiting if p not in due]
-        out = [taken for p in due if (taken := self._take(p)) is not None]
         keep_from = min([p.start_ns for p in self.waiting], default=now_ns) - \
             int((BEFORE_S + KEEP_S) * 1e9)
         if self.history.older_than(keep_from - int(KEEP_S * 1e9)):   # now and then: cheap
             self.history.forget(keep_from)
-        return out
+        return self._collect(wait=False)
 
-    def _take(self, done: PressDone) -> LivePress | None:
+    def finish(self, now_ns: int) -> list[LivePress]:
+        """At the session's end: the presses still waiting taken with what arrived, and every
+        press the worker still has."""
+        for press in self.waiting:
+            self._submit(press, now_ns)
+        self.waiting = []
+        taken = self._collect(wait=True)
+        self._pool.shutdown()
+        return taken
+
+    def _submit(self, done: PressDone, stop_ns: int) -> None:
+        """The press's stretch (a copy) to the worker: the stream goes on meanwhile."""
         start = max(done.start_ns - int(BEFORE_S * 1e9), self._last_end)
         self._last_end = done.end_ns
-        found = press_record(self.history.stretch(start, done.end_ns + int(AFTER_S * 1e9)),
-                             done, self)
+        stretch = self.history.stretch(start, stop_ns)
+        self._running.append((done, self._pool.submit(self._read, stretch, done)))
+
+    def _read(self, stretch: tuple[np.ndarray, ...], done: PressDone
+              ) -> tuple[Cut, bool, PressStates] | None:
+        """The worker's part: the press by sync's steps and its states by extract's."""
+        found = press_record(stretch, done, self)
         if found is None:
-            self.missed += 1
             return None
-        rec, untrusted = found
-        centre = contact_points(rec.points[:, -1], [rec.press], self.surface.point,
-                                self.surface.normal)[0]
-        centres = np.array([t.centre for t in self.taken] + [centre])
-        location = int(assign_locations(centres, self.sync.location_radius_m)[0][-1])
-        press = Press(time_s=rec.time_ns * 1e-9, points=rec.points, force=rec.force_magnitude,
-                      onset=rec.press.onset, peak=rec.press.peak, untrusted_force=untrusted)
+        cut, untrusted = found
+        press = _press(cut, untrusted)
         in_frame = replace(press, points=apply_transform(self.surface.transform, press.points))
-        states = press_states(in_frame, self.extract,
-                              levels=not untrusted and press.peak > press.onset)
-        self.taken.append(LivePress(done.number, press, centre, location, states))
-        return self.taken[-1]
+        return cut, untrusted, press_states(in_frame, self.extract,
+                                            levels=not untrusted and press.peak > press.onset)
+
+    def _collect(self, wait: bool) -> list[LivePress]:
+        """The worker's finished presses, in order, placed at their locations."""
+        out = []
+        while self._running and (wait or self._running[0][1].done()):
+            done, future = self._running.pop(0)
+            read = future.result()
+            if read is None:
+                self.missed += 1
+                continue
+            cut, untrusted, states = read
+            centre = contact_points(cut.points[:, -1], [cut.press], self.surface.point,
+                                    self.surface.normal)[0]
+            centres = np.array([t.centre for t in self.taken] + [centre])
+            location = int(assign_locations(centres, self.sync.location_radius_m)[0][-1])
+            self.taken.append(LivePress(done.number, _press(cut, untrusted), centre, location,
+                                        states))
+            out.append(self.taken[-1])
+        return out
 
     def session(self, path: Path) -> Session:
         """The presses taken, as extract reads a synced file's (the phantom frame fitted from
@@ -218,6 +285,12 @@ class OnlineStates:
                                     [t.location for t in self.taken], names,
                                     self.surface.point, self.surface.normal, self.cfg.phantom,
                                     self.force.noise_n)
+
+
+def _press(cut: Cut, untrusted: bool) -> Press:
+    """Extract's press of a cut (lab frame)."""
+    return Press(time_s=cut.time_ns * 1e-9, points=cut.points, force=cut.force_magnitude,
+                 onset=cut.press.onset, peak=cut.press.peak, untrusted_force=untrusted)
 
 
 def press_record(stretch: tuple[np.ndarray, ...], done: PressDone, on: OnlineStates
