@@ -11,7 +11,10 @@ markers at 500 Hz) replayed at ``--speed`` times real time, prints:
   and with ``--model RUN`` the model's answer while a press goes on), median and p99 in ms,
   for each session of ``--runs``: ``model`` (the recording and the model), ``view`` (the
   recording), ``plain`` (neither), each its own replay;
-* lag: the wall time of the live session against the recording's own duration / speed.
+* lag: the wall time of the live session against the recording's own duration / speed;
+* states: those taken live (``states.h5``) against ``pipeline sync`` + ``pipeline extract`` on
+  the session's MCAP afterwards: how many, whether the presses, levels and locations are the
+  same, and the largest difference of a point (mm) and of a force (N).
 
 The host's speed figure (``../shared/tools/host_speed.py``) is printed beside, as for every
 wall time here. Run: ``python benchmarks/bench_live.py [--minutes 10] [--speed 1]
@@ -29,13 +32,19 @@ from pathlib import Path
 import numpy as np
 
 from core.progress import set_quiet
+from data_schema.hdf5 import read_h5
+from data_schema.states import STATES
+from extract.extract_params import ExtractParams
+from extract.extract_stage import run_extract
 from ingest.mcap_io import read_raw_mcap
 from live.live_params import LiveParams
-from live.live_stage import MCAP_NAME, RRD_NAME, LiveSummary, run_live
+from live.live_stage import MCAP_NAME, RRD_NAME, STATES_NAME, LiveSummary, run_live
 from sim.twin.synth_params import SynthParams
 from sim.twin.synth_stage import run_synth
+from sync.sync_params import SyncParams
+from sync.sync_stage import run_sync
 
-PRESS_S = 8.0                  # a twin press with its rest, about
+PRESS_S = 5.9                  # a twin press with its rest, about
 MAX_LOCATIONS = 15             # places 15 mm apart that fit on the twin's phantom
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,8 +65,7 @@ def record(session: Path, out: Path, speed: float, view: bool, model: Path | Non
            ) -> tuple[LiveSummary, int]:
     """One live session of the replayed ``session``: its summary and the frames sent."""
     proc, port = replay(session, speed)
-    summary = run_live(session, out, LiveParams(port=port, timeout_s=20, model=model,
-                                                states=False),
+    summary = run_live(session, out, LiveParams(port=port, timeout_s=20, model=model),
                        out / RRD_NAME if view else None)
     stdout, _ = proc.communicate(timeout=60)
     sent = int(stdout.split(" frames sent")[0].rsplit(" ", 1)[-1].replace(",", ""))
@@ -73,6 +81,25 @@ def report(name: str, s: LiveSummary, sent: int, duration_s: float, speed: float
           f"max {lat.max():.2f} ms (targets 5 / 20); wall {s.seconds:.1f} s for "
           f"{duration_s / speed:.1f} s of replay (lag {s.seconds - duration_s / speed:+.1f} s);"
           f" ended: {s.ended}")
+
+
+def compare_states(out: Path) -> None:
+    """The states taken live against sync's and extract's on the MCAP afterwards."""
+    run_sync(out / MCAP_NAME, out / "offline_synced.h5", SyncParams(), None)
+    run_extract([out / "offline_synced.h5"], out / "offline_states.h5", ExtractParams(), None)
+    live, _ = read_h5(out / STATES_NAME, STATES)
+    offline, _ = read_h5(out / "offline_states.h5", STATES)
+    keys = ("states/step", "states/sequence", "states/location")
+    same = all(np.array_equal(live[k], offline[k]) for k in keys)
+    n = len(live["states/step"])
+    if not same:
+        print(f"states: {n} live, {len(offline['states/step'])} offline: NOT the same presses "
+              "and levels")
+        return
+    points = np.nanmax(np.abs(live["states/points"] - offline["states/points"])) * 1e3
+    force = np.max(np.abs(live["states/force"] - offline["states/force"]))
+    print(f"states: {n} live = {n} offline, the same presses, levels and locations; points "
+          f"within {points:.4f} mm (target 0.05), forces within {force:.2g} N")
 
 
 def main() -> None:
@@ -103,7 +130,7 @@ def main() -> None:
         out = work / f"live_{key}"
         s, sent = record(session, out, a.speed, view, model)
         report(name, s, sent, sent / 500.0, a.speed)
-        assert (out / MCAP_NAME).is_file()
+        compare_states(out)
 
 
 if __name__ == "__main__":
