@@ -34,6 +34,8 @@ from ingest.sniff import head_text, read_head, sniff
 _READ_ERRORS = (*MAT_ERRORS, RuntimeError, pa.ArrowException)   # a damaged file's failures
 _RATE_TOLERANCE = 0.01          # a stated rate and the time column's may differ this much
 TEXT_FORMATS = ("force_csv", "force_ati_daq", "force_ati_netft", "qtm_tsv_force")
+# what of a layout's details the series keeps: a MAT or text layout, a force plate's identity
+KEPT_DETAILS = ("layout", "variable", "dialect", "plate", "plate_type", "plate_corners_mm")
 
 
 # ---------------------------------------------------------------------------- layouts
@@ -171,6 +173,7 @@ def read_force_log(
     rate_hz: float | None = None,
     scale: list[float] | None = None,
     offset: list[float] | None = None,
+    table: LogTable | None = None,
 ) -> ForceSeries:
     """Read a force log into a ``ForceSeries`` in SI units.
 
@@ -179,7 +182,9 @@ def read_force_log(
     name such as ``time (ms)``, ``Force X (N)``), else s and the kind's default units.
     ``variable`` picks a MAT variable or struct field, ``delimiter``/``decimal`` a text
     dialect, ``rate_hz`` times a log without a time column, ``scale``/``offset`` turn volts
-    into N and N m (:mod:`ingest.channel_scale`).
+    into N and N m (:mod:`ingest.channel_scale`). ``table``: the log's columns as read
+    elsewhere (a force plate's samples off QTM's real-time stream, ``path`` then naming the
+    server), picked and converted exactly as the file's would be.
     """
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise BadInput(path, f"time_unit must be one of {', '.join(TIME_UNITS)}, "
@@ -188,9 +193,9 @@ def read_force_log(
         raise BadInput(path, "channels must be a non-empty list of distinct column names")
     if kind not in ("gauge", "wrench"):
         raise BadInput(path, f"kind must be one of gauge, wrench, got {kind!r}")
-    t = read_log_table(path, variable, delimiter, decimal,
-                       wanted=[c for c in [time_column, *channels, trigger_column]
-                               if isinstance(c, str)])
+    t = table if table is not None else read_log_table(
+        path, variable, delimiter, decimal,
+        wanted=[c for c in [time_column, *channels, trigger_column] if isinstance(c, str)])
     time = _pick_time(path, t, time_column, rate_hz)
     names = _pick(path, t, channels, time, "force.channels")
     trigger = _pick(path, t, [trigger_column], time, "force.trigger_column")[0] \
@@ -225,7 +230,7 @@ def read_force_log(
             "trigger_column": trigger,
             "timed_by": "column" if time else "rate", **info,
             **({"clock": SHARED_CLOCK} if t.details.get("clock") == "mocap" else {}),
-            **{k: v for k, v in t.details.items() if k in ("layout", "variable", "dialect")}}
+            **{k: v for k, v in t.details.items() if k in KEPT_DETAILS}}
     return ForceSeries(source=str(path), time_ns=time_ns, channels=names, values=values,
                        units=si_units, kind=kind, rate_hz=rate, trigger=trig, meta=meta)
 

@@ -6,7 +6,9 @@ A header of ``KEY <tab> value`` lines (``NO_OF_SAMPLES``, ``FREQUENCY``, ``FORCE
 samples (older exports: no column line and no SAMPLE and TIME, the nine values only). QTM
 writes forces in N, moments in N m and the centre of pressure in mm, in the plate's own frame
 (the export's DESCRIPTION says which); the samples share the mocap's clock (time 0 at the
-first frame of the capture), as the analog board's do.
+first frame of the capture), as the analog board's do. The plate's name, type and corners (QTM's
+corners 1 to 4, ``FORCE_PLATE_CORNER_POSX_POSY_X`` ..., lab mm) go with the samples where the
+header states them.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ COLUMNS = ("Force_X", "Force_Y", "Force_Z", "Moment_X", "Moment_Y", "Moment_Z",
            "COP_X", "COP_Y", "COP_Z")
 UNITS = dict(zip(COLUMNS, ("N",) * 3 + ("N*m",) * 3 + ("mm",) * 3, strict=True))
 WRENCH = list(COLUMNS[:6])
+CORNERS = ("POSX_POSY", "NEGX_POSY", "NEGX_NEGY", "POSX_NEGY")   # QTM's corners 1 to 4
 
 
 def _exact_time(path: str | Path, time: np.ndarray, rate: float) -> np.ndarray:
@@ -34,6 +37,26 @@ def _exact_time(path: str | Path, time: np.ndarray, rate: float) -> np.ndarray:
         raise BadInput(path, f"TIME departs from FREQUENCY {rate:g} Hz by up to "
                              f"{off * 1e3:.3f} ms: the header contradicts the data")
     return exact
+
+
+def corner_keys() -> list[str]:
+    """The header keys of the plate's corners, in QTM's order: corner 1 x, y, z, corner 2 ..."""
+    return [f"FORCE_PLATE_CORNER_{c}_{a}" for c in CORNERS for a in "XYZ"]
+
+
+def plate_corners(metadata: dict[str, str]) -> list[list[float]] | None:
+    """The plate's four corners (lab, mm) from an export's header keys; None unless it gives
+    all twelve numbers."""
+    try:
+        xyz = [float(metadata[k]) for k in corner_keys()]
+    except (KeyError, ValueError):
+        return None
+    return [xyz[i:i + 3] for i in range(0, 12, 3)]
+
+
+def export_plate_name(path: str | Path) -> str | None:
+    """The plate an export is of (``FORCE_PLATE_NAME``), from its header alone."""
+    return sniff_dialect(path, delimiter="\t", decimal=".").metadata.get("FORCE_PLATE_NAME")
 
 
 def looks_like_force_plate(head: str) -> bool:
@@ -66,5 +89,6 @@ def read_force_plate(path: str | Path) -> LogTable:
     t.units = {k: u for k, u in UNITS.items() if k in t.columns}
     t.details.update(plate=d.metadata.get("FORCE_PLATE_NAME"),
                      plate_type=d.metadata.get("FORCE_PLATE_TYPE"),
+                     plate_corners_mm=plate_corners(d.metadata),
                      description=d.metadata.get("DESCRIPTION"), clock="mocap")
     return t

@@ -1,16 +1,17 @@
 """Everything a live session receives, on disk as it arrives, in a form a crash cannot spoil.
 
-While QTM streams, each second of markers and of the analog board's samples is appended to
+While QTM streams, each second of markers and of the force device's samples is appended to
 ``session.mcap.part`` (beside the final file) as ingest's block messages
 (:mod:`data_schema.raw_mcap`): ``/live/markers`` (every 3D label QTM sends, metres, NaN when
-lost) and ``/live/analog`` (every channel of the force's board, in the units QTM states), each
-block its own chunk, flushed to the disk at once. A process killed, or a connection lost,
+lost) and ``/live/force`` (every channel of the force's analog board, or the nine values of
+its force plate, in the units QTM states), each block its own chunk, flushed to the disk at
+once. A process killed, or a connection lost,
 leaves every complete block readable (:func:`read_journal` stops at the first record cut
 short). When the session ends, :func:`ingest_layout` turns the journal into ingest's streams,
 and the live runner writes ``session.mcap`` from them as ingest would have from the exports.
 
 The journal's first record, ``live_journal``, says what it holds: the server, the labels, the
-board, the rates and where each stream's sample numbers start.
+board or plate, the rates.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ import numpy as np
 from core.errors import BadInput
 from data_schema.raw_mcap import ENCODING, decode_block, encode_block
 
-MARKERS, ANALOG = "/live/markers", "/live/analog"
+MARKERS, FORCE = "/live/markers", "/live/force"
+FORMER = {"/live/analog": FORCE}    # the force's topic in journals of earlier versions
 RECORD = "live_journal"
 
 
@@ -66,7 +68,7 @@ class Journal:
         self._writer.add_metadata(RECORD, {"header": json.dumps(header)})
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
-        for topic in (MARKERS, ANALOG):
+        for topic in (MARKERS, FORCE):
             schema = self._writer.register_schema(topic, ENCODING, b"")
             self._channels[topic] = self._writer.register_channel(topic, ENCODING, schema, {})
             self._sequence[topic] = 0
@@ -111,7 +113,7 @@ def read_journal(path: Path) -> JournalContent:
 
     header: dict[str, Any] | None = None
     topics: dict[int, str] = {}
-    blocks: dict[str, Samples] = {MARKERS: Samples(), ANALOG: Samples()}
+    blocks: dict[str, Samples] = {MARKERS: Samples(), FORCE: Samples()}
     complete = False
     with open(path, "rb") as f:
         try:
@@ -119,7 +121,7 @@ def read_journal(path: Path) -> JournalContent:
                 if isinstance(record, Metadata) and record.name == RECORD:
                     header = json.loads(record.metadata["header"])
                 elif isinstance(record, Channel):
-                    topics[record.id] = record.topic
+                    topics[record.id] = FORMER.get(record.topic, record.topic)
                 elif isinstance(record, Message) and header is not None:
                     k = _values_per_sample(header, topics[record.channel_id])
                     blocks[topics[record.channel_id]].add(

@@ -2,12 +2,14 @@
 tip (fitted where the view draws the scene), the tared force and its flags, handed to the live
 view.
 
-The force's channels go to SI units by the same affine map ingest applies to an analog export
-(measured once from :func:`live.live_layout.to_force`, so a frame costs a product, not a
-parse); its bias comes from the unloaded start (:func:`live.live_calibration.force_tare`) once
+The force's channels (an analog board's, or a force plate's force and moment, already N and
+N m) go to SI units by the same affine map ingest applies to the export
+(:func:`live.live_layout.si_map`, measured once from :func:`live.live_layout.to_force`); its
+bias comes from the unloaded start (:func:`live.live_calibration.force_tare`) once
 :data:`live.live_calibration.TARE_S` seconds have arrived, and the samples before it are shown
 then. A gauge within :data:`sync.force_conditioning.RAIL_TOLERANCE` of the amplifier's rail is
-flagged saturated, a wrench beyond the sensor's rating over range, frame by frame.
+flagged saturated, a wrench beyond the sensor's rating over range (where a .cal states one),
+frame by frame; a wrench is tared as sync tares it, less its bias.
 """
 
 from __future__ import annotations
@@ -20,9 +22,8 @@ from calib.force_tare import Tare
 from calib.rest_plane import rest_surface
 from data_schema.session import SessionConfig
 from extract.phantom_frame import to_phantom_frame
-from ingest.analog import resolve_channels
 from live.live_calibration import TARE_S, TipModel, force_tare, wrench
-from live.live_layout import LiveLayout, to_force
+from live.live_layout import LiveLayout, si_map
 from live.live_model import LiveModel
 from live.live_presses import PressTracker
 from live.live_states import Conditioning, History, LivePress, OnlineStates, Surface
@@ -45,11 +46,7 @@ class Monitor:
         self.layout, self.tip, self.view, self.model = layout, tip, view, model
         self.cfg = cfg
         self.params = params or SyncParams()
-        zero_row = np.zeros((1, len(layout.device.labels)))
-        zero, one = to_force(layout, zero_row, cfg), to_force(layout, zero_row + 1.0, cfg)
-        self._si = (zero.values[0], one.values[0] - zero.values[0])   # SI = a + b v
-        self._channels = resolve_channels(layout.analog_export(zero_row[:0]),
-                                          cfg.force.channels)
+        self._si = si_map(layout, cfg)
         self.kind = cfg.force.kind
         self._rails = rails(cfg.force.kind, layout.calibration)
         self._limit = None if layout.calibration is None else \
@@ -57,7 +54,7 @@ class Monitor:
         self.tare: Tare | None = None
         self.presses: PressTracker | None = None       # once the tare gives the contact
         self.states: OnlineStates | None = None        # ... and the phantom's rest
-        self.history = History(len(names), len(layout.device.labels))
+        self.history = History(len(names), len(cfg.force.channels))
         self._early: list[tuple[np.ndarray, np.ndarray]] = []   # samples before the tare
         self._early_samples = 0
         self._rest: list[np.ndarray] = []      # markers before the tare: the phantom's rest
@@ -85,8 +82,8 @@ class Monitor:
                 reading = self.model.at(markers[:self.phantom], tip, self._force_now)
                 if reading is not None:
                     self.view.model(time_ns, reading)
-        if frame.analog is not None:
-            self._force(sample_ns, self._si[0] + frame.analog[:, self._channels] * self._si[1])
+        if frame.force is not None:
+            self._force(sample_ns, self._si(frame.force))
         if self.states is not None:
             self._show(time_ns, self.states.poll(time_ns))
 

@@ -1,9 +1,10 @@
 """Frames as they arrive, put on the mocap's clock and into the journal a second at a time.
 
-A frame's time is its number since the first frame over the marker rate, and an analog
-sample's its number since the first sample over the board's rate: time 0 at the first frame,
-as ingest times an analog export, so the journal turns into the same streams an export would
-give. Frames QTM numbered but never sent (a gap in the numbers) are counted, not invented.
+A frame's time is its number since the first frame over the marker rate, and a force sample's
+(a board's, a plate's) its number since the first sample over the device's rate: time 0 at the
+first frame, as ingest times an analog or force-plate export, so the journal turns into the
+same streams an export would give. Frames QTM numbered but never sent (a gap in the numbers)
+are counted, not invented.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.errors import BadInput
-from live.live_journal import ANALOG, MARKERS, Journal, Samples
+from live.live_journal import FORCE, MARKERS, Journal, Samples
 from live.live_layout import LiveLayout
 from live.rt_client import Frame
 
@@ -22,7 +23,7 @@ FLUSH_S = 1.0                 # seconds of samples per journal block
 
 @dataclass
 class Counts:
-    """What arrived: frames, frame numbers skipped, analog samples, and the frames a server
+    """What arrived: frames, frame numbers skipped, force samples, and the frames a server
     sent again after a reconnection (recorded once)."""
 
     frames: int = 0
@@ -44,10 +45,10 @@ class Recorder:
     last_number: int | None = None
     resuming: bool = False          # after a reconnection: frames up to the last are had
     _pending: dict[str, Samples] = field(default_factory=lambda: {MARKERS: Samples(),
-                                                                 ANALOG: Samples()})
+                                                                 FORCE: Samples()})
 
     def add(self, frame: Frame) -> tuple[int, np.ndarray | None, np.ndarray | None] | None:
-        """Record one frame; returns its time (ns) and the analog samples' times and values
+        """Record one frame; returns its time (ns) and the force samples' times and values
         (None where it carried none); None for a frame recorded before a reconnection."""
         if self.resuming:
             if frame.number <= self.last_number:
@@ -64,17 +65,17 @@ class Recorder:
         self._pending[MARKERS].add(np.array([t], np.int64), frame.markers.reshape(1, -1))
         self.counts.frames += 1
         times = None
-        if frame.analog is not None:
+        if frame.force is not None:
             if self.first_sample is None:
                 self.first_sample = frame.first_sample
-            n = len(frame.analog)
+            n = len(frame.force)
             numbers = frame.first_sample - self.first_sample + np.arange(n)
             times = np.round(numbers * (1e9 / self.layout.device.rate_hz)).astype(np.int64)
-            self._pending[ANALOG].add(times, frame.analog)
+            self._pending[FORCE].add(times, frame.force)
             self.counts.samples += n
         if self._pending[MARKERS].samples >= FLUSH_S * self.layout.rate_hz:
             self.flush()
-        return t, times, frame.analog
+        return t, times, frame.force
 
     def flush(self) -> None:
         """Write what is pending to the journal (each stream as one block)."""
@@ -102,8 +103,8 @@ class Recorder:
             raise BadInput(self.layout.source, f"frame {frame.number} after frame "
                                                f"{self.last_number}: frame numbers must "
                                                "increase")
-        if frame.analog is not None and frame.analog.shape[1] != len(self.layout.device.labels):
-            raise BadInput(self.layout.source, f"frame {frame.number}: the analog board sends "
-                                               f"{frame.analog.shape[1]} channels, its "
-                                               f"parameters name "
-                                               f"{len(self.layout.device.labels)}")
+        d = self.layout.device
+        if frame.force is not None and frame.force.shape[1] != len(d.labels):
+            raise BadInput(self.layout.source, f"frame {frame.number}: the {d.what} sends "
+                                               f"{frame.force.shape[1]} channels, its "
+                                               f"parameters name {len(d.labels)}")

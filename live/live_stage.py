@@ -39,7 +39,7 @@ from ingest.detect import read_mocap
 from ingest.ingest_stage import session_inputs
 from ingest.mcap_io import write_raw_mcap
 from live.live_calibration import TipModel, tip_model
-from live.live_journal import ANALOG, MARKERS, Journal, read_journal
+from live.live_journal import FORCE, MARKERS, Journal, read_journal
 from live.live_layout import LiveLayout, live_layout, to_force
 from live.live_model import LiveModel
 from live.live_monitor import Monitor
@@ -47,7 +47,7 @@ from live.live_params import LiveParams
 from live.live_recorder import Counts, Recorder
 from live.live_states import Coverage, OnlineStates, coverage
 from live.live_view import LiveView
-from live.qtm_parameters import AnalogDevice, parse_parameters
+from live.qtm_parameters import device_from_json, device_json, parse_parameters
 from live.rt_client import Stream, decode_frame
 from sync.sync_params import SyncParams
 
@@ -109,7 +109,7 @@ def _recover(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> 
     _finish(part, mcap, cfg, params)
     frames = len(content.streams[MARKERS][0])
     summary = LiveSummary(content.header["source"], Counts(frames, 0,
-                                                          len(content.streams[ANALOG][0])),
+                                                          len(content.streams[FORCE][0])),
                           "recovered from the journal of a killed session", mcap, None, 0.0)
     return summary
 
@@ -176,7 +176,7 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: T
     def on_frame(data: bytes) -> None:
         tic = time.perf_counter()
         try:
-            frame = decode_frame(data, layout.device.device_id)
+            frame = decode_frame(data, layout.device.device_id, layout.device.component)
             got = recorder.add(frame)
             if got is not None:
                 monitor.frame(frame, got[0], got[1])
@@ -199,7 +199,7 @@ async def _stream(stream: Stream, layout: LiveLayout, cfg: SessionConfig, tip: T
         while True:
             left = None if params.duration_s is None else \
                 params.duration_s - (time.perf_counter() - start)
-            await current[0].run(on_frame, left)
+            await current[0].run(on_frame, left, layout.device.component)
             if not (current[0].lost and params.reconnect_s > 0 and not refused):
                 break
             try:
@@ -258,8 +258,8 @@ async def _reconnect(lost: Stream, layout: LiveLayout, cfg: SessionConfig, param
                 (layout.labels, layout.rate_hz, layout.device):
             await stream.close()
             raise BadInput(stream.source, "reconnected, but QTM now streams another capture "
-                                          "(its markers, rate or analog board changed): "
-                                          "session.mcap holds the frames before")
+                                          f"(its markers, rate or {layout.device.what} "
+                                          "changed): session.mcap holds the frames before")
         recorder.resuming = True
         if view is not None:
             view.note(recorder.last_time_ns, f"reconnected to {stream.source}: frames up to "
@@ -282,10 +282,10 @@ def _finish(part: Path, mcap: Path, cfg: SessionConfig, params: LiveParams) -> N
 def raw_session(streams: dict[str, tuple[np.ndarray, np.ndarray]], layout: LiveLayout,
                 cfg: SessionConfig) -> RawSession:
     """The journal's streams as ingest's raw session of the live capture: every marker QTM
-    sent, the force converted as ingest converts an analog export, the session's
-    calibration and pivot recording."""
+    sent, the force converted as ingest converts an analog or force-plate export, the
+    session's calibration and pivot recording."""
     t_m, v_m = streams[MARKERS]
-    t_a, v_a = streams[ANALOG]
+    t_a, v_a = streams[FORCE]
     markers = MarkerSeries(source=layout.source, time_ns=t_m, labels=list(layout.labels),
                            positions=v_m.reshape(len(t_m), len(layout.labels), 3),
                            rate_hz=layout.rate_hz)
@@ -301,11 +301,11 @@ def raw_session(streams: dict[str, tuple[np.ndarray, np.ndarray]], layout: LiveL
 def _header(layout: LiveLayout) -> dict:
     """The journal's first record: what a reader needs to rebuild the layout."""
     return {"source": layout.source, "rate_hz": layout.rate_hz, "labels": layout.labels,
-            "device": asdict(layout.device), "channels": layout.device.labels}
+            "device": device_json(layout.device), "channels": layout.device.labels}
 
 
 def _layout(header: dict, cfg: SessionConfig) -> LiveLayout:
     """The layout a journal's header records, with the session's calibration."""
     calibration = read_ati_cal(cfg.force.calibration) if cfg.force.calibration else None
     return LiveLayout(header["source"], float(header["rate_hz"]), list(header["labels"]),
-                      AnalogDevice(**header["device"]), calibration)
+                      device_from_json(header["device"]), calibration)

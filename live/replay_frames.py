@@ -3,8 +3,10 @@
 Frame ``i`` of the source goes out as frame number ``i + 1`` (QTM numbers a file's frames from
 1) with its time in microseconds. The 3D component holds every label's marker, NaN when lost;
 the 3D-without-labels component only the markers seen, each with its label's place (from 1)
-as its id, where a real QTM numbers unidentified trajectories itself; the analog component
-the force device's samples; the force component no plate (the replay serves none).
+as its id, where a real QTM numbers unidentified trajectories itself; the analog component the
+force's samples where an analog device carries them (else no device), the force component
+where a force plate does (else no plate): each sample numbered by its index in the session's
+force stream.
 """
 
 from __future__ import annotations
@@ -13,11 +15,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from live.replay_parameters import DEVICE_ID
+from live.replay_parameters import DEVICE_ID, PLATE_ID
 from live.replay_source import ReplaySource
 from live.rt_packets import (
     AnalogBlock,
     Component,
+    ForceBlock,
     encode_3d,
     encode_3d_no_labels,
     encode_analog,
@@ -29,11 +32,11 @@ FIRST_FRAME = 1          # the number of a recording's first frame
 
 
 def frame_packet(source: ReplaySource, frame: int, components: Sequence[Component],
-                 analog_from: int | None = None) -> bytes:
-    """The data packet of frame ``frame`` with ``components``; its analog component carries
-    the samples of frames ``analog_from`` to ``frame`` (default: the frame's own), so that a
-    stream of every n-th frame still carries every sample."""
-    start = frame if analog_from is None else analog_from
+                 samples_from: int | None = None) -> bytes:
+    """The data packet of frame ``frame`` with ``components``; its force samples (analog or
+    force component) are those of frames ``samples_from`` to ``frame`` (default: the frame's
+    own), so that a stream of every n-th frame still carries every sample."""
+    start = frame if samples_from is None else samples_from
     parts = [_ENCODERS[c](source, frame, start) for c in components]
     return encode_data(source.timestamp_us(frame), frame + FIRST_FRAME, parts)
 
@@ -49,12 +52,23 @@ def _three_d_no_labels(source: ReplaySource, frame: int, start: int) -> bytes:
 
 
 def _analog(source: ReplaySource, frame: int, start: int) -> bytes:
-    first, values = source.analog.samples(start, frame + 1)
-    return encode_analog([AnalogBlock(DEVICE_ID, first, values)])
+    return encode_analog(_blocks(source, frame, start, Component.ANALOG))
 
 
 def _force(source: ReplaySource, frame: int, start: int) -> bytes:
-    return encode_force([])
+    return encode_force(_blocks(source, frame, start, Component.FORCE))
+
+
+def _blocks(source: ReplaySource, frame: int, start: int, component: Component
+            ) -> list[AnalogBlock] | list[ForceBlock]:
+    """The force's samples of frames ``start`` to ``frame`` as ``component``'s one block
+    (device or plate), where that component carries the force; else none."""
+    if source.force.component != component:
+        return []
+    first, values = source.force.samples(start, frame + 1)
+    if component == Component.ANALOG:
+        return [AnalogBlock(DEVICE_ID, first, values)]
+    return [ForceBlock(PLATE_ID, first, values)]
 
 
 _ENCODERS: dict[Component, Callable[[ReplaySource, int, int], bytes]] = {

@@ -4,10 +4,15 @@ The element names are QTM's (RT protocol documentation; the vendor's clients rea
 names): the marker rate in ``General/Frequency`` (with ``Capture_Time``), the marker labels in
 ``The_3D`` (``Labels``, then one ``Label/Name`` each, in the order the 3D component sends
 them), the analog device in ``Analog/Device`` (``Device_ID``, ``Device_Name``, ``Channels``,
-``Frequency``, then per channel ``Channel/Label`` and ``Channel/Unit``) and the force plates
-in ``Force`` (units, and no ``Plate``: the replay serves none). A real QTM sends much more
-(cameras, trigger settings, marker colours, bones, the analog board's range, the calibration
-time); a client should read nothing of that from the replay. Example::
+``Frequency``, then per channel ``Channel/Label`` and ``Channel/Unit``) where an analog device
+carries the force, and ``Force`` (``Unit_Length`` mm, ``Unit_Force`` N) with one ``Plate``
+where a force plate measured it (``Plate_ID``, ``Analog_Device_ID`` 0: no analog device is
+served, ``Frequency``, ``Type``, ``Name``, and where the session knows the corners
+``Length``, ``Width``, ``Location/Corner1`` .. ``Corner4`` (lab, mm) and ``Origin`` 0 0 0: the
+plate's origin on its top surface, where the replay puts the point of application). A real
+QTM sends much more (cameras, trigger settings, marker colours, bones, the analog board's
+range, a plate's channels and calibration matrix, the calibration time); a client should read
+nothing of that from the replay. Example::
 
     <QTM_Parameters_Ver_1.25>
       <General>
@@ -27,10 +32,13 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from live.replay_source import ReplaySource
 
 SECTIONS = ("general", "3d", "analog", "force")      # in the order QTM writes them
 DEVICE_ID = 1                                        # the force's analog device
+PLATE_ID = 1                                         # ... or its force plate
 FORCE_UNITS = {"Unit_Length": "mm", "Unit_Force": "N"}
 
 
@@ -68,7 +76,9 @@ def _three_d(node: ET.Element, source: ReplaySource) -> None:
 
 
 def _analog(node: ET.Element, source: ReplaySource) -> None:
-    a = source.analog
+    a = source.force
+    if a.plate is not None:
+        return
     device = ET.SubElement(node, "Device")
     _add(device, "Device_ID", str(DEVICE_ID))
     _add(device, "Device_Name", a.name)
@@ -83,6 +93,32 @@ def _analog(node: ET.Element, source: ReplaySource) -> None:
 def _force(node: ET.Element, source: ReplaySource) -> None:
     for tag, unit in FORCE_UNITS.items():
         _add(node, tag, unit)
+    f = source.force
+    if f.plate is None:
+        return
+    plate = ET.SubElement(node, "Plate")
+    for tag, text in (("Plate_ID", str(PLATE_ID)), ("Analog_Device_ID", "0"),
+                      ("Frequency", _number(f.rate_hz)), ("Type", f.plate.type or "unknown"),
+                      ("Name", f.name)):
+        _add(plate, tag, text)
+    if f.plate.corners_mm is not None:
+        _location(plate, f.plate.corners_mm)
+
+
+def _location(plate: ET.Element, corners_mm: list[list[float]]) -> None:
+    """A plate's size, its corners 1 to 4 (lab, mm) and its origin (0: on its top surface)."""
+    c = np.asarray(corners_mm, float)
+    _add(plate, "Length", f"{np.linalg.norm(c[0] - c[1]):.6f}")
+    _add(plate, "Width", f"{np.linalg.norm(c[1] - c[2]):.6f}")
+    location = ET.SubElement(plate, "Location")
+    for k, corner in enumerate(c, start=1):
+        _xyz(ET.SubElement(location, f"Corner{k}"), corner)
+    _xyz(ET.SubElement(plate, "Origin"), np.zeros(3))
+
+
+def _xyz(node: ET.Element, xyz: np.ndarray) -> None:
+    for axis, v in zip("XYZ", xyz, strict=True):
+        _add(node, axis, f"{v:.6f}")
 
 
 _ELEMENT = {"general": "General", "3d": "The_3D", "analog": "Analog", "force": "Force"}

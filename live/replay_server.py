@@ -105,7 +105,7 @@ class ReplayServer:
         self.port = self._server.sockets[0].getsockname()[1]
         s = self.source
         say(f"replay: {s.name}, {s.frames:,} frames at {s.rate_hz:g} Hz, {len(s.labels)} "
-            f"markers, {len(s.analog.labels)} analog channels at {s.analog.rate_hz:g} Hz; "
+            f"markers, the force as {s.force.describe()} at {s.force.rate_hz:g} Hz; "
             f"serving QTM RT on {p.host}:{self.port} at {p.speed:g}x real time")
         return self.port
 

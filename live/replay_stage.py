@@ -42,4 +42,4 @@ def run_replay(inputs: str | Path, out: None, params: ReplayParams | None = None
     except KeyboardInterrupt:
         pass                                     # Ctrl-C: the normal end of a replay
     return ReplaySummary(source.name, server.stats.clients, server.stats.frames_sent,
-                         time.monotonic() - start, source.analog.left_out)
+                         time.monotonic() - start, source.force.left_out)

@@ -2,11 +2,13 @@
 each frame into numpy arrays.
 
 The SDK connects, negotiates the protocol version, asks for the parameters and starts the
-stream (``StreamFrames AllFrames 3D Analog``); each data packet is handed to
-:func:`decode_frame`, which reads the 3D component (markers in mm as float32, NaN when lost)
-and the analog component (per board: channel count, sample count, the first sample's number,
-then the samples channel after channel) with numpy, so that a 500 Hz stream costs microseconds
-a frame. Observed behaviour of the SDK that shapes this module (see FINDINGS):
+stream (``StreamFrames AllFrames 3D Analog``, or ``3D Force`` where a force plate measures the
+force); each data packet is handed to :func:`decode_frame`, which reads the 3D component
+(markers in mm as float32, NaN when lost) and the force's device with numpy: the analog
+component (per board: channel count, sample count, the first sample's number, then the samples
+channel after channel) or the force component (per plate: force count, the first force's
+number, then each force's nine float32 values), so that a 500 Hz stream costs microseconds a
+frame. Observed behaviour of the SDK that shapes this module (see FINDINGS):
 
 - ``connect`` returns None, rather than raising, when nothing answers or the version is
   refused, and hangs on a server that never answers: it is given a deadline here;
@@ -29,11 +31,14 @@ from core.errors import BadInput
 VERSION = "1.25"                  # the protocol version asked for (QTM 2019 and later)
 DATA_HEADER = struct.Struct("<qII")          # timestamp (us), frame number, component count
 COMPONENT = struct.Struct("<II")             # size (header included), type
-THREE_D, ANALOG = 1, 3                       # component types
+THREE_D, ANALOG, FORCE = 1, 3, 4             # component types
+COMPONENTS = {"analog": ANALOG, "force": FORCE}   # a force device's component, by name
 MARKERS_HEADER = struct.Struct("<IHH")       # marker count, 2D drop rate, out-of-sync rate
-DEVICES = struct.Struct("<I")                # analog boards in the component
+DEVICES = struct.Struct("<I")                # analog boards (force plates) in the component
 DEVICE = struct.Struct("<III")               # board id, channel count, sample count
 FIRST_SAMPLE = struct.Struct("<I")
+PLATE = struct.Struct("<III")                # plate id, force count, first force's number
+PLATE_VALUES = 9                             # force, moment, application point: x y z each
 END_EVENTS = {"EventRTfromFileStopped": "QTM stopped playing the file",
               "EventCaptureStopped": "QTM stopped capturing",
               "EventConnectionClosed": "QTM closed the connection",
@@ -43,21 +48,23 @@ END_EVENTS = {"EventRTfromFileStopped": "QTM stopped playing the file",
 @dataclass(frozen=True)
 class Frame:
     """One frame as it arrived: its number and QTM's timestamp (us), the 3D markers (M, 3) in
-    metres (NaN when lost), and the force board's samples: the first one's number and the
-    values (n, C), or None where the frame carries no analog component."""
+    metres (NaN when lost), and the force device's samples (a board's, a plate's): the first
+    one's number and the values (n, C), or None where the frame carries none."""
 
     number: int
     timestamp_us: int
     markers: np.ndarray
     first_sample: int | None
-    analog: np.ndarray | None
+    force: np.ndarray | None
 
 
-def decode_frame(data: bytes, device_id: int) -> Frame:
+def decode_frame(data: bytes, device_id: int, component: str = "analog") -> Frame:
     """A data packet's payload (after the packet header) as a :class:`Frame`; ``device_id``
-    picks the analog board. A payload cut short is a :class:`ValueError`."""
+    picks the analog board (``component`` "analog") or the force plate ("force"). A payload
+    cut short is a :class:`ValueError`."""
     timestamp, number, count = DATA_HEADER.unpack_from(data, 0)
-    pos, markers, first, analog = DATA_HEADER.size, np.empty((0, 3)), None, None
+    pos, markers, first, force = DATA_HEADER.size, np.empty((0, 3)), None, None
+    wanted = COMPONENTS[component]
     for _ in range(count):
         size, kind = COMPONENT.unpack_from(data, pos)
         if size < COMPONENT.size or pos + size > len(data):
@@ -65,10 +72,10 @@ def decode_frame(data: bytes, device_id: int) -> Frame:
         body = pos + COMPONENT.size
         if kind == THREE_D:
             markers = _markers(data, body)
-        elif kind == ANALOG:
-            first, analog = _analog(data, body, device_id)
+        elif kind == wanted:
+            first, force = _DEVICE_READERS[kind](data, body, device_id)
         pos += size
-    return Frame(int(number), int(timestamp), markers, first, analog)
+    return Frame(int(number), int(timestamp), markers, first, force)
 
 
 def _markers(data: bytes, pos: int) -> np.ndarray:
@@ -91,6 +98,21 @@ def _analog(data: bytes, pos: int, device_id: int) -> tuple[int | None, np.ndarr
             return int(first), values.reshape(channels, samples).T.astype(np.float64)
         pos += 4 * channels * samples
     return None, None
+
+
+def _plate(data: bytes, pos: int, plate_id: int) -> tuple[int | None, np.ndarray | None]:
+    (plates,), pos = DEVICES.unpack_from(data, pos), pos + DEVICES.size
+    for _ in range(plates):
+        plate, forces, first = PLATE.unpack_from(data, pos)
+        pos += PLATE.size
+        if plate == plate_id and forces:
+            values = np.frombuffer(data, "<f4", count=PLATE_VALUES * forces, offset=pos)
+            return int(first), values.reshape(forces, PLATE_VALUES).astype(np.float64)
+        pos += 4 * PLATE_VALUES * forces
+    return None, None
+
+
+_DEVICE_READERS = {ANALOG: _analog, FORCE: _plate}
 
 
 class Stream:
@@ -123,14 +145,16 @@ class Stream:
                                         f"{self.timeout_s:g} s (is QTM running, with "
                                         "real-time output on this port?)")
         try:
-            return await self._conn.get_parameters(["general", "3d", "analog"])
+            return await self._conn.get_parameters(["general", "3d", "analog", "force"])
         except Exception as e:  # noqa: BLE001 - the SDK raises its own and asyncio's kinds
             raise BadInput(self.source, f"did not give its parameters ({type(e).__name__})"
                            ) from None
 
-    async def run(self, on_frame: Callable[[bytes], None], duration_s: float | None) -> None:
-        """Stream every frame (3D and analog) to ``on_frame`` (the packet's payload) until
-        ``duration_s``, an end event, a lost connection or ``timeout_s`` of silence."""
+    async def run(self, on_frame: Callable[[bytes], None], duration_s: float | None,
+                  component: str = "analog") -> None:
+        """Stream every frame (3D and the force's ``component``, "analog" or "force") to
+        ``on_frame`` (the packet's payload) until ``duration_s``, an end event, a lost
+        connection or ``timeout_s`` of silence."""
         from qtm_rt.packet import QRTPacket
 
         loop = asyncio.get_running_loop()
@@ -141,7 +165,7 @@ class Stream:
             on_frame(p.data)
 
         try:
-            await self._conn.stream_frames(components=["3d", "analog"], on_packet=packet)
+            await self._conn.stream_frames(components=["3d", component], on_packet=packet)
         except Exception as e:  # noqa: BLE001 - the SDK raises its own and asyncio's kinds
             raise BadInput(self.source, f"refused to stream frames ({type(e).__name__}: "
                                         f"{e})") from None

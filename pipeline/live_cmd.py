@@ -55,9 +55,11 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
 
     Reads SESSION_DIR's session.toml (the markers, the force's channels, kind and units, the
     ATI .cal, the pivot recording) and QTM's parameters, and refuses in one line what does not
-    agree (a marker QTM lacks, analog units or a rate that contradict session.toml) before a
-    frame is read. Then streams 3D markers and the force's analog board until --duration,
-    Ctrl-C, QTM's end of the recording or a lost connection. Writes --out/session.mcap as
+    agree (a marker QTM lacks, a force plate or analog channel it lacks, units or a rate that
+    contradict session.toml) before a frame is read. Then streams 3D markers and the force
+    (QTM's force component of the plate where session.toml's force file is a QTM force-plate
+    export, else the force's analog board) until --duration, Ctrl-C, QTM's end of the
+    recording or a lost connection. Writes --out/session.mcap as
     `pipeline ingest` would (every frame received, each stream on its clock; `pipeline sync`
     runs on it), built from a journal written as the frames arrive (session.mcap.part: what a
     kill leaves), and --out/session.rrd: markers, tip, the tared force at the mocap rate, lost

@@ -64,12 +64,16 @@ MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
               show_default=True,
               help="logger: the Speedgoat log on its own clock (force.csv, force.mat); "
                    "analog: the Nano17 through the mocap's analog board, on the mocap clock "
-                   "(indentation.c3d with markers and analog channels, indentation_a.tsv).")
+                   "(indentation.c3d with markers and analog channels, indentation_a.tsv); "
+                   "plate: a force plate under the phantom, on the mocap clock (the QTM "
+                   "force-plate export indentation_f_1.tsv: the true force and its moment "
+                   "with the plate's noise, the centre of pressure; no Nano17).")
 @click.option("--force-file", type=click.Choice([f for fs in FORCE_FILES.values() for f in fs]),
               default=D.force_file,
               help="The force file session.toml names: csv (default) or mat with --force-via "
                    "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
-                   "file) with --force-via analog. Both of a route are written.")
+                   "file) with --force-via analog; tsv (the plate's export) with --force-via "
+                   "plate. Every file of a route is written.")
 @click.option("--markers", type=MARKERS, default=D.markers, show_default=True,
               help="Phantom markers: a grid RxC (R rows along +x, C markers each, centred, "
                    "named row-major P00, P01, ...) or scattered:N (N markers at random "
@@ -83,7 +87,7 @@ MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
               help="The block's footprint LxW in mm (L along +x; 40 to 300 each; 32 mm thick).")
 @click.option("--mocap-rate", "rate_hz", type=MOCAP_RATE, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
-                   "analog needs a rate that divides 1000).")
+                   "analog or plate needs a rate that divides 1000).")
 @click.option("--view-press", type=bounded_int(0), default=D.view_press, show_default=True,
               help="Press shown in the rerun recording.")
 @seed_option
@@ -95,16 +99,18 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
           no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
-    Reads nothing. Writes OUT_DIR: session.toml (with the [phantom] table: the footprint, and
-    how the markers fix the phantom frame); indentation.tsv and indentation_6D.tsv (QTM TSV 3D
-    of the phantom markers, --markers, + 4 indenter markers and 6D of the body 'Indenter', at
+    Reads nothing. Writes OUT_DIR: session.toml (with the [phantom] table: the footprint, and how
+    the markers fix the phantom frame); indentation.tsv and indentation_6D.tsv (QTM TSV 3D of
+    the phantom markers, --markers, + 4 indenter markers and 6D of the body 'Indenter', at
     --mocap-rate, noise and gaps); pivot.tsv (QTM TSV 3D, the tip in a divot); force.csv and
     force.mat (Speedgoat log at 1 kHz on its own clock: six Nano17 gauge voltages with bias,
     and the trigger), or with --force-via analog the same gauges at 1 kHz on the mocap clock in
-    indentation.c3d (with the markers) and indentation_a.tsv (QTM analog export);
-    FT<serial>.cal (ATI calibration, SI-12-0.12); truth.h5 (noise-free markers and tip on the
-    mocap clock, true force, clock offset and drift, tip offset, static states every 0.5 N);
-    and a rerun recording of one press beside its truth (--rrd, default
+    indentation.c3d (with the markers) and indentation_a.tsv (QTM analog export), or with
+    --force-via plate a force plate under the phantom at 1 kHz on the mocap clock in
+    indentation_f_1.tsv (QTM force-plate export: force N, moment N m, centre of pressure mm);
+    FT<serial>.cal (ATI calibration, SI-12-0.12; none with a plate); truth.h5 (noise-free
+    markers and tip on the mocap clock, true force, clock offset and drift, tip offset, static
+    states every 0.5 N); and a rerun recording of one press beside its truth (--rrd, default
     OUT_DIR/recording.rrd). OUT_DIR is new, empty, or an earlier synth session: then the files
     of that session this run does not rewrite (another FT<serial>.cal, a recording.rrd) are
     removed, and files the twin does not write are left alone. The same seed gives the same

@@ -13,6 +13,9 @@
   (points in mm, residual -1 in gaps, analog channels with ``ANALOG:LABELS`` cut short and
   repeated as real exports have them, the full names in ``ANALOG:DESCRIPTIONS``, and a channel
   scale) and a QTM analog TSV export (``<trial>_a.tsv``).
+* QTM's force-plate export (``<trial>_f_1.tsv``): header keys (the plate's name, type, corners
+  and size among them), a ``SAMPLE TIME Force_X .. COP_Z`` line, forces in N, moments in N m,
+  the centre of pressure in mm.
 * ``session.toml`` (see :mod:`data_schema.session`).
 
 The ATI ``.cal`` file is written by :func:`ingest.ati_cal.write_ati_cal`. No writer puts the
@@ -28,6 +31,8 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 from scipy.spatial.transform import Rotation
+
+from ingest.qtm_force_plate import COLUMNS
 
 _CHUNK = 4096                     # rows formatted at a time
 _MAT_HEADER_BYTES = 116           # MAT v5/v7 descriptive text field
@@ -171,6 +176,24 @@ def write_qtm_analog(path: str | Path, analog: Mapping[str, np.ndarray], analog_
     with open(path, "w", newline="", encoding="utf-8") as f:
         f.write("\r\n".join(lines) + "\r\n")
         _write_rows(f, table, ["%d", "%.5f"] + ["%.6f"] * len(names), "\t", "\r\n")
+
+
+def write_qtm_force_plate(path: str | Path, values: np.ndarray, rate_hz: float,
+                          timestamp: str, plate: Sequence[tuple[str, str]]) -> None:
+    """A QTM force-plate TSV export (``<trial>_f_1.tsv``) of one plate's samples ``values``
+    (L, 9: force N, moment N m, centre of pressure mm, in the plate's frame) at ``rate_hz``,
+    the samples on the mocap's clock from its first frame; ``plate`` the header keys that
+    describe the plate (``FORCE_PLATE_*``), in order."""
+    n = len(values)
+    lines = [f"NO_OF_SAMPLES\t{n}", f"FREQUENCY\t{rate_hz:g}", f"TIME_STAMP\t{timestamp}",
+             "FIRST_SAMPLE\t1", "DESCRIPTION\tForce data in local (force plate) coordinates",
+             "DATA_INCLUDED\tForce", *(f"{k}\t{v}" for k, v in plate),
+             "SAMPLE\tTIME\t" + "\t".join(COLUMNS)]
+    idx = np.arange(n, dtype=np.float64)
+    table = np.column_stack([idx + 1, idx / rate_hz, values])
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        f.write("\r\n".join(lines) + "\r\n")
+        _write_rows(f, table, ["%d", "%.5f"] + ["%.6f"] * 6 + ["%.3f"] * 3, "\t", "\r\n")
 
 
 def write_force_csv(path: str | Path, columns: Mapping[str, np.ndarray],

@@ -87,18 +87,19 @@ def write_twin(twin: Twin, folder: str | Path, params: SynthParams,
     folder = Path(folder)
     earlier = (folder / FILES["truth"]).is_file()
     keys = file_keys(twin)
-    finals = [folder / FILES[k] for k in keys] + [folder / calibration_name(twin)]
+    finals = [folder / FILES[k] for k in keys]
+    cal = None if calibration_name(twin) is None else folder / calibration_name(twin)
     if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
         raise BadInput(rrd, "--rrd names one of the session files synth writes")
     provenance = make_provenance("synth", asdict(params), [], TRUTH.name, TRUTH.version)
-    with atomic_outputs(*finals, rrd) as tmps:
+    with atomic_outputs(*finals, cal, rrd) as tmps:
         out = dict(zip([*keys, "cal", "rrd"], tmps, strict=True))
         write_lab_files(twin, out)
         write_truth(out["truth"], twin, provenance)
         if out["rrd"] is not None:
             write_twin_recording(twin, out["rrd"], params.view_press)
     if earlier:
-        _remove_stale(folder, [*finals, rrd])
+        _remove_stale(folder, [*finals, cal, rrd])
 
 
 def _remove_stale(folder: Path, written: list[Path | str | None]) -> None:

@@ -35,7 +35,8 @@ from sim.twin.twin_scene import (
 )
 from sim.twin.twin_states import TrueStates, true_states
 
-ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (analog route)
+ANALOG_LEAD_IN_S = 3.0     # s the hand holds still before its first move (force on the
+                           # mocap's clock: its analog board, its force plate)
 
 
 @dataclass
@@ -64,10 +65,11 @@ class Twin:
 
 def _lead_in(p: TwinParams) -> float:
     """Seconds the hand holds the indenter still before its first move. The Speedgoat log
-    starts seconds before the capture; through the analog board the force starts with the
-    capture, so the hand waits longer there: sync tares from the first 2 s when they are quiet.
+    starts seconds before the capture; sampled by the mocap system (its analog board, its
+    force plate) the force starts with the capture, so the hand waits longer there: sync
+    tares from the first 2 s when they are quiet.
     """
-    return ANALOG_LEAD_IN_S if p.force_via == "analog" else 1.0
+    return ANALOG_LEAD_IN_S if p.on_mocap_clock else 1.0
 
 
 def simulate_twin(p: TwinParams) -> Twin:

@@ -14,14 +14,18 @@ Session folder::
     indentation.c3d       C3D of the markers (mm) and the analog channels (ANALOG:LABELS cut
                           to a repeated "Nano17", full names in ANALOG:DESCRIPTIONS)
     indentation_a.tsv     QTM analog TSV export of the same channels
-    FT<serial>.cal        ATI calibration (SI-12-0.12)
+    (with force_via = "plate", instead: a force plate under the phantom, on the mocap clock)
+    indentation_f_1.tsv   QTM force-plate export: force, moment, centre of pressure
+                          (sim.twin.twin_plate)
+    FT<serial>.cal        ATI calibration (SI-12-0.12; not with a plate: no Nano17)
     truth.h5              the truth (data_schema.truth)
     recording.rrd         the rerun recording of one press (when asked for)
 
 Clock convention: an event at mocap time ``t_m`` (0 at the first frame) is stamped by the
 logger at ``t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m``; the log starts before the mocap
 (with the indenter still and unloaded, so it can be tared) and ends after it. Through the
-analog board offset and drift are 0: the first sample is at the first frame.
+analog board or the force plate offset and drift are 0: the first sample is at the first
+frame.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import numpy as np
 from data_schema.session import SCHEMA as SESSION_SCHEMA
 from data_schema.session import VERSION as SESSION_VERSION
 from ingest.ati_cal import write_ati_cal
+from ingest.qtm_force_plate import WRENCH, corner_keys
 from sim.twin.indenter import BODY_NAME
 from sim.twin.lab_writers import (
     write_c3d,
@@ -41,14 +46,17 @@ from sim.twin.lab_writers import (
     write_qtm_3d,
     write_qtm_6d,
     write_qtm_analog,
+    write_qtm_force_plate,
     write_session_toml,
 )
 from sim.twin.twin import Twin
+from sim.twin.twin_plate import PLATE, plate_corners_mm, plate_samples
 from sim.twin.twin_scene import TRIGGER_EVENT
 
 FILES = {"trial": "indentation.tsv", "bodies": "indentation_6D.tsv", "pivot": "pivot.tsv",
          "csv": "force.csv", "mat": "force.mat", "c3d": "indentation.c3d",
-         "analog": "indentation_a.tsv", "session": "session.toml", "truth": "truth.h5"}
+         "analog": "indentation_a.tsv", "plate": "indentation_f_1.tsv",
+         "session": "session.toml", "truth": "truth.h5"}
 GAUGES = tuple(f"G{k}" for k in range(6))
 TRIGGER_COLUMN = "trigger"
 # the analog route: channel names, the label a C3D export cuts them to (repeated), the board
@@ -56,23 +64,25 @@ ANALOG_GAUGES = tuple(f"Nano17 G{k}" for k in range(6))
 ANALOG_LABEL = "Nano17"
 ANALOG_TRIGGER = "Sync"
 ANALOG_SCALE = 10.0 / 32768        # V per count of a +-10 V 16-bit board (C3D ANALOG:SCALE)
+ROUTE_FILES = {"logger": ("csv", "mat"), "analog": ("c3d", "analog"), "plate": ("plate",)}
 RECORDING = "recording.rrd"         # the recording's default name in the folder
 
 
 def file_keys(twin: Twin) -> tuple[str, ...]:
     """The :data:`FILES` keys a session writes (the force route's own), truth last."""
-    force = ("c3d", "analog") if twin.params.force_via == "analog" else ("csv", "mat")
-    return ("trial", "bodies", "pivot", *force, "session", "truth")
+    return ("trial", "bodies", "pivot", *ROUTE_FILES[twin.params.force_via], "session",
+            "truth")
 
 
-def calibration_name(twin: Twin) -> str:
-    """The ATI calibration's file name: ``FT<serial>.cal``."""
-    return f"{twin.sensor.serial}.cal"
+def calibration_name(twin: Twin) -> str | None:
+    """The ATI calibration's file name, ``FT<serial>.cal``; None where no Nano17 measures
+    the force (a force plate)."""
+    return None if twin.params.force_via == "plate" else f"{twin.sensor.serial}.cal"
 
 
 def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
     """Every lab file of the session (all but the truth) to the paths ``out`` names by
-    :data:`FILES` key, and the calibration to ``out["cal"]``."""
+    :data:`FILES` key, and the calibration to ``out["cal"]`` (None: no calibration)."""
     p, m = twin.params, twin.mocap
     stamp, mat_date = _stamp(p.seed)
     write_qtm_3d(out["trial"], _marker_names(twin), m.measured, p.rate_hz, stamp, m.events)
@@ -82,9 +92,13 @@ def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
                  _stamp(p.seed, minutes_before=4)[0])
     if p.force_via == "analog":
         _write_analog(twin, out["c3d"], out["analog"], stamp)
+    elif p.force_via == "plate":
+        write_qtm_force_plate(out["plate"], plate_samples(twin), p.logger_hz, stamp,
+                              _plate_keys(twin))
     else:
         _write_logger(twin, out["csv"], out["mat"], mat_date)
-    write_ati_cal(out["cal"], twin.sensor.calibration)
+    if out.get("cal") is not None:
+        write_ati_cal(out["cal"], twin.sensor.calibration)
     write_session_toml(out["session"], *_session_tables(twin, calibration_name(twin)))
 
 
@@ -129,16 +143,31 @@ def _write_analog(twin: Twin, c3d: Path, tsv: Path, stamp: str) -> None:
     write_qtm_analog(tsv, channels, p.logger_hz, stamp)
 
 
-def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:
+def _plate_keys(twin: Twin) -> list[tuple[str, str]]:
+    """The export's ``FORCE_PLATE_*`` header keys: the plate's type, model, name, corners
+    (lab, mm) and size."""
+    corners = plate_corners_mm(twin).ravel()
+    return [("FORCE_PLATE_TYPE", PLATE.type), ("FORCE_PLATE_MODEL", PLATE.model),
+            ("FORCE_PLATE_NAME", PLATE.name),
+            *((k, f"{v:.3f}") for k, v in zip(corner_keys(), corners, strict=True)),
+            ("FORCE_PLATE_LENGTH", f"{PLATE.length_mm:.3f}"),
+            ("FORCE_PLATE_WIDTH", f"{PLATE.width_mm:.3f}")]
+
+
+def _session_tables(twin: Twin, cal_name: str | None) -> tuple[dict, dict]:
     p = twin.params
     mocap: dict[str, object] = {
         "file": FILES["trial"], "bodies_file": FILES["bodies"],
         "phantom_markers": list(twin.phantom.spec.markers.names),
         "indenter_markers": list(twin.indenter.names),
         "indenter_body": BODY_NAME}
-    source = {"csv": "csv", "mat": "mat", "tsv": "analog", "c3d": "c3d"}[p.force_source]
+    source = "plate" if p.force_via == "plate" else \
+        {"csv": "csv", "mat": "mat", "tsv": "analog", "c3d": "c3d"}[p.force_source]
     force: dict[str, object] = {"file": FILES[source]}
-    if p.force_via == "analog":
+    if p.force_via == "plate":                  # the export states N and N m
+        force.update(kind="wrench", channels=list(WRENCH), rate_hz=p.logger_hz)
+        other = None
+    elif p.force_via == "analog":
         force.update(kind="gauge", channels=list(ANALOG_GAUGES), rate_hz=p.logger_hz,
                      calibration=cal_name)
         if source == "c3d":                     # one export holds markers and force
@@ -153,7 +182,8 @@ def _session_tables(twin: Twin, cal_name: str) -> tuple[dict, dict]:
             force["trigger_column"] = TRIGGER_COLUMN
     top = {"schema": SESSION_SCHEMA, "schema_version": SESSION_VERSION,
            "name": f"phantom-twin-seed{p.seed}"}
-    synth = {"seed": p.seed, "truth": FILES["truth"], "other_force_file": other}
+    synth = {"seed": p.seed, "truth": FILES["truth"],
+             **({"other_force_file": other} if other else {})}
     return top, {"mocap": mocap, "force": force, "pivot": {"file": FILES["pivot"]},
                  "phantom": phantom_table(twin), "synth": synth}
 

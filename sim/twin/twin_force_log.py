@@ -7,7 +7,9 @@ irregular intervals go to the trigger channel.
 
 With ``force_via = "analog"`` the Nano17's amplifier is wired into the mocap system's analog
 board instead: the samples are on the mocap's clock (offset 0, drift 0), a whole number per
-frame, from the first frame to the last frame's end, as QTM records them.
+frame, from the first frame to the last frame's end, as QTM records them. A force plate under
+the phantom (``force_via = "plate"``, :mod:`sim.twin.twin_plate`) is sampled at the same
+times.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.twin.indenter import GRAVITY, Hand, IndenterGeometry
+from sim.twin.indenter import GRAVITY, Hand, HandState, IndenterGeometry
 from sim.twin.nano17 import Nano17
 from sim.twin.twin_scene import TwinParams
 
@@ -51,7 +53,7 @@ def play_force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor
     offset = offset if p.offset_s is None else p.offset_s
     drift = drift if p.drift_ppm is None else p.drift_ppm
     lead, tail = g_clock.uniform(1.5, 3.0), g_clock.uniform(0.5, 2.0)
-    if p.force_via == "analog":
+    if p.on_mocap_clock:
         offset, drift = 0.0, 0.0
         per_frame = int(round(p.logger_hz / p.rate_hz))
         t_f = np.arange((int(round(last_frame_s * p.rate_hz)) + 1) * per_frame) / p.logger_hz
@@ -64,9 +66,7 @@ def play_force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor
     t_m = (t_f - offset) / scale
 
     st = hand.state(t_m)
-    directions = np.vstack([np.zeros(3), *(q.direction for q in hand.presses)])
-    force, torque = contact_wrench(indenter, st.rotation,
-                                    st.force[:, None] * directions[st.press + 1])
+    force, torque = contact_wrench(indenter, st.rotation, force_on_phantom(hand, st))
     tool = np.einsum("tji,j->ti", st.rotation, indenter.tool_mass * GRAVITY)
     tool_torque = np.cross(indenter.tool_centre - indenter.sensor, tool)
     volts = sensor.volts(g_force, force + tool, torque + tool_torque, t_f)
@@ -81,6 +81,13 @@ def play_force_log(p: TwinParams, hand: Hand, indenter: IndenterGeometry, sensor
     return ForceLog(time_s=t_f, mocap_time_s=t_m, force=force, torque=torque, tool_force=tool,
                     volts=volts, trigger=trigger, offset_s=float(offset),
                     drift_ppm=float(drift), pulses=pulses)
+
+
+def force_on_phantom(hand: Hand, st: HandState) -> np.ndarray:
+    """The force (T, 3) the indenter exerts on the phantom at the hand's states, lab frame
+    (0 in the air)."""
+    directions = np.vstack([np.zeros(3), *(q.direction for q in hand.presses)])
+    return st.force[:, None] * directions[st.press + 1]
 
 
 def contact_wrench(indenter: IndenterGeometry, rotation: np.ndarray, force_lab: np.ndarray

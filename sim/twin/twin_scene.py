@@ -23,7 +23,9 @@ from sim.twin.mocap_errors import MocapErrors
 from sim.twin.phantom import LoadPath, Phantom, PhantomSpec
 
 TRIGGER_EVENT = "Trigger"           # the EVENT label of the sync pulses in the mocap export
-FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d")}   # --force-via: --force-file
+# --force-via: its --force-file choices (the first the default)
+FORCE_FILES = {"logger": ("csv", "mat"), "analog": ("tsv", "c3d"), "plate": ("tsv",)}
+MOCAP_CLOCK = ("analog", "plate")   # the routes the mocap system samples, on its own clock
 PRESS_SECONDS = (2.0, 60.0)         # s, the range of --press-seconds
 PIVOT_SECONDS = (2.0, 600.0)        # s, the range of --pivot-seconds
 RATE_HZ = (10.0, 2000.0)            # Hz, the mocap frame rates a lab runs (--mocap-rate)
@@ -48,8 +50,10 @@ class TwinParams:
     offset_s: float | None = None        # None: drawn, |offset| in [0.3, 3] s, either sign
     drift_ppm: float | None = None       # None: drawn, |drift| in [10, 60] ppm, either sign
     force_file: str | None = None        # the file session.toml names: csv or mat (logger),
-                                         # tsv (QTM analog export) or c3d (analog); None: first
-    force_via: str = "logger"            # logger: Speedgoat, own clock; analog: mocap's board
+                                         # tsv (QTM analog export) or c3d (analog), tsv (QTM
+                                         # force-plate export: plate); None: the route's first
+    force_via: str = "logger"            # logger: Speedgoat, own clock; analog: the Nano17
+                                         # through the mocap's board; plate: a force plate
     errors: MocapErrors = field(default_factory=MocapErrors)
     phantom: PhantomSpec = field(default_factory=PhantomSpec)
 
@@ -57,6 +61,12 @@ class TwinParams:
     def force_source(self) -> str:
         """The force file session.toml names (``force_file``, or the route's first)."""
         return self.force_file or FORCE_FILES.get(self.force_via, ("csv",))[0]
+
+    @property
+    def on_mocap_clock(self) -> bool:
+        """Whether the mocap system samples the force (its analog board, its force plate):
+        one clock, a whole number of samples per frame."""
+        return self.force_via in MOCAP_CLOCK
 
 
 def check_params(p: TwinParams) -> None:
@@ -70,11 +80,13 @@ def check_params(p: TwinParams) -> None:
          f"{p.force_via}"),
         ("--mocap-rate", RATE_HZ[0] <= p.rate_hz <= RATE_HZ[1],
          "{:g} Hz: must be between {:g} and {:g} Hz".format(p.rate_hz, *RATE_HZ)),
-        ("--mocap-rate", p.force_via != "analog" or float(p.logger_hz / p.rate_hz).is_integer(),
-         f"{p.rate_hz:g} Hz does not divide the {p.logger_hz:g} Hz force rate: through the "
-         "analog board (--force-via analog) the force has a whole number of samples per frame"),
-        ("--offset", p.force_via != "analog" or (p.offset_s is None and p.drift_ppm is None),
-         "--offset and --drift are the logger's clock; through the analog board there is one"),
+        ("--mocap-rate", not p.on_mocap_clock or float(p.logger_hz / p.rate_hz).is_integer(),
+         f"{p.rate_hz:g} Hz does not divide the {p.logger_hz:g} Hz force rate: sampled by the "
+         f"mocap system (--force-via {p.force_via}) the force has a whole number of samples "
+         "per frame"),
+        ("--offset", not p.on_mocap_clock or (p.offset_s is None and p.drift_ppm is None),
+         "--offset and --drift are the logger's clock; sampled by the mocap system "
+         f"(--force-via {p.force_via}) there is one"),
         ("--press-seconds", p.press_seconds is None
          or PRESS_SECONDS[0] <= p.press_seconds <= PRESS_SECONDS[1],
          "must be between {:g} and {:g} s".format(*PRESS_SECONDS)),

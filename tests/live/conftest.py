@@ -1,4 +1,5 @@
-"""A twin session whose force comes through QTM's analog board, as a live session's does."""
+"""Twin sessions whose force QTM samples, as a live session's is: through its analog board, or
+from a force plate under the phantom."""
 
 from __future__ import annotations
 
@@ -16,3 +17,11 @@ def twin_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("live") / "session"
     return run_synth(None, out, SynthParams(seed=3, locations=4, repeats=1,
                                             force_via="analog"))
+
+
+@pytest.fixture(scope="session")
+def plate_session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The same four presses (seed 3), the force from a force plate under the phantom."""
+    out = tmp_path_factory.mktemp("live_plate") / "session"
+    return run_synth(None, out, SynthParams(seed=3, locations=4, repeats=1,
+                                            force_via="plate"))

@@ -13,7 +13,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,45 +20,22 @@ import pytest
 from click.testing import CliRunner
 from helpers.bad_input_checks import TINY_RUN
 from helpers.cgnn_data import write_dent_states
+from helpers.live_replay import STATE_KEYS, assert_same_states, offline_states, replaying
 from helpers.paths import ROOT
 
 from core.recording import rrd_entities
 from data_schema.hdf5 import read_h5
 from data_schema.states import STATES
-from extract.extract_params import ExtractParams
-from extract.extract_stage import run_extract
 from ingest.ingest_params import IngestParams
 from ingest.ingest_stage import run_ingest
 from ingest.mcap_io import read_raw_mcap
 from live.live_params import LiveParams
 from live.live_stage import MCAP_NAME, RRD_NAME, STATES_NAME, run_live
 from live.replay_parameters import parameters_xml
-from live.replay_params import ReplayParams
-from live.replay_server import ReplayServer
 from live.replay_source import read_replay_source
 from live.rt_packets import Component, PacketType, encode_text
 from pipeline.cli import cli
 from sync.sync import sync_session
-from sync.sync_params import SyncParams
-from sync.sync_stage import run_sync
-
-SPEED = 20.0                  # times real time: a 20 s twin session in about a second
-
-
-@contextlib.contextmanager
-def replaying(session: Path, speed: float = SPEED) -> Iterator[ReplayServer]:
-    """The replay server on a free port, in a thread of its own (run_live runs its own loop)."""
-    loop = asyncio.new_event_loop()
-    server = ReplayServer(read_replay_source(session), ReplayParams(port=0, speed=speed))
-    loop.run_until_complete(server.start())
-    thread = threading.Thread(target=loop.run_forever, daemon=True)
-    thread.start()
-    try:
-        yield server
-    finally:
-        asyncio.run_coroutine_threadsafe(server.close(), loop).result(10)
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(10)
 
 
 @pytest.fixture(scope="module")
@@ -119,21 +95,13 @@ def test_presses_seen_live_are_syncs_and_the_states_are_extracts(recorded, tmp_p
     are those ingest, sync and extract give on the exports afterwards: the same presses and
     levels, points within 0.05 mm, forces within 1 mN."""
     summary, _, _, ingested, out = recorded
-    offline = tmp_path / "offline"
-    offline.mkdir()
-    run_sync(out.parent / "ingested.mcap", offline / "s.h5", SyncParams(), None)
-    run_extract([offline / "s.h5"], offline / "states.h5", ExtractParams(), None)
+    offline = offline_states(out.parent / "ingested.mcap", tmp_path / "offline")
     synced = sync_session(ingested)
     assert summary.presses == len(synced.presses)
     assert len(summary.locations) == len(synced.location_centres)
-    live, _ = read_h5(out / STATES_NAME, STATES)
-    want, _ = read_h5(offline / "states.h5", STATES)
+    want, _ = read_h5(offline, STATES)
     assert summary.states.startswith(f"{len(want['states/points'])} states")
-    for key in ("states/step", "states/sequence", "states/location", "single/start",
-                "single/end", "multi/start", "multi/end"):
-        np.testing.assert_array_equal(live[key], want[key], err_msg=key)
-    np.testing.assert_allclose(live["states/points"], want["states/points"], atol=5e-5)
-    np.testing.assert_allclose(live["states/force"], want["states/force"], atol=1e-3)
+    assert_same_states(out / STATES_NAME, offline)
     assert [c.presses for c in summary.locations] == [1, 1, 1, 1]
 
 
@@ -367,11 +335,7 @@ def test_a_lab_with_another_marker_layout(tmp_path) -> None:
                                                                   timeout_s=10), None)
     ingested = tmp_path / "ingested.mcap"
     run_ingest(session, ingested, IngestParams(), None)
-    run_sync(ingested, tmp_path / "s.h5", SyncParams(), None)
-    run_extract([tmp_path / "s.h5"], tmp_path / "states.h5", ExtractParams(), None)
+    offline = offline_states(ingested, tmp_path / "offline")
     live, _ = read_h5(tmp_path / "live" / STATES_NAME, STATES)
-    want, _ = read_h5(tmp_path / "states.h5", STATES)
     assert summary.refused is None and live["states/points"].shape[1] == 21
-    for key in ("states/step", "states/sequence", "states/location"):
-        np.testing.assert_array_equal(live[key], want[key], err_msg=key)
-    np.testing.assert_allclose(live["states/points"], want["states/points"], atol=5e-5)
+    assert_same_states(tmp_path / "live" / STATES_NAME, offline, STATE_KEYS[:3])

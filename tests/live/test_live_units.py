@@ -1,6 +1,6 @@
 """The live client's parts on hand-made input: QTM's parameters document, a data packet's
 bytes written here with struct from the protocol's layout, the journal cut short, and the
-session's checks against QTM's labels and analog board."""
+session's checks against QTM's labels and analog board (force plates: test_live_plate.py)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,16 @@ import pytest
 
 from core.errors import BadInput
 from data_schema.session import read_session
-from live.live_journal import ANALOG, MARKERS, Journal, read_journal
+from live.live_journal import FORCE, MARKERS, Journal, read_journal
 from live.live_layout import live_layout
-from live.qtm_parameters import AnalogDevice, QtmParameters, parse_parameters
+from live.qtm_parameters import (
+    AnalogDevice,
+    ForcePlate,
+    QtmParameters,
+    device_from_json,
+    device_json,
+    parse_parameters,
+)
 from live.rt_client import decode_frame
 
 SOURCE = "QTM RT 127.0.0.1:1"
@@ -34,6 +41,8 @@ def test_the_parameters_document_gives_rates_labels_and_boards() -> None:
     p = parse_parameters(XML.encode(), SOURCE)
     assert (p.rate_hz, p.labels) == (500.0, ["P00", "Indenter - 1"])
     assert p.analog == [AnalogDevice(3, "USB-2533", 1000.0, ["G0", "G1"], ["V", "V"])]
+    words = XML.replace("<Unit>V</Unit>", "<Unit>newtons</Unit>", 1)   # QTM's word for N
+    assert parse_parameters(words, SOURCE).analog[0].units == ["N", "V"]
 
 
 @pytest.mark.parametrize(("edit", "words"), [
@@ -50,18 +59,60 @@ def test_a_document_without_rates_or_labels_is_refused(edit, words) -> None:
         parse_parameters(xml, SOURCE)
 
 
-def _packet(number: int, markers: np.ndarray, boards: list[tuple[int, int, np.ndarray]]
-            ) -> bytes:
+PLATE_XML = """<QTM_Parameters_Ver_1.25>
+ <General><Frequency>500</Frequency></General>
+ <The_3D><Labels>1</Labels><Label><Name>P00</Name></Label></The_3D>
+ <Force><Unit_Length>m</Unit_Length><Unit_Force>N</Unit_Force>
+  <Plate><Plate_ID>2</Plate_ID><Analog_Device_ID>1</Analog_Device_ID>
+   <Frequency>1000.000000</Frequency><Type>Kistler</Type><Name>Force-plate 1</Name>
+   <Length>0.6</Length><Width>0.5</Width>
+   <Location><Corner1><X>0.3</X><Y>0.25</Y><Z>0</Z></Corner1>
+    <Corner2><X>-0.3</X><Y>0.25</Y><Z>0</Z></Corner2>
+    <Corner3><X>-0.3</X><Y>-0.25</Y><Z>0</Z></Corner3>
+    <Corner4><X>0.3</X><Y>-0.25</Y><Z>0</Z></Corner4></Location></Plate>
+  <Plate><Force_Plate_Index>3</Force_Plate_Index><Frequency>500</Frequency></Plate>
+ </Force>
+</QTM_Parameters_Ver_1.25>"""
+NINE = ["Force_X", "Force_Y", "Force_Z", "Moment_X", "Moment_Y", "Moment_Z", "COP_X", "COP_Y",
+        "COP_Z"]
+
+
+def test_the_parameters_document_gives_the_force_plates() -> None:
+    """Each plate's id (Plate_ID, or Force_Plate_Index of protocols before 1.8), rate, name,
+    type and corners (in mm, whatever Unit_Length), its nine values in the units stated."""
+    p = parse_parameters(PLATE_XML, SOURCE)
+    assert p.analog == []
+    first, second = p.plates
+    corners = [[300.0, 250.0, 0.0], [-300.0, 250.0, 0.0], [-300.0, -250.0, 0.0],
+               [300.0, -250.0, 0.0]]
+    assert first == ForcePlate(2, "Force-plate 1", 1000.0, NINE, ["N"] * 3 + ["N*m"] * 3
+                               + ["m"] * 3, "Kistler", corners)
+    assert (second.device_id, second.name, second.rate_hz, second.corners_mm) == \
+        (3, "#2", 500.0, None)
+    assert device_from_json(device_json(first)) == first
+    assert device_from_json({"device_id": 3, "name": "b", "rate_hz": 1.0, "labels": [],
+                             "units": []}) == AnalogDevice(3, "b", 1.0, [], [])
+    with pytest.raises(BadInput, match="force plate #2 Frequency"):
+        parse_parameters(PLATE_XML.replace("<Frequency>500</Frequency></Plate>", "</Plate>"),
+                         SOURCE)
+
+
+def _packet(number: int, markers: np.ndarray, boards: list[tuple[int, int, np.ndarray]],
+            plates: list[tuple[int, int, np.ndarray]] = ()) -> bytes:
     """A data packet's payload from the protocol's layout: i64 timestamp, u32 frame, u32
     components; 3D: u32 count, u16 drop, u16 sync, f32 x y z (mm); analog: u32 boards, per
-    board u32 id, u32 channels, u32 samples, u32 first sample, f32 channel after channel."""
+    board u32 id, u32 channels, u32 samples, u32 first sample, f32 channel after channel;
+    force: u32 plates, per plate u32 id, u32 forces, u32 first force, 9 f32 per force."""
     three = struct.pack("<IHH", len(markers), 0, 0) + markers.astype("<f4").tobytes()
     analog = struct.pack("<I", len(boards))
     for board, first, values in boards:
         analog += struct.pack("<IIII", board, values.shape[1], values.shape[0], first)
         analog += values.T.astype("<f4").tobytes()
+    force = struct.pack("<I", len(plates))
+    for plate, first, values in plates:
+        force += struct.pack("<III", plate, len(values), first) + values.astype("<f4").tobytes()
     comps = [struct.pack("<II", 8 + len(body), kind) + body for kind, body in
-             ((1, three), (3, analog))]
+             ((1, three), (3, analog), (4, force))]
     return struct.pack("<qII", 123456, number, len(comps)) + b"".join(comps)
 
 
@@ -71,8 +122,23 @@ def test_a_frame_decodes_to_metres_and_the_chosen_boards_samples() -> None:
     frame = decode_frame(_packet(7, mm, [(1, 0, other), (3, 40, mine)]), device_id=3)
     assert frame.number == 7 and frame.first_sample == 40
     np.testing.assert_array_equal(frame.markers, mm / 1000.0)
-    np.testing.assert_array_equal(frame.analog, mine)
-    assert decode_frame(_packet(8, mm, [(1, 0, other)]), device_id=3).analog is None
+    np.testing.assert_array_equal(frame.force, mine)
+    assert decode_frame(_packet(8, mm, [(1, 0, other)]), device_id=3).force is None
+
+
+def test_a_frame_decodes_the_chosen_plates_forces() -> None:
+    """The force component's plate of that id: its first force's number and its forces (n, 9),
+    force by force; the analog component is not read then."""
+    mm = np.zeros((1, 3))
+    other, mine = np.arange(9.0)[None], np.arange(18.0).reshape(2, 9) / 4
+    data = _packet(7, mm, [(2, 0, np.ones((2, 2)))], [(1, 5, other), (2, 40, mine)])
+    frame = decode_frame(data, device_id=2, component="force")
+    assert frame.first_sample == 40
+    np.testing.assert_array_equal(frame.force, mine)
+    assert decode_frame(_packet(8, mm, [], [(1, 0, other)]), 2, "force").force is None
+    assert decode_frame(_packet(8, mm, [], [(2, 3, other[:0])]), 2, "force").force is None
+    with pytest.raises((ValueError, struct.error)):
+        decode_frame(data[:-5], device_id=2, component="force")
 
 
 def test_a_frame_cut_short_is_refused() -> None:
@@ -87,7 +153,7 @@ def test_the_journal_keeps_every_complete_block_of_a_file_cut_short(tmp_path: Pa
     for i in range(3):
         journal.append(MARKERS, np.arange(i * 5, i * 5 + 5) * 2_000_000, np.full((5, 3), i))
         before = path.stat().st_size
-        journal.append(ANALOG, np.arange(i * 10, i * 10 + 10) * 1_000_000, np.full((10, 2), i))
+        journal.append(FORCE, np.arange(i * 10, i * 10 + 10) * 1_000_000, np.full((10, 2), i))
     cut = (before + path.stat().st_size) // 2   # the last block cut short, as by a kill
     journal.close()
     whole = read_journal(path)
@@ -96,7 +162,7 @@ def test_the_journal_keeps_every_complete_block_of_a_file_cut_short(tmp_path: Pa
     (tmp_path / "cut.part").write_bytes(path.read_bytes()[:cut])
     part = read_journal(tmp_path / "cut.part")
     assert not part.complete
-    assert len(part.streams[MARKERS][0]) == 15 and len(part.streams[ANALOG][0]) == 20
+    assert len(part.streams[MARKERS][0]) == 15 and len(part.streams[FORCE][0]) == 20
     (tmp_path / "other.part").write_bytes(b"\x89MCAP0\r\n")
     with pytest.raises(BadInput, match="not a live session's journal"):
         read_journal(tmp_path / "other.part")

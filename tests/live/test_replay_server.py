@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.force_plate import centre_of_pressure
 from core.series import RawSession
 from data_schema.session import read_session
 from ingest.ingest_params import IngestParams
@@ -68,9 +69,11 @@ async def serving(path: Path, speed: float = SPEED) -> AsyncIterator[ReplayServe
         await server.close()
 
 
-async def vendor_stream(port: int, components: list[str]) -> tuple[str, list, list]:
-    """Connect with the SDK, ask the parameters, stream until the end event: (XML, packets,
-    events)."""
+async def vendor_stream(port: int, components: list[str],
+                        parameters: tuple[str, ...] = ("general", "3d", "analog")
+                        ) -> tuple[str, list, list]:
+    """Connect with the SDK, ask the ``parameters``, stream until the end event: (XML,
+    packets, events)."""
     ended, events = asyncio.Event(), []
 
     def on_event(event: object) -> None:
@@ -80,7 +83,7 @@ async def vendor_stream(port: int, components: list[str]) -> tuple[str, list, li
 
     conn = await qtm_rt.connect("127.0.0.1", port=port, version="1.25", on_event=on_event)
     assert conn is not None
-    xml = await conn.get_parameters(["general", "3d", "analog"])
+    xml = await conn.get_parameters(list(parameters))
     packets: list = []
     assert await conn.stream_frames(components=components, on_packet=packets.append) == b"Ok"
     await asyncio.wait_for(ended.wait(), WAIT_S)
@@ -159,6 +162,58 @@ def _check_analog(packets: list, s: RawSession) -> None:
         values.append(block)
     np.testing.assert_array_equal(np.concatenate(numbers), np.arange(f.frames))
     np.testing.assert_array_equal(np.concatenate(values), np.float32(f.values))
+
+
+@pytest.fixture(scope="module")
+def replay_plate(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One short press, its force from a force plate under the phantom (the mocap's clock)."""
+    return run_synth(None, tmp_path_factory.mktemp("replay_plate") / "twin", SynthParams(
+        seed=3, locations=1, repeats=1, force_via="plate", press_seconds=2.0,
+        pivot_seconds=2.0))
+
+
+def test_vendor_client_decodes_the_force_plate(replay_plate):
+    """A session whose force a plate measured is served as that plate: its parameters (id,
+    rate, name, type, corners; no analog device), and per frame the force component with the
+    plate's forces falling in it, numbered on, each its force and moment as the session has
+    them and its point of application (mm) where their line of action meets the plate."""
+    s = load_session(read_session(replay_plate))
+
+    async def run() -> tuple[str, list]:
+        async with serving(replay_plate) as server:
+            xml, packets, _ = await vendor_stream(server.port, ["3d", "analog", "force"],
+                                                  ("general", "3d", "analog", "force"))
+            return xml, packets
+
+    xml, packets = asyncio.run(run())
+    root = ET.fromstring(xml)
+    assert root.find("Analog/Device") is None and root.findtext("Force/Unit_Force") == "N"
+    (plate,) = root.iterfind("Force/Plate")
+    assert (plate.findtext("Plate_ID"), plate.findtext("Name"), plate.findtext("Type")) == \
+        ("1", "Force-plate 1", "Kistler")
+    assert float(plate.findtext("Frequency")) == s.force.rate_hz == 1000.0
+    corners = [[float(plate.findtext(f"Location/Corner{k}/{a}")) for a in "XYZ"]
+               for k in range(1, 5)]
+    np.testing.assert_allclose(corners, s.force.meta["plate_corners_mm"], atol=1e-6)
+    assert len(packets) == s.markers.frames
+    f, t_frames = s.force, s.markers.time_ns
+    half, period = 500_000, int(1e9 / s.markers.rate_hz)
+    numbers, values = [], []
+    for i, p in enumerate(packets):
+        assert p.get_analog()[1] == []                          # no analog device
+        info, plates = p.get_force()
+        assert info.plate_count == 1 and len(plates) == 1
+        head, forces = plates[0]
+        assert head.id == 1 and head.force_count == len(forces) == 2
+        t = f.time_ns[head.force_number:head.force_number + len(forces)]
+        assert np.all(t >= t_frames[i] - half) and np.all(t < t_frames[i] + period - half)
+        numbers.append(np.arange(head.force_number, head.force_number + len(forces)))
+        values += [tuple(x) for x in forces]
+    np.testing.assert_array_equal(np.concatenate(numbers), np.arange(f.frames))
+    cop = centre_of_pressure(f.values[:, :3], f.values[:, 3:]) * 1e3
+    np.testing.assert_array_equal(np.array(values, np.float32),
+                                  np.float32(np.column_stack([f.values, cop])))
+    assert np.abs(cop[np.abs(f.values[:, 2]) > 1, :2]).max() < 60    # under the phantom
 
 
 def test_clients_one_after_another_and_one_that_leaves_midway(replay_mcap):

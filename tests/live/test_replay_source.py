@@ -22,7 +22,7 @@ def test_shared_clock_gives_each_frame_its_own_samples():
 def test_a_log_on_its_own_clock_is_cut_to_the_frames():
     s = analytic_session()                             # a wrench log 0.8 s late, 1 s longer
     src = replay_source(s, "analytic")
-    a, f = src.analog, s.force
+    a, f = src.force, s.force
     assert src.labels == s.phantom_markers + s.indenter_markers and src.clock == "log"
     np.testing.assert_array_equal(src.markers_mm, np.float32(s.markers.positions * 1e3))
     assert a.labels == f.channels + ["trigger"] and a.units[:4] == ["newtons"] * 3 + [
