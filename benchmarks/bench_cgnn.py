@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import statistics
 import tempfile
@@ -45,7 +46,7 @@ from train.inference.predictor import DEFAULT_REGION, Predictor
 from train.inference.si_model import ENTRIES, SIModel, to_onnx
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.normalise import Normaliser
+from train.model.normalise import Envelope, Normaliser
 from train.model.si_units import deformed, newtons
 
 
@@ -98,8 +99,25 @@ def median_ms(fn: Callable[[], object], repeats: int, sync: Callable[[], None]) 
     return statistics.median(times) * 1e3
 
 
-NORM = Normaliser((0.05, 0.05, 0.0), 0.04, 0.002, 0.5, 0.07)   # a 100 mm surface's statistics
+# a 100 mm surface's statistics, with a training envelope (presses of 1-20 mm from up to 5 mm
+# above the surface) so that every call checks its press against it, as a checkpoint's does
+ENVELOPE = Envelope(press_min=0.001, press_max=0.02, tip_lowest=-0.02, gap_max=0.005,
+                    force_min=-1e6, force_max=1e6, top=0.001)
+NORM = Normaliser((0.05, 0.05, 0.0), 0.04, 0.002, 0.5, 0.07, ENVELOPE)
 PRESS = np.array([0.05, 0.05, 0.002, 0.05, 0.05, -0.01], np.float32)  # 12 mm at the centre
+
+
+def circle(places: int = 64, radius: float = 0.02) -> list[np.ndarray]:
+    """A moving tip: ``PRESS`` at ``places`` points of a circle about the centre, in turn
+    (a haptic loop's tip moves between calls, so each call is a new press)."""
+    turn = np.linspace(0.0, 2 * np.pi, places, endpoint=False)
+    shift = np.stack([np.cos(turn), np.sin(turn), np.zeros(places)], 1) * radius
+    return [(PRESS + np.tile(s, 2)).astype(np.float32) for s in shift]
+
+
+def moving() -> Callable[[], np.ndarray]:
+    """Each call the next press of :func:`circle`."""
+    return partial(next, itertools.cycle(circle()))
 
 
 def surface(n: int, grid: bool) -> np.ndarray:
@@ -139,12 +157,14 @@ READS = {True: "its graph layers read the press: every press runs them",
 
 def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> None:
     """Batch-1 latency through the predictor, for each of :data:`NETWORKS` (a mesh pressed
-    again: the scene is reused; and a new mesh every call)."""
+    again with a moving tip and with one press repeated: the scene is reused; and a new mesh
+    every call)."""
     backends = ("onnx", "torch") if device.type == "cpu" else ("torch",)
     print(f"batch-1 latency through Predictor [ms] (median of >= 30); ratio = PyG peer / "
-          f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; 'new' = a new mesh "
-          "every call (nothing cached):")
-    for name, cfg in NETWORKS.items():     # the last (tip offsets) is timed apart below
+          f"ours ({backends[0]}); region = {DEFAULT_REGION * 1e3:.0f} mm; a known mesh with a "
+          "moving tip (a new press each call) unless 'same' (one press repeated); 'new' = a "
+          "new mesh every call (nothing cached):")
+    for name, cfg in NETWORKS.items():
         torch.manual_seed(0)
         model = CGNN(cfg).to(device).eval()
         si = SIModel(model, NORM)
@@ -154,73 +174,137 @@ def latency(device: torch.device, repeats: int, sync: Callable[[], None]) -> Non
         for n, grid in ((26, False), (1024, False), (1024, True), (4096, True)):
             row = scene_row(ours, them, surface(n, grid), max(30, repeats * 26 // n), sync)
             ratio = {what: row["PyG peer"] / row[f"{backends[0]} {what}"]
-                     for what in ("predict", "region", "new")}
+                     for what in ("predict", "same", "region", "new")}
             print(f"  N={n:5d} {'grid' if grid else 'random':6s} "
                   + "  ".join(f"{k} {v:7.3f}" for k, v in row.items())
-                  + f"  ratio {ratio['predict']:5.2f}x (region {ratio['region']:5.1f}x, "
-                    f"new {ratio['new']:4.1f}x)")
-    if device.type == "cpu":                 # the tip-offset network: it runs whole per press
-        where_the_time_goes(ours["onnx"], si, repeats)
+                  + f"  ratio {ratio['predict']:5.2f}x (same press {ratio['same']:5.2f}x, "
+                    f"region {ratio['region']:5.1f}x, new {ratio['new']:4.1f}x)")
+        if device.type == "cpu":
+            where_the_time_goes(ours["onnx"], si, repeats)
+    if device.type == "cpu" and torch.get_num_threads() > 1:
+        thread_table(repeats)
 
 
 def scene_row(ours: dict[str, Predictor], them: PeerPredictor, pts: np.ndarray, reps: int,
               sync: Callable[[], None]) -> dict[str, float]:
-    """Median ms of each backend's predict, predict_force, region predict and predict on a
-    new mesh each call (two meshes in turn), and the peer's."""
+    """Median ms of each backend's predict, predict_force and region predict on a known mesh
+    with a moving tip, of predict and predict_force with one press repeated ("same"), and of
+    predict on a new mesh each call (two meshes in turn); and the peer's, with the moving tip."""
     moved = pts.copy()
     moved[0, 2] += np.float32(1e-4)
-    turn = [pts, moved]                      # the meshes in turn: each call is a new scene
+    turn, press = [pts, moved], moving()      # the meshes in turn: each call is a new scene
 
     def new(p: Predictor) -> None:
         turn.reverse()
-        p.predict(turn[0], PRESS)
+        p.predict(turn[0], press())
 
-    calls = {"predict": lambda p: p.predict(pts, PRESS),
-             "force": lambda p: p.predict_force(pts, PRESS),
-             "region": lambda p: p.predict(pts, PRESS, region=DEFAULT_REGION),
+    calls = {"predict": lambda p: p.predict(pts, press()),
+             "force": lambda p: p.predict_force(pts, press()),
+             "region": lambda p: p.predict(pts, press(), region=DEFAULT_REGION),
+             "same": lambda p: p.predict(pts, PRESS),
+             "force same": lambda p: p.predict_force(pts, PRESS),
              "new": new}
     row = {f"{b} {what}": median_ms(lambda p=p, fn=fn: fn(p), reps, sync)
            for b, p in ours.items() for what, fn in calls.items()}
-    row["PyG peer"] = median_ms(lambda: them.predict(pts, PRESS), reps, sync)
+    row["PyG peer"] = median_ms(lambda: them.predict(pts, press()), reps, sync)
     return row
 
 
-def checked(pred: Predictor, pts: np.ndarray) -> None:
-    """The predictor's per-call work before the network: the scene lookup, the condition."""
-    pred._scene_of(pts)
-    pred._condition(PRESS)
+def feed(pred: Predictor, pts: np.ndarray, entry: str) -> tuple[np.ndarray, ...]:
+    """The inputs of ``entry`` for a press on the known scene of ``pts``, as the predictor
+    passes them."""
+    pred.predict(pts, PRESS)                                    # the scene is known
+    scene = pred._scene_of(pts)
+    disp, force = scene.terms if scene.terms is not None else (None, None)
+    made = {"points": scene.points[None], "condition": PRESS[None], "surface": scene.points[None],
+            "neighbours": scene.neighbours[None], "disp_terms": disp, "force_terms": force}
+    return tuple(made[name] for name in ENTRIES[entry].inputs)
 
 
 def where_the_time_goes(pred: Predictor, si: SIModel, repeats: int) -> None:
-    """Split one warm ``predict`` into the predictor's checks and the network, and name the
-    network's heaviest operators (ONNX Runtime's own profiler on the same graph)."""
-    print("where the time goes (onnx predictor, tip offsets, warm scene) [ms]:")
+    """Split one warm ``predict`` on a known mesh with a moving tip into the predictor's
+    checks (the envelope's among them) and the network, and name the network's heaviest
+    operators (ONNX Runtime's own profiler on the same graph)."""
+    entry = "pressed" if pred.press_independent else "full"
+    print(f"  where a known mesh's predict goes (onnx, a moving tip, entry {entry}) [ms]:")
     for n in (26, 1024):
-        pts = surface(n, False)
-        scene = pred._scene_of(pts)
-        checks = median_ms(partial(checked, pred, pts), repeats, lambda: None)
-        feed = (scene.points[None], PRESS[None], scene.neighbours[None])
-        net = median_ms(partial(pred.backend.run, "full", *feed), repeats, lambda: None)
-        top = ", ".join(f"{op} {share:.0f}%" for op, share in onnx_operators(si, feed)[:6])
-        print(f"  N={n:5d}: checks and scene {checks:6.3f}  network {net:6.3f}  (its operators: "
-              f"{top})")
+        split_call(pred, si, entry, surface(n, False), repeats)
 
 
-def onnx_operators(si: SIModel, feed: tuple[np.ndarray, ...], runs: int = 50
+def split_call(pred: Predictor, si: SIModel, entry: str, pts: np.ndarray, repeats: int
+               ) -> None:
+    """One line of :func:`where_the_time_goes`: the call, its checks, the envelope's, the
+    network and its heaviest operators."""
+    press, inputs = moving(), feed(pred, pts, entry)
+    scene = pred._scene_of(pts)
+    checks = median_ms(lambda: pred._press(pts, press(), None), repeats, lambda: None)
+    envelope = median_ms(lambda: pred._beyond(press().reshape(2, 3).astype(np.float64), scene),
+                         repeats, lambda: None)
+    net = median_ms(partial(pred.backend.run, entry, *inputs), repeats, lambda: None)
+    whole = median_ms(lambda: pred.predict(pts, press()), repeats, lambda: None)
+    top = ", ".join(f"{op} {share:.0f}%" for op, share in onnx_operators(si, entry, inputs)[:6])
+    print(f"   N={len(pts):5d}: call {whole:6.3f} = checks {checks:6.3f} (the envelope's "
+          f"{envelope:6.4f}, {100 * envelope / whole:.1f}% of the call) + network {net:6.3f} + "
+          f"the rest; its operators: {top}")
+
+
+def thread_table(repeats: int) -> None:
+    """Each ONNX entry of the recipe's network with one intra-op thread against torch's
+    count: what :class:`train.inference.backends.OnnxBackend`'s rule is measured on (best of
+    the repeats: the steady state a loop reaches on a shared host's quiet moments)."""
+    import onnxruntime as ort
+
+    threads = torch.get_num_threads()
+    torch.manual_seed(0)
+    si = SIModel(CGNN(NETWORKS["head offsets"]).eval(), NORM)
+    pred = Predictor(si, torch.device("cpu"), "onnx")
+    print(f"ONNX Runtime threads, the recipe's network [ms] (best of {repeats}): "
+          f"1 thread / {threads} threads")
+    for entry in pred.backend.sessions:
+        buf = io.BytesIO()
+        to_onnx(si, buf, entry)
+        sessions = {}
+        for t in (1, threads):
+            opts = ort.SessionOptions()
+            opts.intra_op_num_threads, opts.inter_op_num_threads = t, 1
+            sessions[t] = ort.InferenceSession(buf.getvalue(), opts,
+                                               providers=["CPUExecutionProvider"])
+        for n in (26, 256, 1024):
+            given = dict(zip(ENTRIES[entry].inputs, feed(pred, surface(n, False), entry),
+                             strict=True))
+            inputs = {name: given[name] for name in pred.backend.inputs[entry]}
+            best = [min_ms(partial(sessions[t].run, None, inputs), repeats)
+                    for t in (1, threads)]
+            print(f"  {entry:22s} N={n:5d}: {best[0]:7.3f} / {best[1]:7.3f}")
+
+
+def min_ms(fn: Callable[[], object], repeats: int) -> float:
+    """The best wall time of ``fn`` over ``repeats`` calls, ms (a shared host's quiet moments)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        tic = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - tic)
+    return min(times) * 1e3
+
+
+def onnx_operators(si: SIModel, entry: str, inputs: tuple[np.ndarray, ...], runs: int = 50
                    ) -> list[tuple[str, float]]:
-    """ONNX Runtime's operators by their share (%) of the whole network's kernel time."""
+    """ONNX Runtime's operators by their share (%) of ``entry``'s kernel time."""
     import onnxruntime as ort
 
     buf = io.BytesIO()
-    to_onnx(si, buf, "full")
+    to_onnx(si, buf, entry)
     with tempfile.TemporaryDirectory() as tmp:
         opts = ort.SessionOptions()
         opts.intra_op_num_threads, opts.inter_op_num_threads = torch.get_num_threads(), 1
         opts.enable_profiling, opts.profile_file_prefix = True, f"{tmp}/ort"
         session = ort.InferenceSession(buf.getvalue(), opts, providers=["CPUExecutionProvider"])
-        inputs = dict(zip(ENTRIES["full"].inputs, feed, strict=True))
+        given = dict(zip(ENTRIES[entry].inputs, inputs, strict=True))
+        names = [i.name for i in session.get_inputs()]
         for _ in range(runs):
-            session.run(None, inputs)
+            session.run(None, {name: given[name] for name in names})
         events = json.loads(Path(session.end_profiling()).read_text())
     spent = Counter()
     for e in events:

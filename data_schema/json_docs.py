@@ -12,7 +12,8 @@
 - ``phantom.metrics`` 1.1 (``pipeline eval --out``): ``runs`` (one row per run: run, label,
   variant, fold, test_set, metrics, references, gain) and ``overall`` (one row per label and
   test set: label, variant, test_set, folds, fold_ids, metrics, fold_ld_mean_sd_mm,
-  references, gain, folds_not_beating_references), optionally ``scarcity`` rows (fold,
+  references, gain, folds_not_beating_references; 1.2: ``intervals``, null where the run
+  keeps none), optionally ``scarcity`` rows (fold,
   groups, predictor, ld_mean_mm, ld_max_mm, force_abs_n), and its ``provenance``;
   ``metrics`` maps ``single``, ``multi`` and ``all`` to the count ``n`` and the Table-2
   numbers in mm, N and N^2; ``references`` maps each no-learning reference to its ``all``
@@ -20,8 +21,12 @@
   and of force with its value and the model's relative gain over it; ``variant`` the run's
   model, training data, rotation, aug, the variant it was fine-tuned from (or null) and
   where its network reads the tip's offsets (1.1: ``offsets``, one of :data:`OFFSETS`; a 1.0
-  document has none). A document from before 1.0 (no ``schema``) is refused: re-run
-  ``pipeline eval``.
+  document has none); ``intervals`` (1.2) per reported level the share of test points inside
+  their radius and the mean radius (mm), the share of test examples whose change of force lies
+  in its interval and the mean half-width (N), the same at 90 % by distance from the tip's
+  path, the mean 90 % radius over the mean L_d, and for a run the calibration's presses and
+  examples (1.0 and 1.1 documents have none and are read as they are). A document from before
+  1.0 (no ``schema``) is refused: re-run ``pipeline eval``.
 """
 
 from __future__ import annotations
@@ -124,7 +129,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
-METRICS = JsonSchema("phantom.metrics", "1.1", {
+METRICS = JsonSchema("phantom.metrics", "1.2", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
@@ -142,6 +147,17 @@ METRIC_ROWS = {
                 "metrics": dict, "fold_ld_mean_sd_mm": _NUMBER, "references": dict,
                 "gain": dict, "folds_not_beating_references": list},
 }
+ROW_OPTIONAL = {"intervals": (dict, type(None))}    # 1.2: null where the run keeps none
+# 1.2: a row's intervals (pipeline eval, train/evaluation/coverage.py): per reported level the
+# share of test points inside their radius and the mean radius, the same for the force; by
+# distance from the tip's path; the mean radius over mean L_d; a run's calibration
+INTERVALS = {"levels": list, "by_distance": list, "radius_to_ld": _NUMBER_OR_NONE}
+INTERVAL_LEVEL = {"level": float, "points": int, "coverage": _NUMBER,
+                  "mean_radius_mm": _NUMBER_OR_NONE, "examples": int, "force_coverage": _NUMBER,
+                  "force_half_width_n": _NUMBER_OR_NONE}
+INTERVAL_NEAR = {"from_mm": _NUMBER, "to_mm": _NUMBER_OR_NONE, "points": int,
+                 "coverage": _NUMBER, "mean_radius_mm": _NUMBER_OR_NONE}
+CALIBRATION = {"presses": int, "examples": int}
 VARIANT = {"model": str, "train_data": str, "rotate": bool, "aug": bool,
            "pretrained": (dict, type(None))}
 VARIANT_OPTIONAL = {"offsets": str}      # 1.1: where the network reads the tip's offsets
@@ -191,8 +207,11 @@ def validate_metrics(path: str | Path) -> dict[str, Any]:
 
 
 def _check_row(path: str | Path, row: Any, keys: dict, where: str) -> None:
-    """One row of ``runs`` or ``overall``: its keys, metrics, references, gain and variant."""
-    _typed_keys(path, row, keys, where)
+    """One row of ``runs`` or ``overall``: its keys, metrics, references, gain, variant and
+    (1.2) intervals."""
+    _typed_keys(path, row, {**keys, **ROW_OPTIONAL}, where, optional=ROW_OPTIONAL)
+    if row.get("intervals") is not None:
+        _check_intervals(path, row["intervals"], f"{where}.intervals")
     _check_metric_sets(path, row["metrics"], f"{where}.metrics")
     if not row["references"]:
         raise BadInput(path, f"{where}.references is empty")
@@ -206,6 +225,27 @@ def _check_row(path: str | Path, row: Any, keys: dict, where: str) -> None:
     _check_variant(path, row["variant"], f"{where}.variant")
     if "fold_ids" in row:
         _check_folds(path, row, where)
+
+
+def _check_intervals(path: str | Path, doc: dict, where: str) -> None:
+    """A row's intervals: each level in (0, 1) with shares in [0, 1] over at least one point
+    and example, widths finite and plausible or null (unbounded); the distance bins alike."""
+    _typed_keys(path, doc, {**INTERVALS, "calibration": dict}, where,
+                optional={"calibration": dict})
+    if "calibration" in doc:
+        _typed_keys(path, doc["calibration"], CALIBRATION, f"{where}.calibration")
+    for kind, keys in (("levels", INTERVAL_LEVEL), ("by_distance", INTERVAL_NEAR)):
+        for i, item in enumerate(doc[kind]):
+            here = f"{where}.{kind}[{i}]"
+            _typed_keys(path, item, keys, here)
+            if kind == "levels" and not 0 < item["level"] < 1:
+                raise BadInput(path, f"{here}.level is {item['level']}: not in (0, 1)")
+            for share in ("coverage", "force_coverage"):
+                if share in item and not 0 <= item[share] <= 1:
+                    raise BadInput(path, f"{here}.{share} is {item[share]!r}: not in [0, 1]")
+            _check_numbers(path, {k: v for k, v in item.items() if v is not None}, here)
+            if item["points"] < 1 or item.get("examples", 1) < 1:
+                raise BadInput(path, f"{here} must count at least one point and example")
 
 
 def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) -> None:

@@ -40,7 +40,11 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     by error and of predicted beside true force (--rrd, default beside --out). Every run is
     scored beside three predictors that learn nothing (nothing moves; the nearest training
     press's displacement; force linear in the tip's motion), on the same test examples, with
-    its gain over the best of them.
+    its gain over the best of them. Where a run's best.pt keeps intervals (calibrated on its
+    fold's validation presses), also their coverage on the test presses at 80, 90 and 95 %
+    (points inside their radius, the force inside its interval, mean widths), and the
+    recording colours the points by error over their 90 % radius; a run without them is said
+    in one line.
     """
     from train.evaluation.eval_params import EvalParams
     from train.evaluation.eval_stage import run_eval

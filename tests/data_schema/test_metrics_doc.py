@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -121,3 +122,36 @@ def test_a_document_from_before_the_schema_says_so(tmp_path) -> None:
 def test_a_key_added_by_hand_is_left_alone(tmp_path) -> None:
     doc = _set(_set(_doc(), ("comment",), "by hand"), ("runs", 0, "note"), "x")
     validate_metrics(_write(tmp_path, doc))
+
+
+def _intervals() -> dict[str, Any]:
+    level = {"level": 0.9, "points": 100, "coverage": 0.9, "mean_radius_mm": 0.3,
+             "examples": 10, "force_coverage": 0.9, "force_half_width_n": 0.1}
+    return {"levels": [level], "radius_to_ld": 2.0, "calibration": {"presses": 3, "examples": 9},
+            "by_distance": [{"from_mm": 40.0, "to_mm": None, "points": 5, "coverage": 1.0,
+                             "mean_radius_mm": None}]}
+
+
+INTERVAL_CASES = [
+    (("levels", 0, "coverage"), 1.2, "coverage is 1.2: not in [0, 1]"),
+    (("levels", 0, "level"), 1.0, "level is 1.0: not in (0, 1)"),
+    (("levels", 0, "mean_radius_mm"), 300.0, "more than a plausible"),
+    (("levels", 0, "points"), 0, "at least one point"),
+    (("by_distance", 0, "force_coverage"), 0.5, None),        # a key added by hand
+    (("calibration", "presses"), "3", "calibration.presses"),
+    (("radius_to_ld",), _DROP, "radius_to_ld missing"),
+]
+
+
+@pytest.mark.parametrize(("keys", "value", "words"), INTERVAL_CASES)
+def test_intervals_are_checked_and_may_be_absent(tmp_path, keys, value, words) -> None:
+    """1.2: a row's intervals are checked field by field; null (a run that keeps none) and a
+    1.1 document without them stay valid."""
+    doc = _set(_doc(), ("runs", 0, "intervals"), _set(_intervals(), keys, value))
+    if words is None:
+        validate_metrics(_write(tmp_path, doc))
+    else:
+        with pytest.raises(BadInput, match=re.escape(words)):
+            validate_metrics(_write(tmp_path, doc))
+    validate_metrics(_write(tmp_path, _set(_doc(), ("overall", 0, "intervals"), None)))
+    validate_metrics(_write(tmp_path, _set(_doc(), ("schema_version",), "1.1")))

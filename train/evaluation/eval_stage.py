@@ -21,6 +21,7 @@ from core.atomic import atomic_outputs, same_path
 from core.errors import BadInput
 from core.provenance import make_provenance
 from data_schema.json_docs import METRICS, validate_metrics
+from train.evaluation.coverage import error_ratios
 from train.evaluation.eval_params import EvalParams
 from train.evaluation.eval_view import write_eval_recording
 from train.evaluation.evaluate import evaluate_runs, shown_name, table2, test_errors
@@ -58,7 +59,10 @@ def run_eval(inputs: Sequence[Path], out: Path, params: EvalParams | None = None
         if tmp_rrd is not None:
             first = result["runs"][0]
             title = f"{shown_name(first, result['runs'])}, fold {first['fold']}"
-            write_eval_recording(tmp_rrd, test_errors(runs[0], params.device)[2], title, table)
+            _, run, shown = test_errors(runs[0], params.device)
+            ratios = None if run.intervals is None else \
+                [error_ratios(run.intervals, b, p) for b, p in shown]
+            write_eval_recording(tmp_rrd, shown, title, table, ratios)
     return doc, table
 
 

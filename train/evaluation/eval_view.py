@@ -7,6 +7,9 @@ prediction coloured by each point's error (blue 0 mm .. red ``ERROR_MM`` and abo
 ``surface/input`` the undeformed input (faint), ``surface/tip`` the tip at start and end;
 ``force/true`` and ``force/predicted`` the change of force (N); ``table`` (static) the
 Markdown of ``metrics.md``, so a model that does not beat the references is seen beside it.
+Where the run keeps intervals, ``interval/points``: the predicted points coloured by their
+error over their 90 % radius (green well inside, yellow at the radius, red at twice it and
+beyond), ``interval/tip`` the tip, in a view of their own.
 """
 
 from __future__ import annotations
@@ -25,12 +28,19 @@ APP_ID = "phantom-eval"
 ERROR_MM = 2.0
 
 
-def blueprint(centre: np.ndarray, size: float, shown: str) -> rrb.Blueprint:
-    """The predicted beside the true surface, framed from above; the force change; the
-    scores beside the references."""
+def blueprint(centre: np.ndarray, size: float, shown: str, intervals: bool = False
+              ) -> rrb.Blueprint:
+    """The predicted beside the true surface, framed from above (and, with ``intervals``,
+    the points coloured by error over radius); the force change; the scores beside the
+    references."""
+    surface = phantom_view(f"{shown}: predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
+                           "beside true (grey)", ["+ /surface/**"], centre, size,
+                           origin="/surface")
+    views = [surface, phantom_view(f"{shown}: error / 90 % radius (green inside, yellow at "
+                                   "the radius, red at twice it)", ["+ /interval/**"], centre,
+                                   size, origin="/interval")] if intervals else [surface]
     return rrb.Blueprint(rrb.Horizontal(
-        phantom_view(f"{shown}: predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
-                     "beside true (grey)", ["+ /surface/**"], centre, size, origin="/surface"),
+        rrb.Vertical(*views),
         rrb.Vertical(
             rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
             rrb.TextDocumentView(name="scores beside the no-learning references",
@@ -46,13 +56,26 @@ def error_colors(err_mm: np.ndarray) -> np.ndarray:
     return (np.array([40, 110, 230]) * (1 - t) + np.array([230, 40, 40]) * t).astype(np.uint8)
 
 
+def ratio_colors(ratio: np.ndarray) -> np.ndarray:
+    """Error over radius as colour (M, 3) uint8: green (0) to yellow (1, at the radius) to
+    red (2, twice outside it, and beyond)."""
+    t = np.clip(ratio, 0, 2)[:, None]
+    green, yellow, red = (np.array(c, float) for c in ((40, 170, 70), (240, 210, 40),
+                                                        (220, 30, 30)))
+    inside = green * (1 - np.minimum(t, 1)) + yellow * np.minimum(t, 1)
+    return np.where(t <= 1, inside, yellow * (2 - t) + red * (t - 1)).astype(np.uint8)
+
+
 def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]], name: str,
-                         table: str) -> None:
-    """Log the examples in ``shown`` (the test batches of the run ``name``) and ``table``
-    (the Markdown scores of every run beside the references)."""
+                         table: str, ratios: list[np.ndarray] | None = None) -> None:
+    """Log the examples in ``shown`` (the test batches of the run ``name``), with
+    ``ratios`` (per batch (B, N): each point's error over its 90 % radius) where the run
+    keeps intervals, and ``table`` (the Markdown scores of every run beside the
+    references)."""
     first = shown[0][0].target[0][shown[0][0].mask[0]].cpu().numpy() if shown else np.zeros((1, 3))
     size = max(float(np.ptp(first[:, :2], axis=0).max()), 0.02)
-    with recording(APP_ID, path, blueprint(first.mean(axis=0), size, name)) as rec:
+    view = blueprint(first.mean(axis=0), size, name, ratios is not None)
+    with recording(APP_ID, path, view) as rec:
         declare_up(rec)
         rec.log("table", rr.TextDocument(table, media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log("force/true", rr.SeriesPoints(names=["true dF [N]"], colors=[(90, 90, 90)],
@@ -61,11 +84,23 @@ def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]]
                                                    colors=[(230, 90, 40)], markers=["cross"],
                                                    marker_sizes=[4]), static=True)
         i = 0
-        for b, p in shown:
+        for k, (b, p) in enumerate(shown):
             for j in range(len(b.dforce)):
                 rec.set_time("example", sequence=i)
                 _example(rec, b, p, j)
+                if ratios is not None:
+                    _interval(rec, b, p, j, ratios[k][j])
                 i += 1
+
+
+def _interval(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int, ratio: np.ndarray
+              ) -> None:
+    """One example's predicted points coloured by error over radius, and its tip."""
+    m = b.mask[j].cpu().numpy()
+    rec.log("interval/points", rr.Points3D(p.deformed[j].cpu().numpy()[m],
+                                           colors=ratio_colors(ratio[m]), radii=[0.0009]))
+    rec.log("interval/tip", rr.Points3D(b.cond[j].cpu().numpy().reshape(2, 3),
+                                        colors=[(250, 200, 40), (220, 40, 40)], radii=[0.0015]))
 
 
 def _example(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int) -> None:

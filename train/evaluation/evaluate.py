@@ -30,9 +30,12 @@ from train.data import (
     make_batch,
     role_examples,
 )
+from train.evaluation.coverage import Coverage, absent, coverage, coverage_doc, coverage_table
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
+from train.model.conformal import IntervalTable
 from train.model.normalise import Normaliser
 from train.model.si_units import Prediction, distances, predict
+from train.training.calibrate import residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
 
@@ -58,6 +61,7 @@ class LoadedRun:
     meta: dict
     splits: Path
     train: dict[str, np.ndarray]     # set -> the training example ids of the run's fold
+    intervals: IntervalTable | None = None   # calibrated on the fold's validation presses
 
 
 def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
@@ -73,7 +77,9 @@ def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
     opts = meta["options"]
     return LoadedRun(model, norm, load_states(data).to(device),
                      role_examples(doc, opts["fold"], "test"), meta, splits,
-                     role_examples(doc, opts["fold"], "train", data, opts["train_groups"]))
+                     role_examples(doc, opts["fold"], "train", data, opts["train_groups"]),
+                     IntervalTable.from_dict(state["intervals"]) if "intervals" in state
+                     else None)
 
 
 @torch.no_grad()
@@ -115,12 +121,22 @@ def reference_errors(run: LoadedRun) -> dict[str, ExampleErrors]:
 
 
 def test_errors(run_dir: Path, device: str = "cpu"
-                ) -> tuple[ExampleErrors, dict, list[tuple[Batch, Prediction]]]:
-    """Errors of a run's best model on its fold's test examples, its meta, and a few
+                ) -> tuple[ExampleErrors, LoadedRun, list[tuple[Batch, Prediction]]]:
+    """Errors of a run's best model on its fold's test examples, the run, and a few
     (batch, prediction) pairs for the recording."""
     run = load_run(run_dir, device)
     errs, shown = example_errors(run)
-    return errs, run.meta, shown
+    return errs, run, shown
+
+
+def fold_coverage(run: LoadedRun, run_dir: Path) -> Coverage | None:
+    """The coverage of a run's intervals on its fold's test examples (None, said in one
+    line, where its checkpoint keeps none)."""
+    if run.intervals is None:
+        absent(str(run_dir))
+        return None
+    pairs = example_pairs(run.states, run.test)
+    return coverage(run.intervals, residuals(run.model, run.norm, run.states, pairs))
 
 
 def metrics(e: ExampleErrors) -> dict[str, dict[str, float | None]]:
@@ -177,29 +193,47 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
         m = metrics(errs)
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
         variant, test_set = recorded_variant(run.meta), source_name(run.meta["data"]["file"])
+        cover = fold_coverage(run, run_dir)
         runs.append({"run": str(run_dir), "label": variant.label, "variant": variant.to_dict(),
                      "fold": run.meta["options"]["fold"], "test_set": test_set, "metrics": m,
-                     "references": ref_m, "gain": gains(m["all"], ref_m)})
-        groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1]))
+                     "references": ref_m, "gain": gains(m["all"], ref_m),
+                     "intervals": _intervals(cover, m, run.intervals)})
+        groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1], cover))
     return {"runs": runs, "overall": [_pooled(v, test_set, items)
                                       for (v, test_set), items in groups.items()]}
 
 
+def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = None
+               ) -> dict | None:
+    """A row's intervals: their coverage (and, for a run, the calibration they stand on);
+    None where they are absent."""
+    if cover is None:
+        return None
+    doc = coverage_doc(cover, m["all"]["ld_mean_mm"])
+    if table is not None:
+        doc["calibration"] = {"presses": table.presses, "examples": table.examples}
+    return doc
+
+
 def _pooled(variant: Variant, test_set: str,
-            items: list[tuple[ExampleErrors, dict[str, ExampleErrors], dict]]) -> dict:
+            items: list[tuple[ExampleErrors, dict[str, ExampleErrors], dict,
+                              Coverage | None]]) -> dict:
     """The overall row of one variant on one test set: its runs' (errors, reference errors,
-    run row) pooled over their folds."""
-    pooled = metrics(pool([e for e, _, _ in items]))
-    ref_m = {n: metrics(pool([r[n] for _, r, _ in items]))["all"] for n in NAMES}
-    fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r in items]
+    run row, coverage) pooled over their folds."""
+    pooled = metrics(pool([e for e, *_ in items]))
+    ref_m = {n: metrics(pool([r[n] for _, r, *_ in items]))["all"] for n in NAMES}
+    covers = [c for *_, c in items]
+    cover = None if None in covers else sum(covers[1:], covers[0])
+    fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r, _ in items]
     fold_ld = [v for v in fold_ld if v is not None] or [0.0]
     return {"label": variant.label, "variant": variant.to_dict(),
             "test_set": test_set, "folds": len(items),
-            "fold_ids": [r["fold"] for _, _, r in items],
+            "fold_ids": [r["fold"] for _, _, r, _ in items],
             "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
             "references": ref_m, "gain": gains(pooled["all"], ref_m),
             "folds_not_beating_references": [
-                r["fold"] for _, _, r in items if not _beats(r["gain"]["ld_gain"])]}
+                r["fold"] for _, _, r, _ in items if not _beats(r["gain"]["ld_gain"])],
+            "intervals": _intervals(cover, pooled)}
 
 
 def shown_name(row: dict, rows: list[dict]) -> str:
@@ -270,7 +304,7 @@ def table2(result: dict) -> str:
         for name in NAMES:
             lines.append(_row(f"*reference: {name}*", row["test_set"], row["references"][name],
                               "", str(row["folds"])))
-    return "\n".join(lines) + "\n" + _fold_table(result)
+    return "\n".join(lines) + "\n" + _fold_table(result) + coverage_table(result, shown_name)
 
 
 def _fold_table(result: dict) -> str:

@@ -15,9 +15,10 @@ import io
 import numpy as np
 import torch
 
-from train.inference.si_model import ENTRIES, SIModel, entries, to_onnx
+from train.inference.si_model import ENTRIES, PER_POINT, SIModel, entries, to_onnx
 
 BACKENDS = ("auto", "torch", "onnx")
+SMALL = 256     # points: a call of at most these runs on one intra-op thread (OnnxBackend)
 
 
 class TorchBackend:
@@ -37,29 +38,47 @@ class TorchBackend:
 
 
 class OnnxBackend:
-    """One ONNX Runtime session per entry the model has, traced from the SI model at load."""
+    """ONNX Runtime sessions per entry the model has, traced from the SI model at load.
+
+    Intra-op threads are chosen per call, by its size (:func:`call_size`: the most points of
+    its per-point inputs): one thread at or below ``SMALL`` points, ``threads`` above. A
+    thread pool's hand-offs cost more than they save on a small scene (measured with
+    ``benchmarks/bench_cgnn.py``'s thread table, head offsets, 2 threads against 1, best of
+    25 on a shared 2-core host: a press on a known mesh 0.030 against 0.033 ms at 26 points,
+    equal at 256, 0.32 against 0.50 ms at 1024; the force alone 0.015 against 0.015 ms at 26,
+    0.040 against 0.021 at 256; a new mesh 0.55 against 0.26 ms at 26 and 2.8 against 1.5 ms
+    at 256). A call with no per-point input (the paper's force on a known mesh: one vector)
+    always runs on one thread.
+    """
 
     name = "onnx"
 
     def __init__(self, si: SIModel, threads: int) -> None:
         import onnxruntime as ort
 
-        self.sessions = {}
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads, opts.inter_op_num_threads = threads, 1
+        def session(graph: bytes, n: int) -> ort.InferenceSession:
+            opts = ort.SessionOptions()
+            opts.intra_op_num_threads, opts.inter_op_num_threads = n, 1
+            return ort.InferenceSession(graph, opts, providers=["CPUExecutionProvider"])
+
+        self.threads, self.sessions = threads, {}
         for entry in entries(si):
             buf = io.BytesIO()
             to_onnx(si.cpu(), buf, entry)
-            self.sessions[entry] = ort.InferenceSession(buf.getvalue(), opts,
-                                                        providers=["CPUExecutionProvider"])
-        self.inputs = {e: [i.name for i in s.get_inputs()] for e, s in self.sessions.items()}
+            self.sessions[entry] = {n: session(buf.getvalue(), n) for n in {1, threads}}
+        self.inputs = {e: [i.name for i in s[1].get_inputs()] for e, s in self.sessions.items()}
 
     def run(self, entry: str, *arrays: np.ndarray) -> list[np.ndarray]:
         """The outputs of ``entry`` (named in ``ENTRIES``) on ``arrays``, in its order."""
-        session = self.sessions[entry]
         given = dict(zip(ENTRIES[entry].inputs, arrays, strict=True))
+        session = self.sessions[entry][1 if call_size(given) <= SMALL else self.threads]
         # a traced graph has no input its outputs do not read (noCond: no condition)
         return session.run(None, {name: given[name] for name in self.inputs[entry]})
+
+
+def call_size(given: dict[str, np.ndarray]) -> int:
+    """The most points of a call's per-point inputs (``PER_POINT``; 0 where it has none)."""
+    return max((a.shape[1] for name, a in given.items() if name in PER_POINT), default=0)
 
 
 def make_backend(si: SIModel, device: torch.device, backend: str = "auto"

@@ -9,7 +9,10 @@ change: :func:`train.model.si_units.press_gate`), a noCond model's too.
 What the graph carries: the no-motion gate and neighbour selection that does not depend on the
 order of the points. What it cannot carry (an ONNX graph cannot refuse an input) is written
 into the file's ``metadata_props`` (:func:`guards`), with the training envelope as JSON, so
-that a runtime can check inputs as :class:`train.Predictor` does; and ``provenance`` (JSON:
+that a runtime can check inputs as :class:`train.Predictor` does; the calibrated intervals
+(``intervals``: the conformal table as JSON, null for a checkpoint from before them, and
+``intervals_lookup``: how to look a prediction up in it, :func:`intervals_props`); and
+``provenance`` (JSON:
 :func:`core.provenance.make_provenance`'s record, schema ``phantom.onnx`` 1.0, written by the
 export runner :mod:`train.inference.export_stage`: the command and the sha256 of the checkpoint).
 """
@@ -28,6 +31,16 @@ from train.model.edgeconv import EXTRA
 from train.model.si_units import GATE_SHARE
 from train.training.checkpoint import load_checkpoint, model_from
 
+INTERVALS_LOOKUP = (
+    "split conformal, binned (train/model/conformal.py): level index i = ceil(100 level) - 1 "
+    "into levels 0.01..0.99; a feature's bin is the count of its edges <= its value; a point's "
+    "radius (m) is points.width[distance bin][depth bin][height bin][i], distance = the "
+    "point's (input) distance from the segment tip start - tip end, depth = |tip end - tip "
+    "start|, height = the tip start's z less that of the surface point nearest it in x, y "
+    "(m); the change of force's interval is dforce +- force.width[depth bin][height bin][i] "
+    "(N); null widths are unbounded; count = the calibration scores behind each; none holds "
+    "beyond the training envelope")
+
 
 def checkpoint_of(run: str | Path) -> Path:
     """The checkpoint a run names: a run folder's best.pt, or the checkpoint file itself."""
@@ -45,10 +58,19 @@ def export_onnx(run: str | Path, out: str | Path, props: Mapping[str, str] | Non
     names = state["meta"]["data"].get("point_names")      # the points it was trained on
     to_onnx(si, out)
     graph = onnx.load(str(out))
-    for key, value in {**guards(si), "point_names": json.dumps(names), **(props or {})}.items():
+    meta = {**guards(si), "point_names": json.dumps(names),
+            **intervals_props(state.get("intervals")), **(props or {})}
+    for key, value in meta.items():
         entry = graph.metadata_props.add()
         entry.key, entry.value = key, value
     onnx.save(graph, str(out))
+
+
+def intervals_props(table: dict | None) -> dict[str, str]:
+    """The calibrated intervals as ``metadata_props``: the table (JSON, ``null`` for a
+    checkpoint from before them) and how a runtime looks a prediction up in it."""
+    return {"intervals": json.dumps(table, allow_nan=False),
+            "intervals_lookup": INTERVALS_LOOKUP}
 
 
 def guards(si: SIModel) -> dict[str, str]:

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 import torch
@@ -24,7 +25,8 @@ from train.inference.backends import TorchBackend, make_backend
 from train.inference.head_split import check_split
 from train.inference.region import near_path, neighbour_table, region
 from train.inference.si_model import SIModel, press_entries
-from train.model.normalise import tip_height
+from train.model.conformal import Interval, IntervalTable, force_interval, interval, level_index
+from train.model.normalise import TIP_POINT, tip_height
 from train.training.checkpoint import load_checkpoint, model_from
 
 UNIT_FACTOR = 20.0
@@ -32,8 +34,10 @@ EXTRAPOLATION_FACTOR = 1.5
 MARGIN = 0.1              # of the training press (or force) range, beyond its envelope
 DEFAULT_REGION = 0.03     # m: the radius benchmarks/bench_cgnn.py times
 LARGE = 8192              # points: above it a call that builds the graph runs in torch
+NOT_HOLDING = "; its intervals do not hold there (calibrated inside the envelope)"
 GRAPH_ENTRIES = ("full", "force", "new_scene")      # the entries that search neighbours
 NEAREST = 8               # points nearest the tip in x, y that its height is measured from
+NEAR_TIP2 = (1.001 * TIP_POINT) ** 2   # m^2: in x, y farther than this, no point is the tip's
 
 
 @dataclass
@@ -53,19 +57,45 @@ class Scene:
         """The highest point's z, m."""
         return float(self.points[:, 2].max())
 
+    @cached_property
+    def bottom(self) -> float:
+        """The lowest point's z, m: no tip is higher above the surface than above it."""
+        return float(self.points[:, 2].min())
+
+    @cached_property
+    def plane(self) -> np.ndarray:
+        """The points' x, y (N, 2) in float64, as :func:`train.model.normalise.tip_height`
+        measures a tip's distance in them."""
+        return self.points[:, :2].astype(np.float64)
+
     def height(self, tip: np.ndarray) -> float:
-        """The tip's height above the surface (:func:`train.model.normalise.tip_height`), from the
-        points nearest it in x, y (a tree: a 1 kHz loop does not scan a mesh per call; a
-        press's start, the same call after call, is looked up once)."""
+        """The tip's height above the surface (:func:`train.model.normalise.tip_height`): one
+        vectorised pass over the scene's x, y for the point nearest the tip (a press's start,
+        the same call after call, is looked up once)."""
         if tip.tobytes() == self.last[0]:
             return self.last[1]
+        d2 = ((self.plane - tip[:2]) ** 2).sum(1)                          # (N,)
+        near = np.flatnonzero(d2 <= NEAR_TIP2)          # the only points that can be the tip's
+        if len(near):
+            d2[near[np.linalg.norm(self.points[near] - tip, axis=1) <= TIP_POINT]] = np.inf
+        i = int(d2.argmin())
+        if not np.isfinite(d2[i]):
+            h = float("nan")
+        elif np.count_nonzero(d2 == d2[i]) > 1:         # a tie: the points nearest in order
+            h = self._from_tree(tip)
+        else:
+            h = float(tip[2] - self.points[i, 2])
+        self.last = (tip.tobytes(), h)
+        return h
+
+    def _from_tree(self, tip: np.ndarray) -> float:
+        """The tip's height from the ``NEAREST`` points nearest it in x, y in the order a tree
+        gives them (which of two points at the same distance is taken, where they tie)."""
         if self.plan is None:
             self.plan = cKDTree(self.points[:, :2])
         _, idx = self.plan.query(tip[:2], k=min(NEAREST, len(self.points)))
         h = tip_height(tip, self.points[np.atleast_1d(idx)])
-        h = tip_height(tip, self.points) if np.isnan(h) else h
-        self.last = (tip.tobytes(), h)
-        return h
+        return tip_height(tip, self.points) if np.isnan(h) else h
 
 
 @dataclass
@@ -97,6 +127,7 @@ class Predictor:
         self.backend = make_backend(si, device, backend)
         self.large = self.backend if self.backend.name == "torch" else TorchBackend(si, device)
         self.extrapolating = False
+        self.intervals: IntervalTable | None = None   # the checkpoint's (load); None: absent
         self._scene: Scene | None = None
         self.point_names: list[str] | None = None   # the points it was trained on (load)
         # how a press runs, by whether a region is asked: the heads alone on a known scene
@@ -116,6 +147,8 @@ class Predictor:
         state = load_checkpoint(path, dev)
         out = cls(SIModel(*model_from(state, dev)), dev, backend)
         out.point_names = state["meta"]["data"].get("point_names")
+        if "intervals" in state:
+            out.intervals = IntervalTable.from_dict(state["intervals"])
         return out
 
     @property
@@ -123,19 +156,60 @@ class Predictor:
         """Whether a known scene's presses run the heads alone."""
         return self.offsets.press_independent
 
-    def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None
-                ) -> tuple[np.ndarray, float]:
-        """Deformed points (N, 3) float32 in metres, and the change of force in newtons."""
+    @overload
+    def predict(self, points: np.ndarray, condition: np.ndarray,
+                region: float | None = None, level: None = None) -> tuple[np.ndarray, float]:
+        ...
+
+    @overload
+    def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None,
+                *, level: float) -> tuple[np.ndarray, float, Interval]:
+        ...
+
+    def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None,
+                level: float | None = None) -> tuple:
+        """Deformed points (N, 3) float32 in metres, and the change of force in newtons; with
+        ``level`` in (0, 1) also how far they may be off (:class:`Interval`: each point's
+        radius, the force's interval, calibrated at that level; a table lookup)."""
+        self._check_level(level)
         press = self._press(points, condition, region)
         deformed, df = self._ways[region is not None](press, False)
-        return deformed, self._flag(press, df)
+        df = self._flag(press, df, NOT_HOLDING if level is not None else "")
+        if level is None:
+            return deformed, df
+        return deformed, df, interval(self.intervals, level, press.scene.points, press.c[0],
+                                      self._height(press), df, not self.extrapolating)
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
-                      region: float | None = None) -> float:
+                      region: float | None = None, level: float | None = None
+                      ) -> float | tuple[float, tuple[float, float]]:
         """The change of force (N) alone: the displacement head is not run (but for the
-        paper's network's first press of a new scene, which keeps both heads' terms)."""
+        paper's network's first press of a new scene, which keeps both heads' terms); with
+        ``level``, also its interval (low, high) N at that level."""
+        self._check_level(level)
         press = self._press(points, condition, region)
-        return self._flag(press, self._ways[region is not None](press, True)[1])
+        df = self._flag(press, self._ways[region is not None](press, True)[1],
+                        NOT_HOLDING if level is not None else "")
+        if level is None:
+            return df
+        return df, force_interval(self.intervals, level, press.c[0], self._height(press), df)
+
+    def _check_level(self, level: float | None) -> None:
+        """Refuse (ValueError, one line) a level outside (0, 1), or any level where the
+        checkpoint keeps no intervals."""
+        if level is None:
+            return
+        level_index(level)
+        if self.intervals is None:
+            raise ValueError("intervals absent: this checkpoint keeps none (trained before "
+                             "they existed, or without validation presses); retrain it, or "
+                             "predict without level")
+
+    @staticmethod
+    def _height(press: Press) -> float:
+        """The tip start's height above the scene (the envelope's check has asked it)."""
+        height = press.scene.height(press.c[0, :3].astype(np.float64))
+        return 0.0 if height != height else height          # NaN: no other point
 
     def _known(self, press: Press, force_only: bool) -> Answer:
         """A press-independent network: a new scene runs the network once and keeps its head
@@ -207,7 +281,7 @@ class Predictor:
         """The cached scene when ``points`` are the last call's, else a new one, checked."""
         p = np.asarray(points, dtype=np.float32)
         old = self._scene
-        if old is not None and old.points.shape == p.shape and np.array_equal(old.points, p):
+        if old is not None and old.points.shape == p.shape and bool((old.points == p).all()):
             return old
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points must be (N, 3), got {p.shape}")
@@ -233,7 +307,7 @@ class Predictor:
             raise ValueError("points and condition must be finite (no NaN or inf)")
         tips = c.reshape(2, 3).astype(np.float64)
         far = max(self._reach(tips, "the tip", lambda: self._mm_tip(tips, scene)), scene.reach)
-        still = bool(np.array_equal(tips[0], tips[1]))
+        still = bool((c[:3] == c[3:]).all())
         outside: list[str] = []
         if not still:                        # no motion: the answer is exact (no change)
             if far > EXTRAPOLATION_FACTOR * self._extent:
@@ -261,13 +335,13 @@ class Predictor:
         if env.top is not None and scene.top > env.top + slack:
             out.append(f"points up to {(scene.top - env.top) * 1e3:.3g} mm above the highest "
                        "learned (the rest surface is at z = 0 in the phantom frame)")
-        gap = scene.height(tips[0])
-        if gap > env.gap_max + slack:
+        limit = env.gap_max + slack
+        if tips[0, 2] - scene.bottom > limit and (gap := scene.height(tips[0])) > limit:
             out.append(f"the tip start {gap * 1e3:.3g} mm above the surface (at most "
-                       f"{env.gap_max * 1e3:.3g} mm learned)")
+                       f"{env.gap_max * 1e3:.3g} mm learned)")       # (no lower point: no search)
         return out
 
-    def _flag(self, press: Press, df: float) -> float:
+    def _flag(self, press: Press, df: float, note: str = "") -> float:
         """Sets ``extrapolating`` for this call and warns, saying where, if the press or its
         predicted change of force lies outside what the model learned; returns ``df``."""
         outside, env = list(press.outside), self.norm.envelope
@@ -278,7 +352,7 @@ class Predictor:
                                f"{env.force_min:.3g} to {env.force_max:.3g} N learned")
         self.extrapolating = bool(outside)
         if self.extrapolating:
-            warnings.warn("the model extrapolates: " + "; ".join(outside), stacklevel=3)
+            warnings.warn("the model extrapolates: " + "; ".join(outside) + note, stacklevel=3)
         return df
 
     @property

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
+from train.model.conformal import path_distance
 from train.model.edgeconv import TIE, WIDEST, Points, ranked, tiebreak
 
 
@@ -51,11 +52,7 @@ def neighbour_table(points: np.ndarray, k: int) -> np.ndarray:
 
 def segment_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """Distance (N,) of each point from the segment start-end (a point when they coincide)."""
-    axis = end - start
-    length2 = float(axis @ axis)
-    t = np.zeros(len(points)) if length2 == 0 else np.clip((points - start) @ axis / length2,
-                                                          0.0, 1.0)
-    return np.linalg.norm(points - start - t[:, None] * axis, axis=1)
+    return path_distance(points, start, end)
 
 
 def near_path(points: np.ndarray, start: np.ndarray, end: np.ndarray, radius: float,

@@ -124,15 +124,47 @@ def ranked(cand: torch.Tensor, usable: torch.Tensor, queries: torch.Tensor, poin
     farthest candidate ties with their k-th neighbour, and all candidates were usable.
 
     ``usable`` (B, Q, c): False for a masked or padding candidate; ``base`` (B, 1, 1) or
-    (R, 1, 1): each row's first point in ``points``."""
+    (R, 1, 1): each row's first point in ``points``.
+
+    Outside a traced graph, :func:`choose` (c x c comparisons) runs only on the rows where a
+    tie can change the k nearest or their order (:func:`apart`: a random cloud's rows are
+    almost all apart, a grid's almost none); the others are their distances' order, which is
+    what :func:`choose` gives them. A traced graph cannot branch: it ranks every row."""
     rows = (cand.clamp(max=points.n - 1) + base).reshape(-1)
     exact = torch.linalg.vector_norm(points.features.index_select(0, rows).reshape(
         *cand.shape, -1) - queries.unsqueeze(2), dim=-1)                      # (B, Q, c)
     exact = exact.masked_fill(~usable, FAR)
-    pick = choose(exact, points.key.index_select(0, rows).reshape(cand.shape), k)
+    if torch.jit.is_tracing():
+        pick = choose(exact, points.key.index_select(0, rows).reshape(cand.shape), k)
+    else:
+        pick = ordered(exact, rows.view(cand.shape), points.key, k)
     last = exact.gather(-1, pick[..., -1:]).squeeze(-1)
     edge = exact.masked_fill(~usable, -1.0).amax(-1)
     return cand.gather(-1, pick), (edge - last <= TIE * edge) & usable.all(-1)
+
+
+def ordered(exact: torch.Tensor, rows: torch.Tensor, key: torch.Tensor, k: int
+            ) -> torch.Tensor:
+    """:func:`choose`'s positions (..., k) of the k nearest of c candidates, from their
+    distances (..., c), their points (..., c) in ``key`` (the flat keys, :func:`tiebreak`):
+    the sorted order where the k + 1 nearest are :func:`apart`, :func:`choose` elsewhere."""
+    dist, order = exact.sort(-1)                                           # (..., c)
+    tied = ~apart(dist[..., :k + 1])                                       # (...,)
+    if bool(tied.all()):                                     # a grid: no row to spare
+        return choose(exact, key[rows], k)
+    pick = order[..., :k].clone()
+    if bool(tied.any()):
+        at = tied.nonzero(as_tuple=True)
+        pick[at] = choose(exact[at], key[rows[at]], k)
+    return pick
+
+
+def apart(dist: torch.Tensor) -> torch.Tensor:
+    """Whether each row of sorted distances (..., m) has every two neighbours apart by more
+    than twice ``TIE`` (relative) (...,): then :func:`choose` ranks them in this order
+    whatever their keys (the margin covers float rounding of its tolerance)."""
+    nxt = dist[..., 1:]
+    return (nxt - dist[..., :-1] > 2 * TIE * nxt).all(-1)
 
 
 def tiebreak(points: torch.Tensor) -> torch.Tensor:

@@ -4,7 +4,10 @@ by the train runner).
 ``{"model": state_dict, "optimizer": state_dict, "epoch": int, "best_val": float,
 "config": CGNNConfig.to_dict(), "norm": Normaliser.to_dict(), "meta": {"options", "config",
 "data": {"file", "sha256"}, "splits", "init", "variant"}, "provenance": {...}}``, and with
-``--ema`` "trained": the weights the optimizer steps (``model`` is then their average):
+``--ema`` "trained": the weights the optimizer steps (``model`` is then their average), and in
+``best.pt`` "intervals": the conformal table calibrated on the fold's validation presses
+(:class:`train.model.conformal.IntervalTable`; absent from a run before them or without
+validation):
 everything inference needs travels with the weights, and nothing needs unpickling, so a
 checkpoint from elsewhere cannot run code on load. ``provenance`` (:data:`SCHEMA`, written by
 the train runner, :mod:`train.training.train_stage`) is how the file was made:
@@ -32,6 +35,7 @@ from data_schema.hdf5 import SCALED_UNIT
 from data_schema.states import PLAUSIBLE_M, PLAUSIBLE_N
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
+from train.model.conformal import IntervalTable
 from train.model.normalise import Normaliser
 from train.training.migrate import migrate
 
@@ -77,6 +81,8 @@ def check_checkpoint(path: str | Path, state: Any) -> None:
     if "trained" in state:                           # a run that averages its weights
         _check_weights(path, state["trained"], config)
     _check_meta(path, state["meta"])
+    if "intervals" in state:                         # absent: a run from before them
+        _parsed(path, "intervals", IntervalTable.from_dict, state["intervals"])
 
 
 def _parsed(path: str | Path, key: str, parse: Any, value: Any) -> Any:

@@ -5,7 +5,8 @@ into ``best.pt``, ``last.pt`` and ``log.csv``, the checkpoints written atomicall
 provenance (:data:`train.training.checkpoint.SCHEMA`: the command, the settings, the sha256 of the
 states file, the manifest and the --init checkpoint), and the same record as
 ``provenance.json`` beside ``log.csv`` (the log's own provenance: its readers see a plain CSV);
-then the curves' recording (:mod:`train.training.train_view`).
+then ``best.pt`` again with its intervals, calibrated on the fold's validation presses
+(:mod:`train.training.calibrate`), and the curves' recording (:mod:`train.training.train_view`).
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ from typing import Any
 import torch
 
 from core.atomic import atomic_output
+from core.progress import say
 from core.provenance import make_provenance
 from core.text import to_json
-from train.training.checkpoint import SCHEMA
-from train.training.loop import RunFiles, run_notes, train_run
+from train.training.calibrate import calibrated_state
+from train.training.checkpoint import SCHEMA, load_checkpoint
+from train.training.loop import RunFiles, resolve_device, run_notes, train_run
 from train.training.train_params import TrainInputs, TrainParams
 from train.training.train_view import write_train_recording
 
@@ -47,11 +50,23 @@ def run_train(inputs: TrainInputs, out: Path, params: TrainParams | None = None,
                      inputs.init, params.device, saver)
     notes = run_notes(files.last)
     if saver.saved:          # the process that wrote the checkpoints (torchrun: rank 0 alone)
+        _calibrate(best, inputs, params, saver)
         with atomic_output(files.log.parent / PROVENANCE) as tmp:
             tmp.write_text(to_json(saver.record(), indent=1) + "\n")
         if rrd is not None:
             write_train_recording(rrd, files.log, notes)
     return Trained(best, notes)
+
+
+def _calibrate(best: Path, inputs: TrainInputs, params: TrainParams, saver: _Saver) -> None:
+    """Keep in ``best`` the intervals calibrated on the fold's validation presses
+    (:mod:`train.training.calibrate`); a run without validation keeps none, and says so."""
+    state = calibrated_state(load_checkpoint(best), inputs.data, inputs.splits,
+                             params.options, resolve_device(params.device))
+    if state is None:
+        say("no validation presses: best.pt keeps no intervals")
+        return
+    saver(best, state)
 
 
 class _Saver:

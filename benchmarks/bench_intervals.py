@@ -1,0 +1,210 @@
+"""How sure the model is: the conformal intervals beside a deep ensemble's, on the quick demo's
+folds, and what the intervals cost a prediction (docs/results.md, "How sure the model is").
+
+    python benchmarks/bench_intervals.py DEMO_OUT [--folds 0 1 2 3 4] [--members 4] [--variant tl]
+    python benchmarks/bench_intervals.py --latency
+
+``DEMO_OUT`` is a ``pipeline demo --quick`` folder. Per fold, the run ``runs/exp_<variant>_foldK``
+(its best.pt keeps the conformal table, calibrated on the fold's validation presses) and
+``members - 1`` more runs trained like it (the same training presses, the same --init, other
+seeds; into ``DEMO_OUT/ensemble/``, kept for a second run) make the ensemble. Never the other
+folds' models: they trained on this fold's test presses. The ensemble's answer is its members'
+mean; its interval is their spread scaled on the same validation presses (normalised split
+conformal: a point's radius is q x its members' RMS distance from their mean, q the
+``ceil((n + 1) level)``-th smallest error / spread over the calibration points; the force
+alike). Printed per fold and pooled, at 80, 90 and 95 %: the share of test points inside
+their radius and the mean radius, the same for the force, for both.
+
+``--latency``: the predictor's batch-1 latency on a known mesh (26 and 1024 points, ONNX
+Runtime, head offsets) with and without ``level=0.9``, median of many calls.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from train.data import example_pairs, load_manifest, make_batch, role_examples  # noqa: E402
+from train.evaluation.coverage import coverage, coverage_doc  # noqa: E402
+from train.evaluation.evaluate import LoadedRun, load_run  # noqa: E402
+from train.model.config import CGNNConfig  # noqa: E402
+from train.model.conformal import REPORTED, conformal_quantile  # noqa: E402
+from train.model.si_units import distances, predict  # noqa: E402
+from train.training.calibrate import residuals  # noqa: E402
+from train.training.checkpoint import load_checkpoint  # noqa: E402
+from train.training.train_params import TrainInputs, TrainOptions, TrainParams  # noqa: E402
+from train.training.train_stage import run_train  # noqa: E402
+
+
+def members(run_dir: Path, out: Path, count: int) -> list[LoadedRun]:
+    """The run and ``count - 1`` more trained like it with seeds 1.., loaded."""
+    meta = load_checkpoint(run_dir / "best.pt")["meta"]
+    opts, config = TrainOptions(**meta["options"]), CGNNConfig.from_dict(meta["config"])
+    inputs = TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]),
+                         Path(meta["init"]) if meta["init"] else None)
+    dirs = [run_dir]
+    for seed in range(opts.seed + 1, opts.seed + count):
+        d = out / f"{run_dir.name}_seed{seed}"
+        if not (d / "best.pt").is_file():
+            run_train(inputs, d, TrainParams(dataclasses.replace(opts, seed=seed), config, "cpu"))
+        dirs.append(d)
+    return [load_run(d) for d in dirs]
+
+
+@torch.no_grad()
+def spread(runs: list[LoadedRun], role_pairs: torch.Tensor) -> dict[str, np.ndarray]:
+    """The ensemble on examples ``role_pairs``: per valid point its mean's error and the
+    members' RMS distance from their mean; per example the same for the force."""
+    first = runs[0]
+    out: dict[str, list] = {"err": [], "sd": [], "ferr": [], "fsd": []}
+    for rows in role_pairs.split(64):
+        b = make_batch(first.states, rows)
+        preds = [predict(r.model, r.norm, b) for r in runs]
+        pts = torch.stack([p.deformed for p in preds])                 # (M, B, N, 3)
+        force = torch.stack([p.dforce for p in preds])                 # (M, B)
+        mean = pts.mean(0)
+        sd = ((pts - mean) ** 2).sum(-1).mean(0).sqrt()                 # (B, N)
+        err = distances(type(preds[0])(mean, force.mean(0)), b)
+        mask = b.mask
+        out["err"].append(err[mask].double().numpy())
+        out["sd"].append(sd[mask].double().numpy())
+        out["ferr"].append((force.mean(0) - b.dforce).abs().double().numpy())
+        out["fsd"].append(force.std(0, unbiased=False).double().numpy())
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def ensemble_rows(cal: dict[str, np.ndarray], test: dict[str, np.ndarray]) -> list[dict]:
+    """Per reported level: the test share inside and mean width of the ensemble's spread
+    scaled on the calibration (points, force)."""
+    rows = []
+    for level in REPORTED:
+        q = conformal_quantile(cal["err"] / np.maximum(cal["sd"], 1e-12), np.array([level]))[0]
+        qf = conformal_quantile(cal["ferr"] / np.maximum(cal["fsd"], 1e-12),
+                                np.array([level]))[0]
+        radius, half = q * test["sd"], qf * test["fsd"]
+        rows.append({"level": level, "coverage": float((test["err"] <= radius).mean()),
+                     "mean_radius_mm": float(radius.mean() * 1e3),
+                     "force_coverage": float((test["ferr"] <= half).mean()),
+                     "force_half_width_n": float(half.mean())})
+    return rows
+
+
+def fold_rows(run_dir: Path, out: Path, count: int) -> tuple[list[dict], list[dict], dict]:
+    """Conformal (the run's own table) and ensemble rows on the run's test presses, and the
+    raw spreads (to pool)."""
+    runs = members(run_dir, out, count)
+    first = runs[0]
+    meta = first.meta
+    doc = load_manifest(Path(meta["splits"]), Path(meta["data"]["file"]))
+    val = example_pairs(first.states, role_examples(doc, meta["options"]["fold"], "val"))
+    test = example_pairs(first.states, first.test)
+    conf = coverage(first.intervals, residuals(first.model, first.norm, first.states, test))
+    cal, tst = spread(runs, val), spread(runs, test)
+    return coverage_doc(conf, None)["levels"], ensemble_rows(cal, tst), {"cal": cal,
+                                                                         "test": tst,
+                                                                         "conf": conf}
+
+
+def show(name: str, conf: list[dict], ens: list[dict]) -> None:
+    for c, e in zip(conf, ens, strict=True):
+        print(f"| {name} | {c['level']:.0%} | {c['coverage']:.1%} / {c['mean_radius_mm']:.3f} mm"
+              f" | {e['coverage']:.1%} / {e['mean_radius_mm']:.3f} mm | "
+              f"{c['force_coverage']:.1%} / {c['force_half_width_n']:.3f} N | "
+              f"{e['force_coverage']:.1%} / {e['force_half_width_n']:.3f} N |")
+
+
+def compare(demo: Path, folds: list[int], count: int, variant: str) -> None:
+    print(f"| fold | level | conformal points: inside / mean radius | ensemble ({count}) points "
+          "| conformal force: inside / half-width | ensemble force |")
+    print("|---|---|---|---|---|---|")
+    pooled_cal: dict[str, list] = {}
+    pooled_test: dict[str, list] = {}
+    conf_sum = None
+    for fold in folds:
+        tic = time.perf_counter()
+        conf, ens, raw = fold_rows(demo / "runs" / f"exp_{variant}_fold{fold}",
+                                   demo / "ensemble", count)
+        show(str(fold), conf, ens)
+        print(f"<!-- fold {fold}: {time.perf_counter() - tic:.0f} s -->", flush=True)
+        conf_sum = raw["conf"] if conf_sum is None else conf_sum + raw["conf"]
+        for k, v in raw["cal"].items():
+            pooled_cal.setdefault(k, []).append(v)
+        for k, v in raw["test"].items():
+            pooled_test.setdefault(k, []).append(v)
+    # pooled: each fold scaled on its own calibration, so pool the per-fold rows' counts
+    show("pooled conformal / fold-mean ensemble", coverage_doc(conf_sum, None)["levels"],
+         _mean_rows([ensemble_rows({k: v[i] for k, v in pooled_cal.items()},
+                                   {k: v[i] for k, v in pooled_test.items()})
+                     for i in range(len(folds))],
+                    [len(t) for t in pooled_test["err"]], [len(t) for t in pooled_test["ferr"]]))
+
+
+def _mean_rows(per_fold: list[list[dict]], points: list[int], examples: list[int]
+               ) -> list[dict]:
+    """Per level, the folds' rows weighted by their test points (force: examples)."""
+    out = []
+    for k in range(len(REPORTED)):
+        rows = [f[k] for f in per_fold]
+        wp, we = np.array(points, float), np.array(examples, float)
+        out.append({"level": rows[0]["level"],
+                    **{key: float(np.average([r[key] for r in rows], weights=wp))
+                       for key in ("coverage", "mean_radius_mm")},
+                    **{key: float(np.average([r[key] for r in rows], weights=we))
+                       for key in ("force_coverage", "force_half_width_n")}})
+    return out
+
+
+def latency(repeats: int = 3000) -> None:
+    """Known-mesh batch-1 latency with and without intervals: bench_cgnn.py's surfaces, press
+    and head-offset network (ONNX Runtime), a table of 16 point bins and 4 force bins."""
+    from bench_cgnn import NETWORKS, NORM, PRESS, median_ms, surface
+
+    from train import Predictor
+    from train.inference.si_model import SIModel
+    from train.model.cgnn import CGNN
+    from train.model.conformal import IntervalTable
+
+    rng = np.random.default_rng(0)
+    table = IntervalTable.fit(rng.exponential(1e-4, 4000), rng.uniform(0, 0.05, (4000, 3)),
+                              rng.exponential(0.1, 400), rng.uniform(0, 0.01, (400, 2)), 3)
+    torch.manual_seed(0)
+    pred = Predictor(SIModel(CGNN(NETWORKS["head offsets"]).eval(), NORM), torch.device("cpu"),
+                     "onnx")
+    pred.intervals = table
+    print("known-mesh batch-1 latency, head offsets, ONNX Runtime [ms] (median):")
+    for n in (26, 1024):
+        pts = surface(n, False)
+        reps = max(30, repeats * 26 // n)
+        plain = median_ms(lambda p=pts: pred.predict(p, PRESS), reps, lambda: None)
+        sure = median_ms(lambda p=pts: pred.predict(p, PRESS, level=0.9), reps, lambda: None)
+        plain2 = median_ms(lambda p=pts: pred.predict(p, PRESS), reps, lambda: None)
+        base = min(plain, plain2)
+        print(f"  N={n:5d} without {plain:.4f} / {plain2:.4f}  with level=0.9 {sure:.4f}  "
+              f"(+{(sure / base - 1):.0%})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("demo", nargs="?", type=Path)
+    ap.add_argument("--folds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    ap.add_argument("--members", type=int, default=4)
+    ap.add_argument("--variant", choices=("tl", "notl"), default="tl")
+    ap.add_argument("--latency", action="store_true")
+    a = ap.parse_args()
+    torch.set_num_threads(1)
+    if a.latency:
+        latency()
+    if a.demo is not None:
+        compare(a.demo, a.folds, a.members, a.variant)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,73 @@
+"""Coverage on test presses against counts known by construction, pooled over folds by adding,
+and the recording's points coloured by how far inside or outside their radius they fall."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from helpers.interval_table import FAR, HALF, NEAR, known_table
+
+from train.data import Batch
+from train.evaluation.coverage import coverage, coverage_doc
+from train.evaluation.eval_view import write_eval_recording
+from train.model.si_units import Prediction
+from train.training.calibrate import Residuals
+
+
+def _residuals() -> Residuals:
+    """Four points beside the tip's path (radius NEAR = 1 mm), two of them inside; four
+    50 mm from it (radius FAR = 0.1 mm), three inside; two examples, one force inside."""
+    err = np.array([0.5, 0.9, 1.1, 3.0, 0.05, 0.2, 0.05, 0.05]) * 1e-3
+    dist = np.r_[np.zeros(4), np.full(4, 0.05)]
+    feats = np.column_stack([dist, np.full(8, 1e-3), np.zeros(8)])
+    return Residuals(err, feats, np.repeat([0, 1], 4), np.array([0.1, -0.3]),
+                     np.array([[1e-3, 0.0], [1e-3, 0.0]]))
+
+
+def test_coverage_counts_points_inside_their_radius() -> None:
+    doc = coverage_doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)
+    for level in doc["levels"]:
+        assert level["points"] == 8 and level["coverage"] == pytest.approx(5 / 8)
+        assert level["mean_radius_mm"] == pytest.approx((4 * NEAR + 4 * FAR) / 8 * 1e3)
+        assert level["force_coverage"] == pytest.approx(0.5)
+        assert level["force_half_width_n"] == pytest.approx(HALF)
+    near, far = doc["by_distance"]
+    assert (near["from_mm"], near["points"], near["coverage"]) == (0.0, 4, 0.5)
+    assert (far["from_mm"], far["to_mm"], far["coverage"]) == (40.0, None, 0.75)
+    assert near["mean_radius_mm"] == pytest.approx(NEAR * 1e3)
+    assert doc["radius_to_ld"] == pytest.approx(0.55 / 0.275)
+
+
+def test_folds_pool_by_adding() -> None:
+    one = coverage(known_table(), _residuals())
+    doc = coverage_doc(one + one, ld_mean_mm=0.275)
+    assert doc["levels"][1]["points"] == 16 and doc["levels"][1]["coverage"] == 5 / 8
+
+
+def _colours(rrd: Path, entity: str) -> list[np.ndarray]:
+    """The colours of each temporal row of ``entity``."""
+    from rerun.chunk import RrdReader
+
+    rows = []
+    for chunk in RrdReader(str(rrd)).store().stream():
+        if chunk.entity_path == entity and not chunk.is_static:
+            col = chunk.to_record_batch().column("Points3D:colors")
+            rows += [np.asarray(col[i].as_py(), np.uint32) for i in range(len(col))]
+    return rows
+
+
+def test_recording_colours_points_by_error_over_radius(tmp_path: Path) -> None:
+    """Three points: well inside (green), at the radius (yellow), three times it (red)."""
+    pts = torch.tensor([[[0.0, 0, 0], [0.01, 0, 0], [0.02, 0, 0]]])
+    b = Batch(pts, pts, torch.ones(1, 3, dtype=torch.bool), torch.zeros(1, 6),
+              torch.zeros(1))
+    p = Prediction(pts, torch.zeros(1))
+    write_eval_recording(tmp_path / "e.rrd", [(b, p)], "run", "table",
+                         [np.array([[0.0, 1.0, 3.0]])])
+    (rgba,) = _colours(tmp_path / "e.rrd", "/interval/points")
+    rgb = [((c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255) for c in rgba]
+    assert rgb == [(40, 170, 70), (240, 210, 40), (220, 30, 30)]
+    assert _colours(tmp_path / "e.rrd", "/surface/predicted")       # beside the surfaces
