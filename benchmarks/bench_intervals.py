@@ -16,7 +16,8 @@ alike). Printed per fold and pooled, at 80, 90 and 95 %: the share of test point
 their radius and the mean radius, the same for the force, for both.
 
 ``--latency``: the predictor's batch-1 latency on a known mesh (26 and 1024 points, ONNX
-Runtime, head offsets) with and without ``level=0.9``, median of many calls.
+Runtime, head offsets) with and without ``level=0.9``, the press repeated and a moving tip,
+median of many calls in alternating blocks.
 """
 
 from __future__ import annotations
@@ -164,8 +165,10 @@ def _mean_rows(per_fold: list[list[dict]], points: list[int], examples: list[int
 
 def latency(repeats: int = 3000) -> None:
     """Known-mesh batch-1 latency with and without intervals: bench_cgnn.py's surfaces, press
-    and head-offset network (ONNX Runtime), a table of 16 point bins and 4 force bins."""
-    from bench_cgnn import NETWORKS, NORM, PRESS, median_ms, surface
+    and head-offset network (ONNX Runtime), a table of 24 point bins and 4 force bins; the
+    press repeated, and a moving tip (its end descending 10 um a call); with and without in
+    alternating blocks, median of every call."""
+    from bench_cgnn import NETWORKS, NORM, PRESS, surface
 
     from train import Predictor
     from train.inference.si_model import SIModel
@@ -179,16 +182,26 @@ def latency(repeats: int = 3000) -> None:
     pred = Predictor(SIModel(CGNN(NETWORKS["head offsets"]).eval(), NORM), torch.device("cpu"),
                      "onnx")
     pred.intervals = table
+    press = np.asarray(PRESS, np.float32).reshape(-1)
+    moving = [np.r_[press[:5], press[5] + 1e-3 - 1e-5 * k].astype(np.float32)
+              for k in range(200)]
     print("known-mesh batch-1 latency, head offsets, ONNX Runtime [ms] (median):")
     for n in (26, 1024):
         pts = surface(n, False)
-        reps = max(30, repeats * 26 // n)
-        plain = median_ms(lambda p=pts: pred.predict(p, PRESS), reps, lambda: None)
-        sure = median_ms(lambda p=pts: pred.predict(p, PRESS, level=0.9), reps, lambda: None)
-        plain2 = median_ms(lambda p=pts: pred.predict(p, PRESS), reps, lambda: None)
-        base = min(plain, plain2)
-        print(f"  N={n:5d} without {plain:.4f} / {plain2:.4f}  with level=0.9 {sure:.4f}  "
-              f"(+{(sure / base - 1):.0%})")
+        reps = max(30, repeats * 26 // n // 20)
+        for name, conds in (("repeated press", [press]), ("moving tip", moving)):
+            times: dict[bool, list[float]] = {False: [], True: []}
+            for block in range(20):
+                for sure in (False, True) if block % 2 else (True, False):
+                    kw = {"level": 0.9} if sure else {}
+                    for k in range(reps):
+                        c = conds[k % len(conds)]
+                        tic = time.perf_counter()
+                        pred.predict(pts, c, **kw)
+                        times[sure].append(time.perf_counter() - tic)
+            plain, with_ = (float(np.median(times[k])) * 1e3 for k in (False, True))
+            print(f"  N={n:5d} {name:14s} without {plain:.4f}  with level=0.9 {with_:.4f}  "
+                  f"(+{with_ / plain - 1:.0%})")
 
 
 def main() -> None:

@@ -150,8 +150,10 @@ METRIC_ROWS = {
 ROW_OPTIONAL = {"intervals": (dict, type(None))}    # 1.2: null where the run keeps none
 # 1.2: a row's intervals (pipeline eval, train/evaluation/coverage.py): per reported level the
 # share of test points inside their radius and the mean radius, the same for the force; by
-# distance from the tip's path; the mean radius over mean L_d; a run's calibration
+# distance from the tip's path (the surface's points; the tip's own point, where the data have
+# one, apart); the mean radius over mean L_d; a run's calibration
 INTERVALS = {"levels": list, "by_distance": list, "radius_to_ld": _NUMBER_OR_NONE}
+INTERVALS_OPTIONAL = {"calibration": dict, "tip_point": dict}
 INTERVAL_LEVEL = {"level": float, "points": int, "coverage": _NUMBER,
                   "mean_radius_mm": _NUMBER_OR_NONE, "examples": int, "force_coverage": _NUMBER,
                   "force_half_width_n": _NUMBER_OR_NONE}
@@ -230,22 +232,26 @@ def _check_row(path: str | Path, row: Any, keys: dict, where: str) -> None:
 def _check_intervals(path: str | Path, doc: dict, where: str) -> None:
     """A row's intervals: each level in (0, 1) with shares in [0, 1] over at least one point
     and example, widths finite and plausible or null (unbounded); the distance bins alike."""
-    _typed_keys(path, doc, {**INTERVALS, "calibration": dict}, where,
-                optional={"calibration": dict})
+    _typed_keys(path, doc, {**INTERVALS, **INTERVALS_OPTIONAL}, where,
+                optional=INTERVALS_OPTIONAL)
     if "calibration" in doc:
         _typed_keys(path, doc["calibration"], CALIBRATION, f"{where}.calibration")
-    for kind, keys in (("levels", INTERVAL_LEVEL), ("by_distance", INTERVAL_NEAR)):
-        for i, item in enumerate(doc[kind]):
-            here = f"{where}.{kind}[{i}]"
-            _typed_keys(path, item, keys, here)
-            if kind == "levels" and not 0 < item["level"] < 1:
-                raise BadInput(path, f"{here}.level is {item['level']}: not in (0, 1)")
-            for share in ("coverage", "force_coverage"):
-                if share in item and not 0 <= item[share] <= 1:
-                    raise BadInput(path, f"{here}.{share} is {item[share]!r}: not in [0, 1]")
-            _check_numbers(path, {k: v for k, v in item.items() if v is not None}, here)
-            if item["points"] < 1 or item.get("examples", 1) < 1:
-                raise BadInput(path, f"{here} must count at least one point and example")
+    items = [("levels", INTERVAL_LEVEL, f"{where}.levels[{i}]", item)
+             for i, item in enumerate(doc["levels"])]
+    items += [("by_distance", INTERVAL_NEAR, f"{where}.by_distance[{i}]", item)
+              for i, item in enumerate(doc["by_distance"])]
+    if "tip_point" in doc:
+        items.append(("tip_point", INTERVAL_NEAR, f"{where}.tip_point", doc["tip_point"]))
+    for kind, keys, here, item in items:
+        _typed_keys(path, item, keys, here)
+        if kind == "levels" and not 0 < item["level"] < 1:
+            raise BadInput(path, f"{here}.level is {item['level']}: not in (0, 1)")
+        for share in ("coverage", "force_coverage"):
+            if share in item and not 0 <= item[share] <= 1:
+                raise BadInput(path, f"{here}.{share} is {item[share]!r}: not in [0, 1]")
+        _check_numbers(path, {k: v for k, v in item.items() if v is not None}, here)
+        if item["points"] < 1 or item.get("examples", 1) < 1:
+            raise BadInput(path, f"{here} must count at least one point and example")
 
 
 def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) -> None:

@@ -4,9 +4,11 @@ At each reported level (:data:`train.model.conformal.REPORTED`): the share of te
 whose error lies within their radius, the mean radius, and the same for the force (the share
 of test examples whose |dF error| lies within the half-width, the mean half-width); and at
 90 %, by the points' distance from the tip's path (:data:`NEAR_MM` bins), so that "beside the
-tip" and "far from it" are seen apart. The sums (:class:`Coverage`) add over folds, so a
-variant's pooled row counts every test point once. A run whose checkpoint keeps no intervals
-(from before them, or trained without validation) has none, said in one line.
+tip" and "far from it" are seen apart, the tip's own point (a lab's tip marker, within
+:data:`~train.model.normalise.TIP_POINT` of the path) apart from them. The sums
+(:class:`Coverage`) add over folds, so a variant's pooled row counts every test point once. A
+run whose checkpoint keeps no intervals (from before them, or trained without validation) has
+none, said in one line.
 """
 
 from __future__ import annotations
@@ -19,17 +21,19 @@ import numpy as np
 from core.progress import warn
 from train.data import Batch
 from train.model.conformal import REPORTED, IntervalTable, level_index
+from train.model.normalise import TIP_POINT
 from train.model.si_units import Prediction
 from train.training.calibrate import Residuals, batch_residuals
 
 NEAR_MM = (10.0, 20.0, 40.0)     # the distance bins' edges of the near/far report, mm
+TIP_MM = TIP_POINT * 1e3         # nearer the tip's path than this: the tip's own point, mm
 SHOWN = 0.9                      # the level of the near/far report and of the recording
 
 
 @dataclass
 class Coverage:
     """Counts and sums over test points and examples (per reported level, and per
-    distance bin at :data:`SHOWN`): they add over folds."""
+    distance bin at :data:`SHOWN`, the first the tip's own point): they add over folds."""
 
     points: np.ndarray         # (L,) test points (the same at every level)
     inside: np.ndarray         # (L,) of them within their radius
@@ -58,8 +62,8 @@ def coverage(table: IntervalTable, r: Residuals) -> Coverage:
         rows.append((len(radius), (r.point_error <= radius).sum(), radius.sum(),
                      len(half), (np.abs(r.force_error) <= half).sum(), half.sum()))
     radius = table.radii(level_index(SHOWN), dist, depth, height)
-    near = np.searchsorted(np.asarray(NEAR_MM) * 1e-3, dist, side="right")
-    bins = len(NEAR_MM) + 1
+    near = np.searchsorted(np.asarray((TIP_MM, *NEAR_MM)) * 1e-3, dist, side="right")
+    bins = len(NEAR_MM) + 2
     return Coverage(*(np.asarray(col, dtype=np.float64) for col in zip(*rows, strict=True)),
                     np.bincount(near, minlength=bins).astype(np.float64),
                     np.bincount(near, (r.point_error <= radius).astype(float), minlength=bins),
@@ -68,8 +72,9 @@ def coverage(table: IntervalTable, r: Residuals) -> Coverage:
 
 def coverage_doc(c: Coverage, ld_mean_mm: float | None) -> dict:
     """The JSON of a coverage: per level the points' and the force's share inside and mean
-    width, by distance at :data:`SHOWN`, and the mean radius at :data:`SHOWN` over the mean
-    L_d (``radius_to_ld``: intervals that cover by being huge show there)."""
+    width, by distance at :data:`SHOWN` (the surface's points; the tip's own point, where
+    there is one, as ``tip_point``), and the mean radius at :data:`SHOWN` over the mean L_d
+    (``radius_to_ld``: intervals that cover by being huge show there)."""
     levels = [{"level": q, "points": int(c.points[k]),
                "coverage": float(c.inside[k] / c.points[k]),
                "mean_radius_mm": _mean(c.radius[k], c.points[k], 1e3),
@@ -77,14 +82,16 @@ def coverage_doc(c: Coverage, ld_mean_mm: float | None) -> dict:
                "force_coverage": float(c.force_inside[k] / c.examples[k]),
                "force_half_width_n": _mean(c.half_width[k], c.examples[k], 1.0)}
               for k, q in enumerate(REPORTED)]
-    edges = (0.0, *NEAR_MM, None)
+    edges = (0.0, TIP_MM, *NEAR_MM, None)
     near = [{"from_mm": edges[d], "to_mm": edges[d + 1], "points": int(c.near_points[d]),
              "coverage": float(c.near_inside[d] / c.near_points[d]),
              "mean_radius_mm": _mean(c.near_radius[d], c.near_points[d], 1e3)}
             for d in range(len(c.near_points)) if c.near_points[d] > 0]
     shown = levels[REPORTED.index(SHOWN)]["mean_radius_mm"]
     ratio = None if shown is None or not ld_mean_mm else shown / ld_mean_mm
-    return {"levels": levels, "by_distance": near, "radius_to_ld": ratio}
+    tip = [b for b in near if b["from_mm"] == 0.0]
+    return {"levels": levels, "by_distance": [b for b in near if b["from_mm"] > 0],
+            "radius_to_ld": ratio, **({"tip_point": tip[0]} if tip else {})}
 
 
 def _mean(total: float, count: float, unit: float) -> float | None:
@@ -145,19 +152,25 @@ def _coverage_row(name: str, test_set: str, fold: str, doc: dict) -> str:
 
 def _near_table(rows: list[dict], overall: list[dict],
                 name: Callable[[dict, list[dict]], str]) -> str:
-    """At :data:`SHOWN`, pooled: share inside / mean radius by distance from the tip's path."""
-    edges = (0.0, *NEAR_MM)
-    head = ["Model/Train set", "Test set",
+    """At :data:`SHOWN`, pooled: share inside / mean radius by distance from the tip's path,
+    the tip's own point first."""
+    edges = (TIP_MM, *NEAR_MM)
+    head = ["Model/Train set", "Test set", "tip's own point",
             *(f"{a:g}–{b:g} mm" for a, b in zip(edges, NEAR_MM, strict=False)),
             f">= {NEAR_MM[-1]:g} mm"]
     lines = ["", f"By distance from the tip's path, at {SHOWN:.0%} (share inside / mean "
                  "radius; points)", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
-        cells = {b["from_mm"]: f"{b['coverage']:.1%} / {_width(b['mean_radius_mm'], 'mm')}; "
-                               f"{b['points']}" for b in row["intervals"]["by_distance"]}
-        lines.append("| " + " | ".join([name(row, overall), row["test_set"],
+        doc = row["intervals"]
+        cells = {b["from_mm"]: _near_cell(b) for b in doc["by_distance"]}
+        tip = _near_cell(doc["tip_point"]) if "tip_point" in doc else "–"
+        lines.append("| " + " | ".join([name(row, overall), row["test_set"], tip,
                                         *(cells.get(e, "–") for e in edges)]) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _near_cell(b: dict) -> str:
+    return f"{b['coverage']:.1%} / {_width(b['mean_radius_mm'], 'mm')}; {b['points']}"
 
 
 def _width(value: float | None, unit: str) -> str:

@@ -33,7 +33,8 @@ from train.training.checkpoint import load_checkpoint, model_from
 
 INTERVALS_LOOKUP = (
     "split conformal, binned (train/model/conformal.py): level index i = ceil(100 level) - 1 "
-    "into levels 0.01..0.99; a feature's bin is the count of its edges <= its value; a point's "
+    "into levels 0.01..0.99; a feature's bin is the count of its edges <= its value (the first "
+    "distance edge, 0.1 mm, sets a lab's tip marker apart); a point's "
     "radius (m) is points.width[distance bin][depth bin][height bin][i], distance = the "
     "point's (input) distance from the segment tip start - tip end, depth = |tip end - tip "
     "start|, height = the tip start's z less that of the surface point nearest it in x, y "

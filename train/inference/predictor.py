@@ -25,7 +25,14 @@ from train.inference.backends import TorchBackend, make_backend
 from train.inference.head_split import check_split
 from train.inference.region import near_path, neighbour_table, region
 from train.inference.si_model import SIModel, press_entries
-from train.model.conformal import Interval, IntervalTable, force_interval, interval, level_index
+from train.model.conformal import (
+    Interval,
+    IntervalTable,
+    SceneLookup,
+    force_interval,
+    interval,
+    level_index,
+)
 from train.model.normalise import TIP_POINT, tip_height
 from train.training.checkpoint import load_checkpoint, model_from
 
@@ -51,6 +58,12 @@ class Scene:
     #                                                 head terms, once its first press has run
     plan: cKDTree | None = None   # of the points' x, y, once a tip's height is asked
     last: tuple[bytes, float] = (b"", 0.0)    # the last tip asked about, and its height
+    start: tuple[bytes, float] = (b"", 0.0)   # the last press's start (C's bytes), its height
+
+    @cached_property
+    def lookup(self) -> SceneLookup:
+        """The points as the interval lookup keeps them, once an interval is asked."""
+        return SceneLookup(self.points)
 
     @cached_property
     def top(self) -> float:
@@ -177,7 +190,7 @@ class Predictor:
         df = self._flag(press, df, NOT_HOLDING if level is not None else "")
         if level is None:
             return deformed, df
-        return deformed, df, interval(self.intervals, level, press.scene.points, press.c[0],
+        return deformed, df, interval(self.intervals, level, press.scene.lookup, press.c[0],
                                       self._height(press), df, not self.extrapolating)
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
@@ -207,9 +220,13 @@ class Predictor:
 
     @staticmethod
     def _height(press: Press) -> float:
-        """The tip start's height above the scene (the envelope's check has asked it)."""
-        height = press.scene.height(press.c[0, :3].astype(np.float64))
-        return 0.0 if height != height else height          # NaN: no other point
+        """The tip start's height above the scene (0 where no other point is left), kept for
+        the press's start: a haptic loop's tip moves its end, call after call."""
+        scene, key = press.scene, press.c[0, :3].tobytes()
+        if key != scene.start[0]:
+            height = scene.height(press.c[0, :3].astype(np.float64))
+            scene.start = (key, 0.0 if height != height else height)   # NaN: no other point
+        return scene.start[1]
 
     def _known(self, press: Press, force_only: bool) -> Answer:
         """A press-independent network: a new scene runs the network once and keeps its head

@@ -11,11 +11,17 @@ The bins (Mondrian: a quantile per bin, so a point beside the tip and one far fr
 own radii) are by what changes the error: a point's distance from the tip's path (segment tip
 start to tip end), the press's depth (how far the tip moves, |tip end - tip start|) and the tip
 start's height above the surface. Their edges are the calibration's own quantiles
-(:data:`SPLITS`: quartiles of the distance, medians of the other two), so every lab's and the
-MSM's scales fit. A bin with fewer than :data:`MIN_COUNT` scores (or an infinite quantile) at
-a level takes its parent's: the same bins without the tip's height, then without the depth
-too, then every score (the fallback is resolved once, when the table is made, and each radius
-records how many scores it stands on). The force is binned by depth and height alike.
+(:data:`SPLITS`: of the distance its nearest tenth and quartiles, medians of the other two), so
+every lab's and the MSM's scales fit. A point within
+:data:`~train.model.normalise.TIP_POINT` of the path is the tip's own (a lab's tip marker: its
+error is a fraction of its neighbours') and has a distance bin of its own (:data:`LEADS`), the
+quantiles being of the surface's points alone. With the tip's point and the markers up to
+30 mm in one bin, one radius was too wide for the tip and too narrow 10-20 mm from the path,
+where the error is largest (docs/results.md). A bin with fewer than :data:`MIN_COUNT` scores
+(or an infinite quantile) at a level takes its parent's: the same bins without the tip's
+height, then without the depth too, then every score (the fallback is resolved once, when the
+table is made, and each radius records how many scores it stands on). The force is binned by
+depth and height alike.
 
 The table covers levels 0.01 .. 0.99 in steps of 0.01; a level between them takes the next
 above (the interval is then at least as wide as asked). Plain numpy and plain types: a
@@ -28,16 +34,23 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
+
+from train.model.normalise import TIP_POINT
 
 LEVELS = tuple(round(0.01 * i, 2) for i in range(1, 100))   # the levels a table holds
 REPORTED = (0.8, 0.9, 0.95)                                   # what evaluation reports
 MIN_COUNT = 30        # scores a bin needs before its own quantile is used
+ROUNDING = 1e-9       # m: a kept lookup measures its bins again when a point is this near an edge
 # the calibration quantiles that make each feature's bin edges: the distance from the tip's
-# path in quarters, the press's depth and the tip's height in halves
-SPLITS = {"distance": (0.25, 0.5, 0.75), "depth": (0.5,), "height": (0.5,)}
+# path in its nearest tenth and quarters (the error falls steeply over the nearest 20 mm), the
+# press's depth and the tip's height in halves
+SPLITS = {"distance": (0.1, 0.25, 0.5, 0.75), "depth": (0.5,), "height": (0.5,)}
+# a feature's fixed first edge: below it a bin of its own (the tip's own point), the quantiles
+# of the rest
+LEADS = {"distance": TIP_POINT}
 POINT_FEATURES = ("distance", "depth", "height")
 FORCE_FEATURES = ("depth", "height")
 
@@ -45,6 +58,15 @@ FORCE_FEATURES = ("depth", "height")
 def level_index(level: float) -> int:
     """The index in :data:`LEVELS` of ``level`` (the next level above it where it lies
     between two); ValueError in one line outside (0, 1) or above the highest."""
+    try:
+        return _level_index(level)
+    except TypeError:                  # unhashable: no level
+        raise ValueError(f"level must lie in (0, 1), got {level!r}") from None
+
+
+@lru_cache(maxsize=256)
+def _level_index(level: float) -> int:
+    """:func:`level_index`, kept per level asked (a haptic loop asks one, call after call)."""
     if not (isinstance(level, int | float) and math.isfinite(level) and 0 < level < 1):
         raise ValueError(f"level must lie in (0, 1), got {level!r}")
     i = max(math.ceil(round(level * 100, 9)) - 1, 0)
@@ -74,9 +96,15 @@ def path_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.
     return np.sqrt(((rel - t[..., None] * axis) ** 2).sum(-1))
 
 
-def bin_edges(values: np.ndarray, splits: tuple[float, ...]) -> tuple[float, ...]:
-    """A feature's bin edges: ``values``' quantiles at ``splits`` (duplicates dropped)."""
-    return tuple(float(v) for v in np.unique(np.quantile(values, splits)))
+def bin_edges(values: np.ndarray, splits: tuple[float, ...], lead: float | None = None
+              ) -> tuple[float, ...]:
+    """A feature's bin edges: ``values``' quantiles at ``splits`` (duplicates dropped); with
+    ``lead``, that edge first and the quantiles of the values at or above it (where any are)."""
+    if lead is None:
+        return tuple(float(v) for v in np.unique(np.quantile(values, splits)))
+    rest = values[values >= lead]
+    above = np.unique(np.quantile(rest, splits)) if len(rest) else np.empty(0)
+    return (float(lead), *(float(v) for v in above[above > lead]))
 
 
 @dataclass(frozen=True)
@@ -90,12 +118,16 @@ class Bins:
     count: np.ndarray          # (*shape, Q) int64
 
     @classmethod
-    def fit(cls, scores: np.ndarray, features: np.ndarray, splits: tuple[tuple[float, ...], ...]
-            ) -> Bins:
+    def fit(cls, scores: np.ndarray, features: np.ndarray, splits: tuple[tuple[float, ...], ...],
+            lead: tuple[float | None, ...] | None = None) -> Bins:
         """From scores (M,) and their features (M, K), each feature binned at its
-        calibration quantiles ``splits[k]``; a bin short of :data:`MIN_COUNT` scores (or
-        unbounded at a level) takes its parent's (the last feature dropped first)."""
-        edges = tuple(bin_edges(features[:, k], s) for k, s in enumerate(splits))
+        calibration quantiles ``splits[k]``; with ``lead[k]`` a value, the values below it
+        are a bin of their own and the quantiles are of the rest (:func:`bin_edges`). A bin
+        short of :data:`MIN_COUNT` scores (or unbounded at a level) takes its parent's (the
+        last feature dropped first)."""
+        lead = lead or (None,) * len(splits)
+        edges = tuple(bin_edges(features[:, k], s, a)
+                      for k, (s, a) in enumerate(zip(splits, lead, strict=True)))
         idx = np.stack([np.searchsorted(e, features[:, k], side="right")
                         for k, e in enumerate(edges)], 1)
         shape = tuple(len(e) + 1 for e in edges)
@@ -122,15 +154,27 @@ class Bins:
 
     def row(self, level: int, *rest: float) -> np.ndarray:
         """The widths (bins of the first feature,) at level index ``level`` for one value of
-        each later feature (looked up in Python: a press's scalars)."""
-        at = (slice(None), *(bisect_right(e, v) for e, v in zip(self.edges[1:], rest,
-                                                                 strict=True)), level)
-        return self.width[at]
+        each later feature (looked up in Python: a press's scalars; each row kept once
+        asked)."""
+        key = (level, *map(bisect_right, self.edges[1:], rest))
+        row = self._kept.get(key)
+        if row is None:
+            row = self._kept[key] = np.ascontiguousarray(self.width[(slice(None), *key[1:],
+                                                                     level)])
+        return row
 
     def at(self, level: int, *values: float) -> float:
         """The width at level index ``level`` for one value of each feature."""
-        index = tuple(bisect_right(e, v) for e, v in zip(self.edges, values, strict=True))
-        return float(self.width[(*index, level)])
+        key = (level, *map(bisect_right, self.edges, values), None)
+        width = self._kept.get(key)
+        if width is None:
+            width = self._kept[key] = float(self.width[(*key[1:-1], level)])
+        return width
+
+    @cached_property
+    def _kept(self) -> dict[tuple, np.ndarray | float]:
+        """The rows and widths asked so far (:meth:`row`, :meth:`at`), by their bins."""
+        return {}
 
     @cached_property
     def first_squared(self) -> np.ndarray:
@@ -175,7 +219,8 @@ class IntervalTable:
         """From the calibration's point scores (M,) m with features (M, 3) (distance, depth,
         height) and force scores (E,) N with features (E, 2) (depth, height)."""
         return cls(Bins.fit(point_scores, point_features,
-                            tuple(SPLITS[f] for f in POINT_FEATURES)),
+                            tuple(SPLITS[f] for f in POINT_FEATURES),
+                            tuple(LEADS.get(f) for f in POINT_FEATURES)),
                    Bins.fit(force_scores, force_features,
                             tuple(SPLITS[f] for f in FORCE_FEATURES)),
                    presses, len(force_scores))
@@ -194,6 +239,24 @@ class IntervalTable:
             raise ValueError("interval levels are not 0.01 .. 0.99")
         return cls(Bins.from_dict(d["points"]), Bins.from_dict(d["force"]),
                    int(d["presses"]), int(d["examples"]))
+
+    def press(self, level: int, depth: float, height: float) -> tuple[np.ndarray, float]:
+        """For a press of ``depth`` whose tip starts ``height`` above the surface, at level
+        index ``level``: the points' radii by distance bin and the force's half-width (each
+        pair kept once asked: one lookup a press)."""
+        pd, ph = self.points.edges[1:]
+        fd, fh = self.force.edges
+        key = (level, bisect_right(pd, depth), bisect_right(ph, height),
+               bisect_right(fd, depth), bisect_right(fh, height))
+        kept = self._kept.get(key)
+        if kept is None:
+            kept = self._kept[key] = (self.points.row(level, depth, height),
+                                      self.force.at(level, depth, height))
+        return kept
+
+    @cached_property
+    def _kept(self) -> dict[tuple[int, ...], tuple[np.ndarray, float]]:
+        return {}
 
     def radii(self, level: int, distance: np.ndarray, depth: float, height: float
               ) -> np.ndarray:
@@ -222,32 +285,83 @@ def force_interval(table: IntervalTable, level: float, condition: np.ndarray, he
     return dforce - half, dforce + half
 
 
-def interval(table: IntervalTable, level: float, points: np.ndarray, condition: np.ndarray,
-             height: float, dforce: float, holds: bool) -> Interval:
-    """The :class:`Interval` of one prediction: its input points (N, 3), C (6,), the tip
-    start's height above the surface, the predicted change of force, and whether it holds.
-    A lookup: each point's squared distance from the tip's path binned, the press's depth
-    and height looked up once."""
-    i, depth = level_index(level), _depth(condition)
-    bins = table.points
-    near = np.searchsorted(bins.first_squared, _path_distance2(points, condition),
-                           side="right")
-    half = table.force.at(i, depth, height)
-    return Interval(level, bins.row(i, depth, height)[near], (dforce - half, dforce + half),
-                    holds)
+def interval(table: IntervalTable, level: float, points: np.ndarray | SceneLookup,
+             condition: np.ndarray, height: float, dforce: float, holds: bool) -> Interval:
+    """The :class:`Interval` of one prediction: its input points (N, 3) (or a scene's
+    :class:`SceneLookup`, kept press after press), C (6,), the tip start's height above the
+    surface, the predicted change of force, and whether it holds. A lookup: each point's
+    squared distance from the tip's path binned, the press's depth and height looked up
+    once."""
+    i = level_index(level)
+    scene = points if isinstance(points, SceneLookup) else SceneLookup(points)
+    near, depth = scene.near(table.points.first_squared, condition)
+    row, half = table.press(i, depth, height)
+    return Interval(level, row[near], (dforce - half, dforce + half), holds)
 
 
-def _path_distance2(points: np.ndarray, condition: np.ndarray) -> np.ndarray:
-    """The squared distance (N,) of each point (N, 3) from the tip's path, C (6,) (few
-    numpy calls: this is most of a known mesh's interval)."""
-    start, axis = condition[:3], condition[3:] - condition[:3]
-    rel = points - start
-    length2 = float(axis @ axis)
-    if length2 > 0:
-        t = rel @ (axis / length2)
-        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-        rel -= np.multiply.outer(t, axis)
-    return np.einsum("ij,ij->i", rel, rel)
+class SceneLookup:
+    """A scene's points as its interval lookups keep them (a known mesh, press after press):
+    in float64; for the last tip start their offsets from it and squared norms; for the last
+    press measured (and table) each point's distance bin and how far the tip's path may move
+    before any point changes bin. A point's distance from a segment moves by no more than
+    the segment's ends do, so a press whose start and end lie within that margin of the
+    measured one's has its bins (a haptic loop's tip, moving micrometres a call, is measured
+    again only when a point nears a bin's edge). Few numpy calls a press: this is most of a
+    known mesh's interval."""
+
+    __slots__ = ("points", "_start", "_rel", "_rel2", "_press", "_unit", "_along", "_near")
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = np.asarray(points, dtype=np.float64)
+        n = len(self.points)
+        self._start: list[float] = []
+        self._rel, self._rel2 = np.empty((n, 3)), np.empty(n)
+        # the press measured: its C, the edges, each point's bin, the margin (m)
+        self._press: tuple[list[float], np.ndarray | None, np.ndarray, float] = \
+            ([], None, np.empty(0, np.int64), -1.0)
+        self._unit, self._along, self._near = np.empty(3), np.empty(n), np.empty(n)
+
+    def near(self, edges2: np.ndarray, condition: np.ndarray) -> tuple[np.ndarray, float]:
+        """Each point's bin (N,) among squared distance edges ``edges2`` from the tip's path
+        of C (6,), and the press's depth |tip end - tip start| (m)."""
+        c = condition.tolist()                      # plain floats: few numpy calls
+        start, end = c[:3], c[3:]
+        depth = math.dist(start, end)
+        seen, kept, bins, margin = self._press
+        if kept is edges2 and max(math.dist(start, seen[:3]), math.dist(end, seen[3:])) \
+                < margin:
+            return bins, depth
+        bins, margin = self._bins(edges2, start, end, depth)
+        self._press = (c, edges2, bins, margin)
+        return bins, depth
+
+    def _bins(self, edges2: np.ndarray, start: list[float], end: list[float], length: float
+              ) -> tuple[np.ndarray, float]:
+        """Each point's bin, and the least distance of any point from a bin's edge less
+        :data:`ROUNDING` (0 where none is farther)."""
+        if start != self._start:
+            np.subtract(self.points, start, out=self._rel)
+            np.einsum("ij,ij->i", self._rel, self._rel, out=self._rel2)
+            self._start = start
+        d2 = self._rel2
+        if length > 0:
+            # b: each point's offset along the path; v = clip(b, 0, length), the nearest
+            # point of the segment's; |rel - v unit|^2 = |rel|^2 + v (v - 2 b)
+            u, d2, v = self._unit, self._along, self._near
+            u[0] = (end[0] - start[0]) / length
+            u[1] = (end[1] - start[1]) / length
+            u[2] = (end[2] - start[2]) / length
+            np.dot(self._rel, u, out=d2)
+            np.maximum(d2, 0.0, out=v)
+            np.minimum(v, length, out=v)
+            d2 *= -2.0
+            d2 += v
+            d2 *= v
+            d2 += self._rel2
+        edges = np.sqrt(edges2)
+        gap = np.abs(np.subtract.outer(np.sqrt(np.maximum(d2, 0.0)), edges)).min() \
+            if len(edges) else np.inf
+        return edges2.searchsorted(d2, "right"), max(float(gap) - ROUNDING, 0.0)
 
 
 def _depth(condition: np.ndarray) -> float:

@@ -18,10 +18,10 @@ from train.training.calibrate import Residuals
 
 
 def _residuals() -> Residuals:
-    """Four points beside the tip's path (radius NEAR = 1 mm), two of them inside; four
+    """Four points 5 mm from the tip's path (radius NEAR = 1 mm), two of them inside; four
     50 mm from it (radius FAR = 0.1 mm), three inside; two examples, one force inside."""
     err = np.array([0.5, 0.9, 1.1, 3.0, 0.05, 0.2, 0.05, 0.05]) * 1e-3
-    dist = np.r_[np.zeros(4), np.full(4, 0.05)]
+    dist = np.r_[np.full(4, 0.005), np.full(4, 0.05)]
     feats = np.column_stack([dist, np.full(8, 1e-3), np.zeros(8)])
     return Residuals(err, feats, np.repeat([0, 1], 4), np.array([0.1, -0.3]),
                      np.array([[1e-3, 0.0], [1e-3, 0.0]]))
@@ -35,10 +35,27 @@ def test_coverage_counts_points_inside_their_radius() -> None:
         assert level["force_coverage"] == pytest.approx(0.5)
         assert level["force_half_width_n"] == pytest.approx(HALF)
     near, far = doc["by_distance"]
-    assert (near["from_mm"], near["points"], near["coverage"]) == (0.0, 4, 0.5)
+    assert (near["from_mm"], near["to_mm"], near["points"], near["coverage"]) == \
+        (0.1, 10.0, 4, 0.5)
     assert (far["from_mm"], far["to_mm"], far["coverage"]) == (40.0, None, 0.75)
     assert near["mean_radius_mm"] == pytest.approx(NEAR * 1e3)
     assert doc["radius_to_ld"] == pytest.approx(0.55 / 0.275)
+    assert "tip_point" not in doc                  # the data have no point on the path
+
+
+def test_the_tips_own_point_is_reported_apart() -> None:
+    """A point on the tip's path (a lab's tip marker, within 0.1 mm of it) is counted at
+    every level but kept out of the distance bins, reported as ``tip_point``."""
+    r = _residuals()
+    r.point_error = np.r_[r.point_error, 2e-3, 0.5e-3]
+    r.point_features = np.r_[r.point_features, [[0.0, 1e-3, 0.0], [5e-5, 1e-3, 0.0]]]
+    r.point_example = np.r_[r.point_example, 0, 1]
+    doc = coverage_doc(coverage(known_table(), r), ld_mean_mm=0.275)
+    assert doc["levels"][1]["points"] == 10 and doc["levels"][1]["coverage"] == 0.6
+    assert [b["points"] for b in doc["by_distance"]] == [4, 4]
+    tip = doc["tip_point"]
+    assert (tip["from_mm"], tip["to_mm"], tip["points"], tip["coverage"]) == (0.0, 0.1, 2, 0.5)
+    assert tip["mean_radius_mm"] == pytest.approx(NEAR * 1e3)
 
 
 def test_folds_pool_by_adding() -> None:
