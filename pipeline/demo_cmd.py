@@ -2,9 +2,12 @@
 
 Each step is skipped when its inputs, arguments and the code are unchanged since it last ran
 (content hashes, :mod:`pipeline.stage_cache`), and says so; ``--force`` runs everything.
-Independent training runs go side by side in ``--jobs`` processes of one thread each (small
-graphs keep one core busier than two threads do). The summary scores everything against its
-targets (:mod:`pipeline.demo_targets`).
+Independent steps (every fold's fit, MSM, pre-training and fine-tunings; the scarcity study)
+go side by side in ``--jobs`` worker processes that keep torch and the code loaded from one
+step to the next, the cores shared out between them (:mod:`pipeline.demo_pool`; small graphs
+keep one core busier than two threads do). The summary scores everything against its targets
+(:mod:`pipeline.demo_targets`), and ``demo_times.json`` says how long each stage and step took,
+beside the host's figure (:mod:`pipeline.demo_times`).
 """
 
 from __future__ import annotations
@@ -12,17 +15,16 @@ from __future__ import annotations
 import os
 import shlex
 import shutil
-import subprocess
-import sys
-import tempfile
 import time
 from pathlib import Path
 
 import click
 
 from pipeline.demo_plan import NETWORKS, PAPER, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
+from pipeline.demo_pool import Pool, StepResult, ready
+from pipeline.demo_times import TIMES, HostFigure, Times, measure_host
 from pipeline.options import seed_option
-from pipeline.stage_cache import is_fresh, write_stamp
+from pipeline.stage_cache import is_fresh, write_doc, write_stamp
 from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 
 
@@ -30,7 +32,8 @@ from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
               show_default=True, help="Folder for everything the demo writes.")
 @click.option("--quick", is_flag=True,
-              help="Small MSM sets, short training: 6-9 minutes on 2 CPU cores (target 5).")
+              help="Small MSM sets, short training: minutes on 2 CPU cores (target: 85 x the "
+                   "host's figure; demo_times.json says where the time went).")
 @click.option("--smoke", is_flag=True,
               help="Only check the wiring: 2 folds, 2 epochs, a tiny MSM set (seconds).")
 @click.option("--force", is_flag=True, help="Run every step, even unchanged ones.")
@@ -38,8 +41,12 @@ from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
               show_default=True, help="Where the cGNN trains.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
-              help="Independent training runs side by side [default: the CPU cores; 1 on a "
-                   "GPU].")
+              help="Worker processes for the independent steps, the cores shared out between "
+                   "them [default: the CPU cores; 1 on a GPU: every step in this process].")
+@click.option("--host-speed/--no-host-speed", default=None,
+              help="First measure the host's figure (core/host_speed.py, about 4 runs of a "
+                   "fixed mix of work; not counted in the demo's time) and state the demo's "
+                   "time as a multiple of it [default: measured, except with --smoke].")
 @click.option("--network", type=click.Choice(list(NETWORKS)), default=None,
               help="Train this network with the rest of the recipe [default: the recipe's]: "
                    "the tip's offsets in the heads or in the first layer, or the paper's "
@@ -55,8 +62,8 @@ from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 @seed_option
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
-         device: str, jobs: int | None, network: str | None, markers: str,
-         marker_pitch: float, size: str, mocap_rate: float, seed: int) -> None:
+         device: str, jobs: int | None, host_speed: bool | None, network: str | None,
+         markers: str, marker_pitch: float, size: str, mocap_rate: float, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
@@ -67,22 +74,42 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     runs/msm_foldK (pre-training on it); runs/exp_tl_* and runs/exp_notl_* (fine-tuning per
     fold with transfer learning and the same from scratch);
     metrics.json/.md (eval, beside the no-learning references), scarcity/ (the data-scarcity
-    study), a rerun recording beside each, and a summary against the targets. Without
+    study), a rerun recording beside each, demo_times.json (each stage's and step's wall
+    time, beside the host's figure) and a summary against the targets. Without
     --quick it follows the paper's settings (hours on a CPU; uses a GPU when there is one).
     """
     from pipeline.demo_targets import summary
 
     settings = SMOKE if smoke else QUICK if quick else PAPER
     jobs = jobs or (1 if _on_gpu(device) else _cores())
+    threads = max(1, _cores() // jobs)
+    host = _host_figure(not smoke if host_speed is None else host_speed)
     started = time.perf_counter()
     lab = Lab(markers, marker_pitch, size, mocap_rate)
     steps = demo_steps(out, seed, settings, device,
                        NETWORKS[network] if network else RECIPE, lab)
-    for batch in _batches(steps):
-        _run_batch(ctx, batch, force, jobs)
-    missed = summary(out, time.perf_counter() - started, quick=quick)
+    times = Times()
+    with Pool(jobs, threads) as pool:
+        for batch in _batches(steps):
+            _run_batch(ctx, batch, force, pool, times)
+    seconds = time.perf_counter() - started
+    tic = time.perf_counter()
+    missed = summary(out, seconds, quick=quick, host_s=host.seconds)
+    write_doc(out / TIMES, times.document(seconds, time.perf_counter() - tic, host, jobs,
+                                          threads))
+    click.echo(f"each stage's and step's time: {out / TIMES}")
     if missed and strict:
         ctx.exit(1)
+
+
+def _host_figure(measure: bool) -> HostFigure:
+    """The host's figure, measured and said, or absent (``--no-host-speed``, ``--smoke``)."""
+    if not measure:
+        return HostFigure(None, "absent: not measured (--no-host-speed, or --smoke)")
+    host = measure_host()
+    click.echo(f"{host.note} (measured in {host.cost_s:.1f} s, not counted in the demo's "
+               "time)", err=True)
+    return host
 
 
 def _on_gpu(device: str) -> bool:
@@ -112,28 +139,42 @@ def _batches(steps: list[Step]) -> list[list[Step]]:
     return out
 
 
-def _run_batch(ctx: click.Context, batch: list[Step], force: bool, jobs: int) -> None:
-    """Run the stale steps of a batch: in this process, or ``jobs`` subprocesses at a time."""
+def _run_batch(ctx: click.Context, batch: list[Step], force: bool, pool: Pool,
+               times: Times) -> None:
+    """Run the stale steps of a batch: parallel ones in the worker processes (with more
+    than one job), every other in this process; each one's time into ``times``."""
     stale: list[Step] = []
     for step in batch:
         line = f"\n$ pipeline {shlex.join(step.args)}"
-        upstream_stale = not _ready(step, stale)    # it reads what a stale step rewrites
+        upstream_stale = not ready(step, stale)    # it reads what a stale step rewrites
         if not force and not upstream_stale and is_fresh(step.args, step.inputs, step.outputs):
             click.echo(f"{line}\n  (unchanged since its last run: skipped)", err=True)
+            times.step(step, 0.0, "demo", skipped=True)
         else:
             stale.append(step)
-    if len(stale) > 1 and jobs > 1:
-        _run_side_by_side(stale, jobs)
-        return
-    for step in stale:
-        click.echo(f"\n$ pipeline {shlex.join(step.args)}", err=True)
-        tic = time.perf_counter()
-        _clean(step)
-        root = ctx.find_root().command
-        with root.make_context("pipeline", list(step.args), parent=ctx.find_root()) as sub:
-            root.invoke(sub)
-        write_stamp(step.args, step.inputs, step.outputs)
-        click.echo(f"  ({time.perf_counter() - tic:.1f} s)", err=True)
+    tic = time.perf_counter()
+    if stale and pool.size > 1 and all(s.parallel for s in stale):
+        _run_in_workers(stale, pool, times)
+    else:
+        for step in stale:
+            _run_here(ctx, step, times)
+    if stale:
+        times.batch(stale, time.perf_counter() - tic, min(pool.size, len(stale))
+                    if stale[0].parallel else 1)
+
+
+def _run_here(ctx: click.Context, step: Step, times: Times) -> None:
+    """``pipeline ARGS`` in this process."""
+    click.echo(f"\n$ pipeline {shlex.join(step.args)}", err=True)
+    tic = time.perf_counter()
+    _clean(step)
+    root = ctx.find_root().command
+    with root.make_context("pipeline", list(step.args), parent=ctx.find_root()) as sub:
+        root.invoke(sub)
+    write_stamp(step.args, step.inputs, step.outputs)
+    seconds = time.perf_counter() - tic
+    times.step(step, seconds, "demo")
+    click.echo(f"  ({seconds:.1f} s)", err=True)
 
 
 def _clean(step: Step) -> None:
@@ -141,42 +182,25 @@ def _clean(step: Step) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
-def _ready(step: Step, pending: list[Step]) -> bool:
-    """Whether no pending step (waiting or running) writes one of ``step``'s inputs."""
-    return not any(set(step.inputs) & set(other.outputs) for other in pending)
-
-
-def _run_side_by_side(steps: list[Step], jobs: int) -> None:
-    """``pipeline -q ARGS`` of each step in subprocesses, ``jobs`` at a time, one thread each,
-    the first step in order whose inputs are written starting as soon as a slot is free; a
-    failing step stops the demo with its own message and exit status."""
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    waiting, running = list(steps), []
+def _run_in_workers(steps: list[Step], pool: Pool, times: Times) -> None:
+    """The steps in the pool's workers, each as soon as its inputs are written; a failing
+    step stops the demo with its own message and exit status."""
     tic = time.perf_counter()
-    click.echo(f"\n$ ({len(steps)} runs, {jobs} at a time, each as its inputs are ready)",
-               err=True)
-    while waiting or running:
-        pending = waiting + [r[0] for r in running]
-        ready = [s for s in waiting if _ready(s, [p for p in pending if p is not s])]
-        while ready and len(running) < jobs:
-            step = ready.pop(0)
-            waiting.remove(step)
-            click.echo(f"  $ pipeline {shlex.join(step.args)}", err=True)
-            _clean(step)
-            log = tempfile.TemporaryFile(mode="w+")
-            proc = subprocess.Popen([sys.executable, "-m", "pipeline", "-q", *step.args],
-                                    env=env, stdout=subprocess.DEVNULL, stderr=log, text=True)
-            running.append((step, proc, log))
-        time.sleep(0.05)
-        for item in [r for r in running if r[1].poll() is not None]:
-            running.remove(item)
-            step, proc, log = item
-            if proc.returncode != 0:
-                for _, other, _ in running:
-                    other.kill()
-                log.seek(0)
-                click.echo(log.read().rstrip(), err=True)
-                raise SystemExit(proc.returncode)
-            log.close()
-            write_stamp(step.args, step.inputs, step.outputs)
+    finished = 0
+    click.echo(f"\n$ ({len(steps)} runs, {pool.size} worker processes of {pool.threads} "
+               "thread(s), each run as its inputs are ready)", err=True)
+
+    def started(step: Step, worker: int) -> None:
+        click.echo(f"  $ pipeline {shlex.join(step.args)}   [worker {worker}]", err=True)
+        _clean(step)
+
+    def done(step: Step, result: StepResult) -> None:
+        nonlocal finished
+        finished += 1
+        write_stamp(step.args, step.inputs, step.outputs)
+        times.step(step, result.seconds, f"worker {result.worker}")
+        click.echo(f"  [{finished}/{len(steps)}] {step.outputs[0]}: {result.seconds:.1f} s",
+                   err=True)
+
+    pool.run(steps, started, done)
     click.echo(f"  ({time.perf_counter() - tic:.1f} s)", err=True)

@@ -54,7 +54,7 @@ class Settings:
     scarcity_folds: int = 2          # folds of the data-scarcity study
     scarcity_groups: int = 4         # training presses 1..this in the study
     batch: int = 32
-    fit_sequences: int = 6           # training presses fitted per fold
+    fit_sequences: int | None = None  # training presses fitted per fold; None: all of them
 
 
 # The recipe the measurements support (docs/model.md, "Training that learns";
@@ -103,6 +103,7 @@ class Lab:
         return tuple(a for opt, v, d in pairs if v != d for a in (opt, v))
 
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
+PLACES, REPEATS = 5, 4   # the demo's session: presses at 5 places, 4 at each
 
 # Fine-tuning variants on the twin's states: transfer learning from the MSM run, and the
 # same training from scratch (the baseline).
@@ -141,7 +142,7 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``)."""
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
-    steps = session_steps(out, "session", seed, 5, 4, lab) + [
+    steps = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe, *sd)
@@ -181,11 +182,11 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
 
 def _fit_step(out: Path, fold: int, states: Path, splits: Path, s: Settings,
               sd: tuple[str, ...]) -> Step:
-    """fit-msm on fold ``fold``'s training presses."""
+    """fit-msm on fold ``fold``'s training presses (all of them: at most the session's)."""
     params = msm_dir(out, fold) / "params.json"
+    most = s.fit_sequences or PLACES * REPEATS
     return Step(("fit-msm", str(states), "--splits", str(splits), "--fold", str(fold),
-                 "--out", str(params), "--max-sequences", str(s.fit_sequences), "--workers", "1",
-                 *sd),
+                 "--out", str(params), "--max-sequences", str(most), "--workers", "1", *sd),
                 (states, splits), (params,), parallel=True, batch=FOLDS)
 
 

@@ -4,7 +4,8 @@ A stage run leaves a stamp, ``<first output>.stamp.json``, holding the sha256 of
 file, the command line and the hash of the package's source. The stage is up to date when a new
 stamp computed the same way equals the stored one and every output still exists with the hash
 the stamp recorded; anything else (an edited input, another option, changed code, a deleted or
-modified output) runs it again.
+modified output) runs it again. The demo's other record, its times (``demo_times.json``), is
+written the same way (:func:`write_doc`).
 """
 
 from __future__ import annotations
@@ -68,6 +69,10 @@ def is_fresh(args: Sequence[str], inputs: Sequence[Path], outputs: Sequence[Path
 
 def write_stamp(args: Sequence[str], inputs: Sequence[Path], outputs: Sequence[Path]) -> None:
     """Record a completed run of the stage (after its outputs are in place)."""
-    doc = {"key": _key(args, inputs), "outputs": _hashes(outputs)}
-    with atomic_output(stamp_path(outputs)) as tmp:
+    write_doc(stamp_path(outputs), {"key": _key(args, inputs), "outputs": _hashes(outputs)})
+
+
+def write_doc(path: Path, doc: dict) -> None:
+    """One of the demo's records as JSON, atomically (a temporary name renamed into place)."""
+    with atomic_output(path) as tmp:
         Path(tmp).write_text(json.dumps(doc, indent=1, sort_keys=True))

@@ -65,10 +65,19 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
         if line.strip().startswith("MISSED"):
             assert "sync" not in line, line
     assert "transfer learning, pooled over folds" in res.output
+    steps = demo_steps(out, 0, SMOKE)
+    times = json.loads((out / "demo_times.json").read_text())     # every step timed, once
+    assert sorted(tuple(s["args"]) for s in times["steps"]) == sorted(s.args for s in steps)
+    assert not any(s["skipped"] for s in times["steps"])
+    trains = [s for s in times["steps"] if s["stage"] == "train"]
+    assert len(trains) == 3 * SMOKE.folds and all(s["seconds"] > 0 for s in trains)
+    assert times["stages"]["train"]["ran"] == len(trains)
+    assert times["host_speed_s"] is None and times["host_speed"].startswith("absent")
     again = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
     assert again.exit_code == 0, again.output
-    steps = demo_steps(out, 0, SMOKE)
     assert again.output.count("(unchanged since its last run: skipped)") == len(steps)
+    times = json.loads((out / "demo_times.json").read_text())
+    assert all(s["skipped"] and s["seconds"] == 0 for s in times["steps"])
     (out / "msm" / "fold0" / "params.json").unlink()    # one fold's fit gone: what reads it,
     third = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])   # and on
     assert third.exit_code == 0, third.output
