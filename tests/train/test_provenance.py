@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from helpers.cgnn_data import dent_fold
 
 from core.provenance import sha256_file
-from data_schema.json_docs import validate_metrics
+from data_schema.json_docs import METRICS, validate_metrics
 from pipeline.cli import cli
 from train.training.checkpoint import load_checkpoint
 from train.training.loop import LOG_FIELDS
@@ -62,7 +62,8 @@ def test_the_log_keeps_its_provenance_beside_it(made) -> None:
 
 def test_metrics_carry_their_schema_and_provenance(made) -> None:
     doc = validate_metrics(made / "metrics.json")
-    assert (doc["schema"], doc["schema_version"]) == ("phantom.metrics", "1.1")
+    assert (doc["schema"], doc["schema_version"]) == (METRICS.name, METRICS.version) == \
+        ("phantom.metrics", "1.2")
     prov = doc["provenance"]
     assert (prov["schema"], prov["stage"]) == ("phantom.metrics", "eval")
     best = made / "tl" / "best.pt"
