@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 from helpers.c3d_bytes import FRAMES, QUALISYS_C3D, qualisys_analog, rename_parameter, set_parameter
 from helpers.spoiled_session import ingest_spoiled
+from helpers.staged_twin import staged_twin
 from helpers.truth_checks import check_states_against_truth
 
 from core.errors import BadInput
@@ -196,15 +197,8 @@ def test_qtm_analog_tsv_that_cannot_be_right(tmp_path, old, new, words):
 def analog_session(request, tmp_path_factory) -> Path:
     """A twin session with the force through the analog board (QTM analog TSV, or one C3D with
     markers and force), ingested, synced and extracted."""
-    d = tmp_path_factory.mktemp(f"analog_{request.param}")
-    for args in (("synth", d / "s", "--seed", "3", "--locations", "2", "--repeats", "2",
-                  "--force-via", "analog", "--force-file", request.param, "--no-rrd"),
-                 ("ingest", d / "s", "--out", d / "s.mcap", "--no-rrd"),
-                 ("sync", d / "s.mcap", "--out", d / "synced.h5", "--no-rrd"),
-                 ("extract", d / "synced.h5", "--out", d / "states.h5", "--no-rrd")):
-        res = _cli(*args)
-        assert res.exit_code == 0, res.output + res.stderr
-    return d
+    return staged_twin(tmp_path_factory.mktemp(f"analog_{request.param}"), "--force-via", "analog",
+                       "--force-file", request.param)
 
 
 def test_analog_route_shares_the_clock_and_meets_the_targets(analog_session):

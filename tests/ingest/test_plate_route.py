@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers.spoiled_session import ingest_spoiled
+from helpers.staged_twin import staged_twin
 from helpers.truth_checks import check_states_against_truth
 
 from core.force_plate import centre_of_pressure
@@ -32,15 +33,7 @@ def _cli(*args: object):
 def plate_session(tmp_path_factory) -> Path:
     """A twin session with the force from a plate under the phantom, ingested, synced and
     extracted."""
-    d = tmp_path_factory.mktemp("plate")
-    for args in (("synth", d / "s", "--seed", "3", "--locations", "2", "--repeats", "2",
-                  "--force-via", "plate", "--no-rrd"),
-                 ("ingest", d / "s", "--out", d / "s.mcap", "--no-rrd"),
-                 ("sync", d / "s.mcap", "--out", d / "synced.h5", "--no-rrd"),
-                 ("extract", d / "synced.h5", "--out", d / "states.h5", "--no-rrd")):
-        res = _cli(*args)
-        assert res.exit_code == 0, res.output + res.stderr
-    return d
+    return staged_twin(tmp_path_factory.mktemp("plate"), "--force-via", "plate")
 
 
 def test_the_plate_export_is_the_true_wrench_on_the_mocap_clock(plate_session):
