@@ -8,6 +8,7 @@ back.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -37,6 +38,9 @@ def default_rrd_path(output: str | Path, folder: bool | None = None) -> Path:
     return out.with_name(out.name + ".rrd")
 
 
+_SERIAL = itertools.count()   # a process (a demo worker) writes many recordings: each its own id
+
+
 @contextlib.contextmanager
 def recording(
     app_id: str, path: str | Path | None, blueprint: rrb.BlueprintLike | None = None
@@ -49,7 +53,7 @@ def recording(
         yield None
         return
     with atomic_output(path) as tmp:
-        rec = rr.RecordingStream(app_id, recording_id=f"{app_id}-{os.getpid()}")
+        rec = rr.RecordingStream(app_id, recording_id=f"{app_id}-{os.getpid()}-{next(_SERIAL)}")
         rec.save(tmp, default_blueprint=blueprint)
         try:
             yield rec

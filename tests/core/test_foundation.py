@@ -227,3 +227,18 @@ def test_every_command_has_help_that_says_what_it_reads_and_writes():
         text = r.output.lower()
         assert "read" in text and "writ" in text, (name, r.output)
     assert set(names) <= set(COMMANDS)
+
+
+def test_recordings_of_one_process_have_their_own_ids(tmp_path) -> None:
+    """A demo worker writes many recordings: opened together they must not merge into one."""
+    import rerun as rr
+    from rerun.chunk import RrdReader
+
+    from core.recording import recording
+
+    ids = []
+    for name in ("a.rrd", "b.rrd"):
+        with recording("phantom-test", tmp_path / name) as rec:
+            rec.log("x", rr.Scalars(1.0))
+        ids += [e.recording_id for e in RrdReader(str(tmp_path / name)).recordings()]
+    assert len(ids) == 2 and ids[0] != ids[1]
