@@ -80,7 +80,7 @@ def nearest(queries: torch.Tensor, x: torch.Tensor, sq: torch.Tensor, k: int,
     b, n, _ = x.shape
     flat = Points(x.reshape(b * n, -1), key.reshape(b * n), n)
     base = (torch.arange(b, device=x.device) * n).view(b, 1, 1)
-    if torch.jit.is_tracing():   # N unknown: k + EXTRA points that are never chosen, so that
+    if fixed_width():   # N unknown: k + EXTRA points that are never chosen, so that
         pad = x.new_zeros(b, k + EXTRA, x.shape[-1])                 # topk always has enough
         d = torch.baddbmm(torch.cat([sq, torch.full_like(pad[..., 0], float("inf"))], 1)
                           .unsqueeze(1), queries, torch.cat([x, pad], 1).transpose(1, 2),
@@ -129,12 +129,13 @@ def ranked(cand: torch.Tensor, usable: torch.Tensor, queries: torch.Tensor, poin
     Outside a traced graph, :func:`choose` (c x c comparisons) runs only on the rows where a
     tie can change the k nearest or their order (:func:`apart`: a random cloud's rows are
     almost all apart, a grid's almost none); the others are their distances' order, which is
-    what :func:`choose` gives them. A traced graph cannot branch: it ranks every row."""
+    what :func:`choose` gives them. A traced graph cannot branch, and on a GPU the branch
+    costs more than it saves (each is a wait for the device): they rank every row."""
     rows = (cand.clamp(max=points.n - 1) + base).reshape(-1)
     exact = torch.linalg.vector_norm(points.features.index_select(0, rows).reshape(
         *cand.shape, -1) - queries.unsqueeze(2), dim=-1)                      # (B, Q, c)
     exact = exact.masked_fill(~usable, FAR)
-    if torch.jit.is_tracing():
+    if fixed_width() or exact.device.type != "cpu":
         pick = choose(exact, points.key.index_select(0, rows).reshape(cand.shape), k)
     else:
         pick = ordered(exact, rows.view(cand.shape), points.key, k)
@@ -157,6 +158,13 @@ def ordered(exact: torch.Tensor, rows: torch.Tensor, key: torch.Tensor, k: int
         at = tied.nonzero(as_tuple=True)
         pick[at] = choose(exact[at], key[rows[at]], k)
     return pick
+
+
+def fixed_width() -> bool:
+    """Whether the search must not branch on the data: a traced graph (the ONNX export) or a
+    CUDA graph being captured (a branch would read the device mid-capture)."""
+    return torch.jit.is_tracing() or (torch.cuda.is_available()
+                                      and torch.cuda.is_current_stream_capturing())
 
 
 def apart(dist: torch.Tensor) -> torch.Tensor:
