@@ -14,7 +14,9 @@
   test set: label, variant, test_set, folds, fold_ids, metrics, fold_ld_mean_sd_mm,
   references, gain, folds_not_beating_references; 1.2: ``intervals``, null where the run
   keeps none), optionally ``scarcity`` rows (fold,
-  groups, predictor, ld_mean_mm, ld_max_mm, force_abs_n), and its ``provenance``;
+  groups, predictor, ld_mean_mm, ld_max_mm, force_abs_n; 1.3: a model's row ``points_90`` and
+  ``force_90``, the shares of test points and examples inside its 90 % intervals, null where
+  it keeps none), and its ``provenance``;
   ``metrics`` maps ``single``, ``multi`` and ``all`` to the count ``n`` and the Table-2
   numbers in mm, N and N^2; ``references`` maps each no-learning reference to its ``all``
   metrics (L_d null for one that moves no point); ``gain`` names the best reference of L_d
@@ -129,7 +131,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
-METRICS = JsonSchema("phantom.metrics", "1.2", {
+METRICS = JsonSchema("phantom.metrics", "1.3", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
@@ -171,6 +173,8 @@ GAIN = {"ld_reference": _TEXT_OR_NONE, "ld_reference_mm": _NUMBER_OR_NONE,
         "force_reference_n": _NUMBER_OR_NONE, "force_gain": _NUMBER_OR_NONE}
 SCARCITY_ROW = {"fold": int, "groups": int, "predictor": str, "ld_mean_mm": _NUMBER_OR_NONE,
                 "ld_max_mm": _NUMBER_OR_NONE, "force_abs_n": _NUMBER}
+# 1.3: a model's row, the shares of test points and examples inside its 90 % intervals
+SCARCITY_OPTIONAL = {"points_90": _NUMBER_OR_NONE, "force_90": _NUMBER_OR_NONE}
 METRIC_KEYS = ("n", "force_mse_n2", "force_abs_n", "force_abs_sd_n", "ld_mean_mm",
                "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")
 LD_KEYS = ("ld_mean_mm", "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")  # None: moves no point
@@ -202,9 +206,11 @@ def validate_metrics(path: str | Path) -> dict[str, Any]:
             _check_row(path, row, keys, f"{table}[{i}]")
     for i, row in enumerate(doc.get("scarcity", [])):
         where = f"scarcity[{i}]"
-        _typed_keys(path, row, SCARCITY_ROW, where)
+        _typed_keys(path, row, {**SCARCITY_ROW, **SCARCITY_OPTIONAL}, where,
+                    optional=SCARCITY_OPTIONAL)
         _check_numbers(path, {k: row[k] for k in SCARCITY_ROW    # a reference may have no L_d
                               if k != "predictor" and row[k] is not None}, where)
+        _check_shares(path, row, SCARCITY_OPTIONAL, where)
     return doc
 
 
@@ -246,12 +252,17 @@ def _check_intervals(path: str | Path, doc: dict, where: str) -> None:
         _typed_keys(path, item, keys, here)
         if kind == "levels" and not 0 < item["level"] < 1:
             raise BadInput(path, f"{here}.level is {item['level']}: not in (0, 1)")
-        for share in ("coverage", "force_coverage"):
-            if share in item and not 0 <= item[share] <= 1:
-                raise BadInput(path, f"{here}.{share} is {item[share]!r}: not in [0, 1]")
+        _check_shares(path, item, ("coverage", "force_coverage"), here)
         _check_numbers(path, {k: v for k, v in item.items() if v is not None}, here)
         if item["points"] < 1 or item.get("examples", 1) < 1:
             raise BadInput(path, f"{here} must count at least one point and example")
+
+
+def _check_shares(path: str | Path, item: dict, keys: Any, where: str) -> None:
+    """Each of ``keys`` that ``item`` has (and is not null) is a share in [0, 1]."""
+    for key in keys:
+        if item.get(key) is not None and not 0 <= item[key] <= 1:
+            raise BadInput(path, f"{where}.{key} is {item[key]!r}: not in [0, 1]")
 
 
 def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) -> None:

@@ -6,7 +6,9 @@ For a run, the curve retrains its fold with the nested subsets of the manifest
 (``--init``), once from that model too; beside them, at each subset, the no-learning references
 fitted on the same training groups (:mod:`train.evaluation.references`). Written as
 ``scarcity.json``, ``scarcity.csv`` and a three-panel ``scarcity.png`` (mean L_d, max L_d, force
-error over training groups; the references dashed).
+error over training groups; the references dashed). A model's row also says how many of the
+test points and examples fall inside its 90 % intervals (calibrated on the fold's validation
+presses at the end of its training): whether they hold with the fewest training presses.
 """
 
 from __future__ import annotations
@@ -19,20 +21,25 @@ from pathlib import Path
 import numpy as np
 
 from core.progress import say
+from train.evaluation.coverage import SHOWN
 from train.evaluation.evaluate import (
     ExampleErrors,
+    LoadedRun,
     example_errors,
+    fold_coverage,
     load_run,
     metrics,
     reference_errors,
 )
 from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
 from train.model.config import CGNNConfig
+from train.model.conformal import REPORTED
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
 
-FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n")
+FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n",
+          "points_90", "force_90")
 MODELS = {False: "no TL", True: "TL"}
 
 
@@ -56,7 +63,8 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
             run_train(TrainInputs(data, splits, init), out_dir / tag,
                       TrainParams(sub, config, device))
             run = load_run(out_dir / tag, device)
-            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0]))
+            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0])
+                        | _covered(run, out_dir / tag))
         rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
     return rows
 
@@ -66,6 +74,17 @@ def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors) -> dict:
     return {"fold": fold, "groups": groups, "predictor": predictor,
             "ld_mean_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
             "force_abs_n": m["force_abs_n"]}
+
+
+def _covered(run: LoadedRun, run_dir: Path) -> dict[str, float | None]:
+    """The shares of the fold's test points and examples inside the run's intervals at
+    :data:`~train.evaluation.coverage.SHOWN` (None where it keeps none)."""
+    c = fold_coverage(run, run_dir)
+    if c is None:
+        return {"points_90": None, "force_90": None}
+    k = REPORTED.index(SHOWN)
+    return {"points_90": float(c.inside[k] / c.points[k]),
+            "force_90": float(c.force_inside[k] / c.examples[k])}
 
 
 def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[float]]:

@@ -194,6 +194,13 @@ def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp
     assert sorted({r["groups"] for r in rows}) == list(range(1, n_train + 1))
     assert {r["predictor"] for r in rows} == {"TL", "no TL", "nothing moves", "nearest press",
                                              "force, linear"} and len(rows) == 5 * n_train
+    for r in rows:          # a model's intervals, calibrated on the fold's validation presses
+        model = r["predictor"] in ("TL", "no TL")
+        assert ("points_90" in r) == model and ("force_90" in r) == model
+        if model:
+            assert 0 <= r["points_90"] <= 1 and 0 <= r["force_90"] <= 1
+    header = out.with_suffix(".scarcity.csv").read_text().splitlines()[0]
+    assert header.endswith("points_90,force_90")
     assert out.with_suffix(".scarcity.png").stat().st_size > 0
 
 
