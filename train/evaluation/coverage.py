@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 import numpy as np
 
@@ -136,9 +137,19 @@ def coverage_table(result: dict, name: Callable[[dict, list[dict]], str]) -> str
         runs = [r for r in result["runs"] if r["variant"] == row["variant"]
                 and r["test_set"] == row["test_set"] and r.get("intervals")]
         lines.append(_coverage_row(shown, row["test_set"], "all", row["intervals"]))
-        lines += [_coverage_row(shown, r["test_set"], str(r["fold"]), r["intervals"])
-                  for r in sorted(runs, key=lambda r: r["fold"])]
+        lines += [_coverage_row(shown, r["test_set"], fold, r["intervals"])
+                  for fold, r in sorted(zip(_fold_names(runs), runs, strict=True),
+                                        key=lambda named: (named[1]["fold"], named[0]))]
     return "\n".join(lines) + "\n" + _near_table(rows, result["overall"], name)
+
+
+def _fold_names(runs: list[dict]) -> list[str]:
+    """Each run's fold as a row names it: its fold number, or its folder's name where two
+    runs share a number (each MSM set is fold 0 of its own manifest, one per lab fold)."""
+    folds = [r["fold"] for r in runs]
+    if len(set(folds)) == len(folds):
+        return [str(f) for f in folds]
+    return [Path(r["run"]).name for r in runs]
 
 
 def _coverage_row(name: str, test_set: str, fold: str, doc: dict) -> str:

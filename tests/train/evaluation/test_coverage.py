@@ -11,7 +11,7 @@ import torch
 from helpers.interval_table import FAR, HALF, NEAR, known_table
 
 from train.data import Batch
-from train.evaluation.coverage import coverage, coverage_doc
+from train.evaluation.coverage import coverage, coverage_doc, coverage_table
 from train.evaluation.eval_view import write_eval_recording
 from train.model.si_units import Prediction
 from train.training.calibrate import Residuals
@@ -62,6 +62,30 @@ def test_folds_pool_by_adding() -> None:
     one = coverage(known_table(), _residuals())
     doc = coverage_doc(one + one, ld_mean_mm=0.275)
     assert doc["levels"][1]["points"] == 16 and doc["levels"][1]["coverage"] == 5 / 8
+
+
+def test_the_table_names_runs_that_share_a_fold_by_their_folder() -> None:
+    """Each lab fold's MSM set is fold 0 of its own manifest: its rows name the run."""
+    doc = coverage_doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)
+    variant = {"model": "cGNN"}
+
+    def runs(names: list[str], folds: list[int]) -> list[dict]:
+        return [{"run": f"out/runs/{n}", "fold": f, "variant": variant, "test_set": "MSM",
+                 "intervals": doc} for n, f in zip(names, folds, strict=True)]
+
+    overall = [{"variant": variant, "test_set": "MSM", "intervals": doc}]
+    shared = coverage_table({"overall": overall, "runs": runs(["msm_fold1", "msm_fold0"],
+                                                              [0, 0])}, lambda r, o: "MSM")
+    assert _fold_cells(shared) == ["all", "msm_fold0", "msm_fold1"]
+    apart = coverage_table({"overall": overall, "runs": runs(["tl_b", "tl_a"], [1, 0])},
+                           lambda r, o: "MSM")
+    assert _fold_cells(apart) == ["all", "0", "1"]
+
+
+def _fold_cells(table: str) -> list[str]:
+    """The fold column of the coverage table's rows (the distance table after it left out)."""
+    rows = table.split("By distance")[0].splitlines()
+    return [line.split(" | ")[2] for line in rows if line.startswith("| MSM |")]
 
 
 def _colours(rrd: Path, entity: str) -> list[np.ndarray]:
