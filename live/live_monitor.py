@@ -96,6 +96,9 @@ class Monitor:
         if self.view is not None:
             for press in taken:
                 self.view.taken(time_ns, press, self.states)
+            for note in self.states.notes:
+                self.view.warning(time_ns, note)
+        self.states.notes.clear()
 
     def _force(self, times: np.ndarray, values: np.ndarray) -> None:
         """Force samples in SI units: shown once the tare is known (the early ones then)."""

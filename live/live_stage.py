@@ -130,6 +130,8 @@ def _states(online: OnlineStates, mcap: Path, params: LiveParams) -> str:
     except BadInput as e:
         return f"no states ({e.line()})"
     missed = f" ({online.missed} presses sync's rules did not confirm)" if online.missed else ""
+    missed += f" ({len(online.unread)} presses not read: their stretch was refused)" \
+        if online.unread else ""
     return f"{len(ex.arrays['states/points'])} states of {len(online.taken)} presses in {out}" \
         + missed
 

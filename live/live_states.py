@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from calib.force_tare import Tare, rest_baseline
+from core.errors import BadInput
+from core.progress import warn
 from data_schema.session import SessionConfig
 from extract.extract_params import ExtractParams
 from extract.phantom_frame import apply_transform
@@ -208,6 +210,8 @@ class OnlineStates:
         self.waiting: list[PressDone] = []
         self.taken: list[LivePress] = []
         self.missed = 0                      # presses sync's rules did not find in the stretch
+        self.unread: list[str] = []          # presses whose stretch was refused: why, in words
+        self.notes: list[str] = []           # those not yet shown (the view's status log)
         self._last_end = 0
         self._pool = ThreadPoolExecutor(max_workers=1)
         self._running: list[tuple[PressDone, Future]] = []
@@ -263,7 +267,11 @@ class OnlineStates:
         out = []
         while self._running and (wait or self._running[0][1].done()):
             done, future = self._running.pop(0)
-            read = future.result()
+            try:
+                read = future.result()
+            except (BadInput, ValueError) as e:   # a stretch sync would refuse offline
+                self._unread(done, e.line() if isinstance(e, BadInput) else str(e))
+                continue
             if read is None:
                 self.missed += 1
                 continue
@@ -276,6 +284,14 @@ class OnlineStates:
                                         states))
             out.append(self.taken[-1])
         return out
+
+    def _unread(self, done: PressDone, why: str) -> None:
+        """A press whose stretch sync's steps refused (a marker lost beyond repair, say):
+        said in one line, left out of the states; the session goes on."""
+        note = f"press {done.number}: its states were not read: {why}"
+        self.unread.append(note)
+        self.notes.append(note)
+        warn(note)
 
     def session(self, path: Path) -> Session:
         """The presses taken, as extract reads a synced file's (the phantom frame fitted from

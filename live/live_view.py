@@ -177,6 +177,10 @@ class LiveView:
         self._at(time_ns)
         self.rec.log("status", rr.TextLog(text, level=level))
 
+    def warning(self, time_ns: int, text: str) -> None:
+        """A line of the session's status that something went wrong."""
+        self.note(time_ns, text, rr.TextLogLevel.WARN)
+
     def close(self) -> None:
         self.rec.flush()
         self.rec.disconnect()

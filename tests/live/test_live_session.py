@@ -23,6 +23,7 @@ from helpers.cgnn_data import write_dent_states
 from helpers.live_replay import STATE_KEYS, assert_same_states, offline_states, replaying
 from helpers.paths import ROOT
 
+from core.errors import BadInput
 from core.recording import rrd_entities
 from data_schema.hdf5 import read_h5
 from data_schema.states import STATES
@@ -114,6 +115,50 @@ def test_the_recording_shows_the_scene_the_force_and_the_status(recorded) -> Non
                             ("/scene/coverage", "Points3D"),
                             ("/status", "TextLog")):
         assert archetype in entities.get(path, set()), path
+
+
+def test_a_press_whose_stretch_is_refused_is_said_and_the_session_goes_on(
+        twin_session, recorded, tmp_path, monkeypatch) -> None:
+    """Sync's steps refusing one press's stretch on the worker thread (a bad stretch, as
+    offline sync would refuse it) leave that press out, in one warning line on stderr and in
+    the status log; the frames, the other presses and their states go on."""
+    from live import live_states
+
+    read = live_states.press_record
+
+    def refusing(stretch, done, on):
+        if done.number == 2:
+            raise BadInput(None, "markers lost beyond repair in its stretch")
+        return read(stretch, done, on)
+
+    monkeypatch.setattr(live_states, "press_record", refusing)
+    out = tmp_path / "live"
+    with replaying(twin_session) as server:
+        code, err = _live(twin_session, server.port, out)
+    assert code == 0, err
+    assert err.count("press 2: its states were not read: markers lost beyond repair") == 1
+    got, _ = read_h5(out / STATES_NAME, STATES)
+    whole, _ = read_h5(recorded[4] / STATES_NAME, STATES)
+    seq = whole["states/sequence"]
+    kept = [np.flatnonzero(seq != k) for k in np.unique(seq)]
+    assert any(len(k) == len(got["states/force"]) and np.allclose(
+        whole["states/force"][k], got["states/force"], atol=1e-3) for k in kept)
+    assert read_raw_mcap(out / MCAP_NAME).markers.frames == recorded[2].markers.frames
+    assert "press 2: its states were not read" in " ".join(_texts(out / RRD_NAME, "/status"))
+
+
+def _texts(rrd: Path, entity: str) -> list[str]:
+    """The lines of a text log in a recording."""
+    from rerun.chunk import RrdReader
+
+    lines = []
+    for chunk in RrdReader(str(rrd)).store().stream():
+        if chunk.entity_path == entity:
+            batch = chunk.to_record_batch()
+            if "TextLog:text" in batch.column_names:
+                lines += [str(v) for row in batch.column("TextLog:text").to_pylist()
+                          for v in (row or [])]
+    return lines
 
 
 def _session_copy(twin_session: Path, tmp_path: Path, old: str, new: str) -> Path:
