@@ -238,8 +238,11 @@ def split_call(pred: Predictor, si: SIModel, entry: str, pts: np.ndarray, repeat
     press, inputs = moving(), feed(pred, pts, entry)
     scene = pred._scene_of(pts)
     checks = median_ms(lambda: pred._press(pts, press(), None), repeats, lambda: None)
-    envelope = median_ms(lambda: pred._beyond(press().reshape(2, 3).astype(np.float64), scene),
-                         repeats, lambda: None)
+    def beyond() -> list[str]:
+        v = press().tolist()
+        return pred._beyond(v[:3], v[3:], scene)
+
+    envelope = median_ms(beyond, repeats, lambda: None)
     net = median_ms(partial(pred.backend.run, entry, *inputs), repeats, lambda: None)
     whole = median_ms(lambda: pred.predict(pts, press()), repeats, lambda: None)
     top = ", ".join(f"{op} {share:.0f}%" for op, share in onnx_operators(si, entry, inputs)[:6])

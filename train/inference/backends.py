@@ -40,8 +40,8 @@ class TorchBackend:
 class OnnxBackend:
     """ONNX Runtime sessions per entry the model has, traced from the SI model at load.
 
-    Intra-op threads are chosen per call, by its size (:func:`call_size`: the most points of
-    its per-point inputs): one thread at or below ``SMALL`` points, ``threads`` above. A
+    Intra-op threads are chosen per call, by its size (the most points of its per-point
+    inputs, ``PER_POINT``): one thread at or below ``SMALL`` points, ``threads`` above. A
     thread pool's hand-offs cost more than they save on a small scene (measured with
     ``benchmarks/bench_cgnn.py``'s thread table, head offsets, 2 threads against 1, best of
     25 on a shared 2-core host: a press on a known mesh 0.030 against 0.033 ms at 26 points,
@@ -66,19 +66,28 @@ class OnnxBackend:
             buf = io.BytesIO()
             to_onnx(si.cpu(), buf, entry)
             self.sessions[entry] = {n: session(buf.getvalue(), n) for n in {1, threads}}
-        self.inputs = {e: [i.name for i in s[1].get_inputs()] for e, s in self.sessions.items()}
+        # per entry, what a call feeds: each session input's name and its place among the
+        # entry's arguments (a traced graph has no input its outputs do not read, noCond: no
+        # condition), the places of its per-point arguments (``PER_POINT``: the call's size),
+        # and the outputs' names (all of them, in order)
+        self.feeds = {e: [(i.name, ENTRIES[e].inputs.index(i.name)) for i in s[1].get_inputs()]
+                      for e, s in self.sessions.items()}
+        self.sized = {e: [k for k, name in enumerate(ENTRIES[e].inputs) if name in PER_POINT]
+                      for e in self.sessions}
+        self.outputs = {e: [o.name for o in s[1].get_outputs()]
+                        for e, s in self.sessions.items()}
+
+    @property
+    def inputs(self) -> dict[str, list[str]]:
+        """Each entry's session inputs by name, in the session's order."""
+        return {e: [name for name, _ in feed] for e, feed in self.feeds.items()}
 
     def run(self, entry: str, *arrays: np.ndarray) -> list[np.ndarray]:
         """The outputs of ``entry`` (named in ``ENTRIES``) on ``arrays``, in its order."""
-        given = dict(zip(ENTRIES[entry].inputs, arrays, strict=True))
-        session = self.sessions[entry][1 if call_size(given) <= SMALL else self.threads]
-        # a traced graph has no input its outputs do not read (noCond: no condition)
-        return session.run(None, {name: given[name] for name in self.inputs[entry]})
-
-
-def call_size(given: dict[str, np.ndarray]) -> int:
-    """The most points of a call's per-point inputs (``PER_POINT``; 0 where it has none)."""
-    return max((a.shape[1] for name, a in given.items() if name in PER_POINT), default=0)
+        size = max((arrays[k].shape[1] for k in self.sized[entry]), default=0)
+        session = self.sessions[entry][1 if size <= SMALL else self.threads]
+        return session.run(self.outputs[entry], {name: arrays[k] for name, k in
+                                                 self.feeds[entry]})
 
 
 def make_backend(si: SIModel, device: torch.device, backend: str = "auto"

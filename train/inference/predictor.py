@@ -10,6 +10,7 @@ with a warning saying where): docs/model.md, "Using a trained model" and "Latenc
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -314,31 +315,44 @@ class Predictor:
     def _press(self, points: np.ndarray, condition: np.ndarray, radius: float | None
                ) -> Press:
         """This call's press, checked (ValueError: what is refused), with the reasons to
-        flag it that the input alone shows."""
+        flag it that the input alone shows. The press's checks run on its six numbers as
+        plain floats (a haptic loop calls with a new press every time: numpy's per-call
+        cost on a few numbers was most of a known scene's call)."""
         self._check_radius(radius)
         scene = self._scene_of(points)
         c = np.asarray(condition, dtype=np.float32).reshape(-1)
         if c.shape != (6,):
             raise ValueError(f"condition must be 6 values (tip start, tip end), got {c.shape}")
-        if not np.isfinite(c).all():
+        v = c.tolist()
+        if not all(map(math.isfinite, v)):
             raise ValueError("points and condition must be finite (no NaN or inf)")
-        tips = c.reshape(2, 3).astype(np.float64)
-        far = max(self._reach(tips, "the tip", lambda: self._mm_tip(tips, scene)), scene.reach)
-        still = bool((c[:3] == c[3:]).all())
+        start, end = v[:3], v[3:]
+        far = max(self._tip_reach(c, start, end, scene), scene.reach)
+        still = start == end
         outside: list[str] = []
         if not still:                        # no motion: the answer is exact (no change)
             if far > EXTRAPOLATION_FACTOR * self._extent:
                 outside.append(f"input reaches {far / self._extent:.1f} times the training "
                                "extent")
             if self.norm.envelope is not None:
-                outside += self._beyond(tips, scene)
+                outside += self._beyond(start, end, scene)
         return Press(scene, c[None], radius, still, outside)
 
-    def _beyond(self, tips: np.ndarray, scene: Scene) -> list[str]:
-        """Where a press lies outside the training envelope (press length, depth, the tip
-        start's distance from the surface), in words."""
+    def _tip_reach(self, c: np.ndarray, start: list[float], end: list[float], scene: Scene
+                   ) -> float:
+        """The farther tip's distance from the training centre (m); refused as
+        :meth:`_reach` refuses (it says how far, and asks about millimetres)."""
+        far = max(math.dist(start, self._centre), math.dist(end, self._centre))
+        if far > UNIT_FACTOR * self._extent:
+            tips = c.reshape(2, 3).astype(np.float64)
+            return self._reach(tips, "the tip", lambda: self._mm_tip(tips, scene))
+        return far
+
+    def _beyond(self, start: list[float], end: list[float], scene: Scene) -> list[str]:
+        """Where a press (its tip start and end, m) lies outside the training envelope
+        (press length, depth, the tip start's distance from the surface), in words."""
         env, out = self.norm.envelope, []
-        length = float(np.linalg.norm(tips[1] - tips[0]))
+        length = math.dist(start, end)
         slack = MARGIN * env.press_max
         if length > env.press_max + slack:
             out.append(f"a press of {length * 1e3:.3g} mm, longer than the longest learned "
@@ -346,14 +360,14 @@ class Predictor:
         elif 0 < length < env.press_min * (1 - MARGIN):
             out.append(f"a press of {length * 1e3:.3g} mm, shorter than the shortest learned "
                        f"({env.press_min * 1e3:.3g} mm)")
-        if tips[1, 2] < env.tip_lowest - slack:
-            out.append(f"the tip end {(env.tip_lowest - tips[1, 2]) * 1e3:.3g} mm below the "
+        if end[2] < env.tip_lowest - slack:
+            out.append(f"the tip end {(env.tip_lowest - end[2]) * 1e3:.3g} mm below the "
                        "lowest learned")
         if env.top is not None and scene.top > env.top + slack:
             out.append(f"points up to {(scene.top - env.top) * 1e3:.3g} mm above the highest "
                        "learned (the rest surface is at z = 0 in the phantom frame)")
         limit = env.gap_max + slack
-        if tips[0, 2] - scene.bottom > limit and (gap := scene.height(tips[0])) > limit:
+        if start[2] - scene.bottom > limit and (gap := scene.height(np.array(start))) > limit:
             out.append(f"the tip start {gap * 1e3:.3g} mm above the surface (at most "
                        f"{env.gap_max * 1e3:.3g} mm learned)")       # (no lower point: no search)
         return out
@@ -375,6 +389,11 @@ class Predictor:
     @property
     def _extent(self) -> float:
         return max(self.norm.extent, 1e-9)
+
+    @cached_property
+    def _centre(self) -> tuple[float, float, float]:
+        """The training data's centre (m), as plain floats."""
+        return tuple(float(v) for v in self.norm.centre)
 
     def _mm_tip(self, tips: np.ndarray, scene: Scene) -> bool:
         """Whether a tip given in millimetres would fit: divided by 1000 it lies within the
