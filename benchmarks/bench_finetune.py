@@ -1,0 +1,95 @@
+"""Fine-tuning's epochs against accuracy: each fold of quick demos fine-tuned again with other
+settings, from the demo's own per-fold pre-trained model (docs/results.md, "Fine-tuning
+longer"), so the trade of minutes against pooled L_d can be re-measured.
+
+    python benchmarks/bench_finetune.py DEMO_OUT [DEMO_OUT ...] [--settings tl:80 tl:160 \
+        tl:240 tl:160:cosine scratch:160] [--jobs 2] [--out DIR]
+
+A setting is ``tl`` (from the fold's ``runs/msm_foldK/best.pt``) or ``scratch`` (random
+weights), the epochs, and optionally the schedule; everything else is the demo's own TL run's
+options (``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). Each run trains on one
+thread, ``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK``
+(a run already there is scored again, not retrained). Printed: per demo and setting the pooled
+mean L_d over the folds' test examples (weighted by their count), each fold's, and the mean
+minutes of the fold runs beside it; the demo's own TL and scratch runs first, as they are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+FOLDS = 5
+
+
+def fine_tune(job: tuple[Path, int, str, Path]) -> dict:
+    """One fold's run of one setting (trained unless its best.pt exists), scored on the fold's
+    test examples."""
+    import torch
+
+    torch.set_num_threads(1)
+    from train.evaluation.evaluate import metrics, test_errors
+    from train.model.config import CGNNConfig
+    from train.training.checkpoint import load_checkpoint
+    from train.training.train_params import TrainInputs, TrainOptions, TrainParams
+    from train.training.train_stage import run_train
+
+    demo, fold, setting, run = job
+    start, epochs, *schedule = setting.split(":")
+    meta = load_checkpoint(demo / "runs" / f"exp_tl_fold{fold}" / "best.pt")["meta"]
+    opts = dataclasses.replace(TrainOptions(**meta["options"]), epochs=int(epochs),
+                               **({"schedule": schedule[0]} if schedule else {}))
+    init = demo / "runs" / f"msm_fold{fold}" / "best.pt" if start == "tl" else None
+    tic = time.perf_counter()
+    if not (run / "best.pt").is_file():
+        run_train(TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]), init), run,
+                  TrainParams(opts, CGNNConfig.from_dict(meta["config"]), "cpu"))
+    return score(run, time.perf_counter() - tic, metrics, test_errors)
+
+
+def score(run: Path, seconds: float, metrics, test_errors) -> dict:
+    """A run's test examples' count and mean L_d (mm), and the seconds it took."""
+    m = metrics(test_errors(run)[0])["all"]
+    return {"n": m["n"], "ld": m["ld_mean_mm"], "seconds": seconds}
+
+
+def line(name: str, rows: list[dict], timed: bool = True) -> str:
+    """One setting's row: pooled L_d, each fold's, the mean minutes of a fold run."""
+    pooled = sum(r["ld"] * r["n"] for r in rows) / sum(r["n"] for r in rows)
+    folds = " ".join(f"{r['ld']:.3f}" for r in rows)
+    minutes = f"{sum(r['seconds'] for r in rows) / len(rows) / 60:.2f}" if timed else "–"
+    return f"| {name} | {pooled:.4f} mm | {folds} | {minutes} |"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("demos", nargs="+", type=Path)
+    ap.add_argument("--settings", nargs="+", default=["tl:160", "tl:240", "scratch:160"])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", type=Path, default=Path("/tmp/bench_finetune"))
+    a = ap.parse_args()
+    from train.evaluation.evaluate import metrics, test_errors
+
+    jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}")
+            for d in a.demos for s in a.settings for f in range(FOLDS)]
+    with ProcessPoolExecutor(a.jobs) as pool:
+        done = {(d, s, f): row for (d, f, s, _), row in
+                zip(jobs, pool.map(fine_tune, jobs), strict=True)}
+    print("| demo, setting | pooled mean L_d | per fold | minutes a fold run |")
+    print("|---|---|---|---|")
+    for d in a.demos:
+        for kind, name in (("tl", "TL"), ("notl", "scratch")):
+            own = [score(d / "runs" / f"exp_{kind}_fold{f}", 0.0, metrics, test_errors)
+                   for f in range(FOLDS)]
+            print(line(f"{d.name}, the demo's {name}", own, timed=False))
+        for s in a.settings:
+            print(line(f"{d.name}, {s}", [done[(d, s, f)] for f in range(FOLDS)]))
+
+if __name__ == "__main__":
+    main()
