@@ -80,8 +80,8 @@ def nearest(queries: torch.Tensor, x: torch.Tensor, sq: torch.Tensor, k: int,
     b, n, _ = x.shape
     flat = Points(x.reshape(b * n, -1), key.reshape(b * n), n)
     base = (torch.arange(b, device=x.device) * n).view(b, 1, 1)
-    if fixed_width():   # N unknown: k + EXTRA points that are never chosen, so that
-        pad = x.new_zeros(b, k + EXTRA, x.shape[-1])                 # topk always has enough
+    if fixed_width():   # no branch (and in a trace N unknown): k + EXTRA points that are
+        pad = x.new_zeros(b, k + EXTRA, x.shape[-1])   # never chosen, so topk has enough
         d = torch.baddbmm(torch.cat([sq, torch.full_like(pad[..., 0], float("inf"))], 1)
                           .unsqueeze(1), queries, torch.cat([x, pad], 1).transpose(1, 2),
                           alpha=-2.0)                                  # (B, Q, N + k + EXTRA)
