@@ -16,7 +16,8 @@ from pipeline.options import bounded_int, resolve_rrd, rrd_option
               help="Metrics JSON to write; the Markdown table goes beside it (.md).")
 @click.option("--scarcity", is_flag=True,
               help="Also retrain each run's fold on 1..n training groups, with and without "
-                   "its transfer learning, and write the curve (.scarcity.json/.csv/.png).")
+                   "its transfer learning, and write the curve (.scarcity.json/.csv/.png; "
+                   "each retrained model with its 90 % intervals' coverage).")
 @click.option("--scarcity-epochs", type=bounded_int(1), default=None,
               help="Epochs of each scarcity run [default: the run's own].")
 @click.option("--scarcity-groups", type=bounded_int(1), default=None,
