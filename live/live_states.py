@@ -286,8 +286,8 @@ class OnlineStates:
         return out
 
     def _unread(self, done: PressDone, why: str) -> None:
-        """A press whose stretch sync's steps refused (a marker lost beyond repair, say):
-        said in one line, left out of the states; the session goes on."""
+        """A press whose stretch sync's steps refused (bad input they would refuse offline
+        too): said in one line, left out of the states; the session goes on."""
         note = f"press {done.number}: its states were not read: {why}"
         self.unread.append(note)
         self.notes.append(note)

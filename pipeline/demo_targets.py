@@ -40,6 +40,7 @@ FORCE_VS_LINEAR = 0.5   # force error at most this fraction of the linear refere
 MSM_VS_STILL = 0.5      # MSM model (and the fit) at most this fraction of a still surface's
 COVERAGE_SLACK = 0.03   # points inside their radius: within this of the level, every fold
 FORCE_COVERAGE = (0.85, 0.95)   # the force inside its 90 % interval
+SCARCE_LEVEL = 0.9      # the level of the scarcity rows' shares (points_90, force_90)
 RADIUS_VS_LD = 3.0      # the mean 90 % radius at most this times the mean L_d
 QUICK_HOST_UNITS = 85   # the quick demo's time, in host figures
 QUICK_MINUTES = 5.0     # ... where the host's figure was not measured
@@ -250,9 +251,11 @@ def _scarce_intervals(rows: list[dict]) -> list[tuple[str, bool, str]]:
     if not runs:
         return []
     low, high = FORCE_COVERAGE
-    ok = all(abs(r["points_90"] - 0.9) <= COVERAGE_SLACK and low <= r["force_90"] <= high
+    ok = all(abs(r["points_90"] - SCARCE_LEVEL) <= COVERAGE_SLACK and low <= r["force_90"] <= high
              for r in runs)
     text = "; ".join(f"fold {r['fold']} {r['predictor']}: points {r['points_90']:.1%}, force "
                      f"{r['force_90']:.1%}" for r in runs)
+    points = f"{SCARCE_LEVEL - COVERAGE_SLACK:.0%}-{SCARCE_LEVEL + COVERAGE_SLACK:.0%}"
     return [(f"intervals with {fewest} training press{'es' if fewest > 1 else ''} (scarcity "
-             "study), 90 %", ok, text + f" (target points 87-93 %, force {low:.0%}-{high:.0%})")]
+             f"study), {SCARCE_LEVEL:.0%}", ok,
+             text + f" (target points {points}, force {low:.0%}-{high:.0%})")]
