@@ -59,7 +59,7 @@ class Scene:
     #                                                 head terms, once its first press has run
     plan: cKDTree | None = None   # of the points' x, y, once a tip's height is asked
     last: tuple[bytes, float] = (b"", 0.0)    # the last tip asked about, and its height
-    start: tuple[bytes, float] = (b"", 0.0)   # the last press's start (C's bytes), its height
+    start: tuple[list[float], float] = ([], 0.0)   # the last press's tip start, its height
 
     @cached_property
     def lookup(self) -> SceneLookup:
@@ -123,6 +123,7 @@ class Press:
     radius: float | None
     still: bool
     outside: list[str]
+    tips: list[float]          # C as plain floats (what the checks and lookups read)
 
 
 Answer = tuple[np.ndarray | None, float]    # deformed points (None: force only), change of force
@@ -191,7 +192,7 @@ class Predictor:
         df = self._flag(press, df, NOT_HOLDING if level is not None else "")
         if level is None:
             return deformed, df
-        return deformed, df, interval(self.intervals, level, press.scene.lookup, press.c[0],
+        return deformed, df, interval(self.intervals, level, press.scene.lookup, press.tips,
                                       self._height(press), df, not self.extrapolating)
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
@@ -223,10 +224,10 @@ class Predictor:
     def _height(press: Press) -> float:
         """The tip start's height above the scene (0 where no other point is left), kept for
         the press's start: a haptic loop's tip moves its end, call after call."""
-        scene, key = press.scene, press.c[0, :3].tobytes()
-        if key != scene.start[0]:
-            height = scene.height(press.c[0, :3].astype(np.float64))
-            scene.start = (key, 0.0 if height != height else height)   # NaN: no other point
+        scene, start = press.scene, press.tips[:3]
+        if start != scene.start[0]:
+            height = scene.height(np.array(start))
+            scene.start = (start, 0.0 if height != height else height)   # NaN: no other point
         return scene.start[1]
 
     def _known(self, press: Press, force_only: bool) -> Answer:
@@ -336,7 +337,7 @@ class Predictor:
                                "extent")
             if self.norm.envelope is not None:
                 outside += self._beyond(start, end, scene)
-        return Press(scene, c[None], radius, still, outside)
+        return Press(scene, c[None], radius, still, outside, v)
 
     def _tip_reach(self, c: np.ndarray, start: list[float], end: list[float], scene: Scene
                    ) -> float:

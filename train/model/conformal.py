@@ -286,17 +286,20 @@ def force_interval(table: IntervalTable, level: float, condition: np.ndarray, he
 
 
 def interval(table: IntervalTable, level: float, points: np.ndarray | SceneLookup,
-             condition: np.ndarray, height: float, dforce: float, holds: bool) -> Interval:
+             condition: np.ndarray | list[float], height: float, dforce: float, holds: bool
+             ) -> Interval:
     """The :class:`Interval` of one prediction: its input points (N, 3) (or a scene's
-    :class:`SceneLookup`, kept press after press), C (6,), the tip start's height above the
-    surface, the predicted change of force, and whether it holds. A lookup: each point's
-    squared distance from the tip's path binned, the press's depth and height looked up
-    once."""
+    :class:`SceneLookup`, kept press after press), C (6,) (an array, or its plain floats),
+    the tip start's height above the surface, the predicted change of force, and whether it
+    holds. A lookup: each point's squared distance from the tip's path binned, the press's
+    depth and height looked up once; the radii are read-only (a scene's lookup hands the same
+    array out while the press's bins stand)."""
     i = level_index(level)
     scene = points if isinstance(points, SceneLookup) else SceneLookup(points)
-    near, depth = scene.near(table.points.first_squared, condition)
+    c = condition if isinstance(condition, list) else np.asarray(condition).tolist()
+    near, depth = scene.near(table.points.first_squared, c)
     row, half = table.press(i, depth, height)
-    return Interval(level, row[near], (dforce - half, dforce + half), holds)
+    return Interval(level, scene.radii(row, near), (dforce - half, dforce + half), holds)
 
 
 class SceneLookup:
@@ -309,7 +312,8 @@ class SceneLookup:
     again only when a point nears a bin's edge). Few numpy calls a press: this is most of a
     known mesh's interval."""
 
-    __slots__ = ("points", "_start", "_rel", "_rel2", "_press", "_unit", "_along", "_near")
+    __slots__ = ("points", "_start", "_rel", "_rel2", "_press", "_unit", "_along", "_near",
+                 "_radii")
 
     def __init__(self, points: np.ndarray) -> None:
         self.points = np.asarray(points, dtype=np.float64)
@@ -320,11 +324,23 @@ class SceneLookup:
         self._press: tuple[list[float], np.ndarray | None, np.ndarray, float] = \
             ([], None, np.empty(0, np.int64), -1.0)
         self._unit, self._along, self._near = np.empty(3), np.empty(n), np.empty(n)
+        self._radii: tuple[np.ndarray | None, np.ndarray | None, np.ndarray] = \
+            (None, None, np.empty(0))              # the last radii, of (row, bins)
 
-    def near(self, edges2: np.ndarray, condition: np.ndarray) -> tuple[np.ndarray, float]:
+    def radii(self, row: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """Each point's radius (N,), read-only: its bin's in ``row``, kept while the row
+        and the bins are the last call's (a moving tip's press after press)."""
+        kept_row, kept_bins, radii = self._radii
+        if row is not kept_row or bins is not kept_bins:
+            radii = row[bins]
+            radii.flags.writeable = False
+            self._radii = (row, bins, radii)
+        return radii
+
+    def near(self, edges2: np.ndarray, c: list[float]) -> tuple[np.ndarray, float]:
         """Each point's bin (N,) among squared distance edges ``edges2`` from the tip's path
-        of C (6,), and the press's depth |tip end - tip start| (m)."""
-        c = condition.tolist()                      # plain floats: few numpy calls
+        of C (6 plain floats: few numpy calls), and the press's depth |tip end - tip start|
+        (m)."""
         start, end = c[:3], c[3:]
         depth = math.dist(start, end)
         seen, kept, bins, margin = self._press

@@ -123,7 +123,7 @@ def test_the_scenes_lookup_bins_points_by_their_distance_from_the_path() -> None
             c = c.astype(np.float32)
             d = path_distance(points.astype(np.float64), c[:3].astype(np.float64),
                               c[3:].astype(np.float64))
-            got, depth = scene.near(np.square(np.array(e)), c)
+            got, depth = scene.near(np.square(np.array(e)), c.tolist())
             np.testing.assert_array_equal(got, np.searchsorted(e, d, side="right"))
             assert depth == pytest.approx(np.linalg.norm(c[3:] - c[:3]), rel=1e-6)
 
@@ -143,7 +143,7 @@ def test_a_tip_moving_in_small_steps_keeps_the_bins_exact() -> None:
         c[5 if k < 300 else 0] -= 2e-5
         c[4] += 1e-6 * rng.standard_normal()
         before = scene._press[3]
-        got, _ = scene.near(edges2, c)
+        got, _ = scene.near(edges2, c.tolist())
         reused += scene._press[3] == before
         d = path_distance(points.astype(np.float64), c[:3].astype(np.float64),
                           c[3:].astype(np.float64))
@@ -167,6 +167,7 @@ def test_an_interval_from_a_kept_scene_is_the_one_from_its_points() -> None:
         d = path_distance(points.astype(np.float64), c[:3].astype(np.float64),
                           c[3:].astype(np.float64))
         np.testing.assert_array_equal(kept.radius, table.radii(level_index(0.9), d, z, 5e-4))
+        assert not kept.radius.flags.writeable     # shared press after press: read-only
 
 
 def test_a_thin_bin_takes_its_parents_radius() -> None:
