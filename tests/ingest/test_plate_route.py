@@ -4,7 +4,6 @@ on that one clock and extracted, against the truth; what ingest refuses of it.""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import h5py
@@ -12,7 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers.spoiled_session import ingest_spoiled
-from helpers.staged_twin import staged_twin
+from helpers.staged_twin import shared_clock_checked, staged_twin
 from helpers.truth_checks import check_states_against_truth
 
 from core.force_plate import centre_of_pressure
@@ -20,7 +19,6 @@ from data_schema.session import read_session
 from ingest.force_source import read_force
 from ingest.qtm_force_plate import WRENCH, read_force_plate
 from pipeline.cli import cli
-from sync.sync_accuracy import TARGETS, sync_errors
 
 PLATE_FILE = "indentation_f_1.tsv"
 
@@ -67,16 +65,7 @@ def test_the_plate_export_is_the_true_wrench_on_the_mocap_clock(plate_session):
 
 
 def test_plate_route_shares_the_clock_and_meets_the_targets(plate_session):
-    d = plate_session
-    err = sync_errors(d / "synced.h5", d / "s" / "truth.h5")
-    with h5py.File(d / "synced.h5") as s:
-        clock = json.loads(s.attrs["calibration"])["clock"]
-    assert clock["policy"] == "shared"
-    assert err["clock_offset_ms"] == 0 and err["clock_drift_ppm"] == 0
-    for key in ("tip_rms_mm", "tip_offset_mm", "force_rms_n"):
-        assert err[key] <= TARGETS[key], (key, err)
-    assert err["presses"] == 4 and err["presses_missed"] == err["presses_extra"] == 0
-    assert err["locations_mixed"] == 0
+    shared_clock_checked(plate_session)
 
 
 def test_plate_route_states_against_truth(plate_session):

@@ -59,7 +59,7 @@ class Scene:
     #                                                 head terms, once its first press has run
     plan: cKDTree | None = None   # of the points' x, y, once a tip's height is asked
     last: tuple[bytes, float] = (b"", 0.0)    # the last tip asked about, and its height
-    start: tuple[list[float], float] = ([], 0.0)   # the last press's tip start, its height
+    start: tuple[list[float] | None, float] = (None, 0.0)   # the last press's tip start, its height
 
     @cached_property
     def lookup(self) -> SceneLookup:
