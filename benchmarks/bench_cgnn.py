@@ -16,9 +16,9 @@ Measured in one run, medians over repeats:
   only its heads run (:mod:`train.inference.predictor`); with tip offsets the whole network runs;
 - where a warm ``predict`` of the tip-offset network spends its time: the predictor's checks
   against the network, and the network's heaviest operators (ONNX Runtime's profiler);
-- training samples/s at batch 32 x 1024 points (forward, backward, Adam step), the part of a
-  step both share (heads, loss, Adam: it bounds the ratio), and where the time of one of our
-  steps goes (torch.profiler, top operators);
+- training samples/s at batch 32 x 1024 points (forward, backward, and the trainer's fused
+  Adam step for both), the part of a step both share (heads, loss, Adam: it bounds the ratio),
+  and where the time of one of our steps goes (torch.profiler, top operators);
 - with ``--device cuda``: the same on the GPU, plus batch-1 latency replayed as a CUDA graph.
 
     python benchmarks/bench_cgnn.py [--threads 2] [--device cpu|cuda] [--repeats 200]
@@ -48,6 +48,7 @@ from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
 from train.model.normalise import Envelope, Normaliser
 from train.model.si_units import deformed, newtons
+from train.training.loop import adam
 
 
 def pyg_knn_edges(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -354,7 +355,7 @@ def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
     f = torch.rand(batch, device=device)
     local = torch.rand(batch, n, sum(o for _, o in model.config.edge_widths), device=device,
                        requires_grad=True)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    opt = adam(model, 1e-4)
 
     def step(forward: Callable[[], tuple[torch.Tensor, torch.Tensor]]) -> None:
         d, df = forward()
@@ -377,7 +378,7 @@ def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
 def profile_step(model: CGNN, x, c, y, f) -> None:
     from torch.profiler import ProfilerActivity, profile
 
-    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    opt = adam(model, 1e-4)
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         d, df = model(x, c)
         loss = 88 * (d - y).norm(dim=-1).mean() + ((df - f) ** 2).mean()

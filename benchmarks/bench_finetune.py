@@ -6,12 +6,15 @@ longer"), so the trade of minutes against pooled L_d can be re-measured.
         tl:240 tl:160:cosine scratch:160] [--jobs 2] [--out DIR]
 
 A setting is ``tl`` (from the fold's ``runs/msm_foldK/best.pt``) or ``scratch`` (random
-weights), the epochs, and optionally the schedule; everything else is the demo's own TL run's
-options (``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). Each run trains on one
-thread, ``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK``
-(a run already there is scored again, not retrained). Printed: per demo and setting the pooled
-mean L_d over the folds' test examples (weighted by their count), each fold's, and the mean
-minutes of the fold runs beside it; the demo's own TL and scratch runs first, as they are.
+weights), the epochs, and optionally the schedule and ``preN``: pre-train the fold's MSM run
+again for N epochs (``preN-cosine``: with that schedule; its own options otherwise; beside the
+fine-tuning run, its minutes counted in the setting's) and fine-tune from that
+(``tl:80:pre40``); everything else is the demo's own TL run's options
+(``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). Each run trains on one thread,
+``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK`` (a run
+already there is scored again, not retrained). Printed: per demo and setting the pooled mean
+L_d over the folds' test examples (weighted by their count), each fold's, and the mean minutes
+of the fold runs beside it; the demo's own TL and scratch runs first, as they are.
 """
 
 from __future__ import annotations
@@ -35,22 +38,40 @@ def fine_tune(job: tuple[Path, int, str, Path]) -> dict:
 
     torch.set_num_threads(1)
     from train.evaluation.evaluate import metrics, test_errors
+
+    demo, fold, setting, run = job
+    start, epochs, *rest = setting.split(":")
+    pre = [r[3:] for r in rest if r.startswith("pre")]
+    tic = time.perf_counter()
+    init = demo / "runs" / f"msm_fold{fold}" / "best.pt"
+    if pre:
+        init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"),
+                       changes(*pre[0].split("-")))
+    trained(demo / "runs" / f"exp_tl_fold{fold}", run,
+            changes(epochs, *[r for r in rest if not r.startswith("pre")]),
+            init if start == "tl" else None)
+    return score(run, time.perf_counter() - tic, metrics, test_errors)
+
+
+def changes(epochs: str, schedule: str | None = None) -> dict:
+    """The options a setting changes: the epochs, and the schedule where it names one."""
+    return {"epochs": int(epochs), **({"schedule": schedule} if schedule else {})}
+
+
+def trained(like: Path, run: Path, changes: dict, init: Path | None = None) -> Path:
+    """``run``'s best.pt: the run ``like`` trained again (unless already there) with
+    ``changes`` to its options, from ``init`` (None: random weights)."""
     from train.model.config import CGNNConfig
     from train.training.checkpoint import load_checkpoint
     from train.training.train_params import TrainInputs, TrainOptions, TrainParams
     from train.training.train_stage import run_train
 
-    demo, fold, setting, run = job
-    start, epochs, *schedule = setting.split(":")
-    meta = load_checkpoint(demo / "runs" / f"exp_tl_fold{fold}" / "best.pt")["meta"]
-    opts = dataclasses.replace(TrainOptions(**meta["options"]), epochs=int(epochs),
-                               **({"schedule": schedule[0]} if schedule else {}))
-    init = demo / "runs" / f"msm_fold{fold}" / "best.pt" if start == "tl" else None
-    tic = time.perf_counter()
+    meta = load_checkpoint(like / "best.pt")["meta"]
     if not (run / "best.pt").is_file():
+        opts = dataclasses.replace(TrainOptions(**meta["options"]), **changes)
         run_train(TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]), init), run,
                   TrainParams(opts, CGNNConfig.from_dict(meta["config"]), "cpu"))
-    return score(run, time.perf_counter() - tic, metrics, test_errors)
+    return run / "best.pt"
 
 
 def score(run: Path, seconds: float, metrics, test_errors) -> dict:

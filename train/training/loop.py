@@ -174,12 +174,18 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
     model, norm = initial_model(states, train, opts, config, init, init_state)
     model.to(device)
     averaged = copy.deepcopy(model).requires_grad_(False) if opts.ema is not None else None
-    run = Run(model, norm, torch.optim.Adam(model.parameters(), lr=opts.lr), states, train,
-              val, 0, math.inf, meta, -1, averaged)
+    run = Run(model, norm, adam(model, opts.lr), states, train, val, 0, math.inf, meta, -1,
+              averaged)
     if files.last.is_file():
         resume(run, files.last, device)
     run.states, run.train, run.val = states.to(device), train.to(device), val.to(device)
     return run
+
+
+def adam(model: torch.nn.Module, lr: float) -> torch.optim.Adam:
+    """The trainer's Adam, fused: one kernel per parameter instead of some thirty operators
+    (the same update, rounded differently; 6 % of a training step at 26 points)."""
+    return torch.optim.Adam(model.parameters(), lr=lr, fused=True)
 
 
 def run_meta(data: Path, splits: Path, init: Path | None, opts: TrainOptions,
@@ -231,9 +237,10 @@ def resume(run: Run, last: Path, device: torch.device) -> None:
 
 @torch.no_grad()
 def update_average(run: Run, decay: float) -> None:
-    """One step of the exponential average: avg <- decay avg + (1 - decay) weights."""
-    for avg, w in zip(run.averaged.parameters(), run.model.parameters(), strict=True):
-        avg.lerp_(w, 1.0 - decay)
+    """One step of the exponential average: avg <- decay avg + (1 - decay) weights, over all
+    parameters in one call."""
+    torch._foreach_lerp_(list(run.averaged.parameters()), list(run.model.parameters()),
+                         1.0 - decay)
 
 
 def balance(run: Run, opts: TrainOptions) -> Normaliser | None:

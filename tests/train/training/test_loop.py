@@ -1,7 +1,7 @@
 """The training loop's parts (:mod:`train.training.loop`) against hand numbers: the step
-size's schedule, each epoch's seeded draws, the stall warning, the options' guard, early
-stopping and the best epoch, what a run's checkpoints record of it, the
-validation metrics, and the per-epoch files.
+size's schedule, the optimizer and the weights' average, each epoch's seeded draws, the stall
+warning, the options' guard, early stopping and the best epoch, what a run's checkpoints
+record of it, the validation metrics, and the per-epoch files.
 
 Whole runs (learning, resuming, a resumed run of other options refused, patience, ema) are
 ``tests/train/training/test_train_stage.py``'s; runs that cannot learn are
@@ -33,6 +33,7 @@ from train.training.loop import (
     RunFiles,
     _checkpoint,
     _track_best,
+    adam,
     check_options,
     evaluate_pairs,
     learning_rate,
@@ -42,6 +43,7 @@ from train.training.loop import (
     seeded,
     stalled,
     stopped_early,
+    update_average,
 )
 from train.training.train_params import TrainOptions
 
@@ -69,6 +71,38 @@ def test_the_cosine_falls_from_lr_to_a_hundredth_at_the_last_epoch() -> None:
 def test_a_one_epoch_cosine_is_the_rate_itself() -> None:
     """No last epoch to fall to (and no division by epochs - 1 = 0)."""
     assert learning_rate(TrainOptions(epochs=1, lr=5e-4, schedule="cosine"), 0) == 5e-4
+
+
+# --- the optimizer and the weights' average --------------------------------------------------
+
+def test_the_trainers_adam_is_adams_update() -> None:
+    """Three steps of the trainer's (fused) Adam against Adam's update written out (Kingma &
+    Ba, bias-corrected, eps 1e-8), on fixed gradients of a weight and a bias."""
+    layer = nn.Linear(3, 2)
+    start = [p.detach().double().clone() for p in layer.parameters()]
+    grads = [[torch.full_like(p, 0.5 * (s + 1)) * (-1) ** i for i, p in
+              enumerate(layer.parameters())] for s in range(3)]
+    opt, lr = adam(layer, 1e-2), 1e-2
+    for g in grads:
+        for p, gp in zip(layer.parameters(), g, strict=True):
+            p.grad = gp.clone()
+        opt.step()
+    for i, (p, w) in enumerate(zip(layer.parameters(), start, strict=True)):
+        m = v = torch.zeros_like(w)
+        for t, g in enumerate(grads, start=1):
+            gd = g[i].double()
+            m, v = 0.9 * m + 0.1 * gd, 0.999 * v + 0.001 * gd * gd
+            w = w - lr * (m / (1 - 0.9 ** t)) / ((v / (1 - 0.999 ** t)).sqrt() + 1e-8)
+        assert torch.allclose(p.detach().double(), w, atol=1e-6)
+
+
+def test_the_average_moves_a_hundredth_of_the_way_to_the_weights() -> None:
+    """avg <- 0.99 avg + 0.01 w, for every parameter (decay 0.99)."""
+    model, avg = nn.Linear(2, 2), nn.Linear(2, 2)
+    before = [a.detach().clone() for a in avg.parameters()]
+    update_average(SimpleNamespace(model=model, averaged=avg), 0.99)
+    for a, b, w in zip(avg.parameters(), before, model.parameters(), strict=True):
+        assert torch.allclose(a, 0.99 * b + 0.01 * w.detach(), atol=1e-7)
 
 
 # --- each epoch's draws ----------------------------------------------------------------------
