@@ -58,9 +58,9 @@ def changes(epochs: str, schedule: str | None = None) -> dict:
     return {"epochs": int(epochs), **({"schedule": schedule} if schedule else {})}
 
 
-def trained(like: Path, run: Path, changes: dict, init: Path | None = None) -> Path:
+def trained(like: Path, run: Path, edits: dict, init: Path | None = None) -> Path:
     """``run``'s best.pt: the run ``like`` trained again (unless already there) with
-    ``changes`` to its options, from ``init`` (None: random weights)."""
+    ``edits`` to its options, from ``init`` (None: random weights)."""
     from train.model.config import CGNNConfig
     from train.training.checkpoint import load_checkpoint
     from train.training.train_params import TrainInputs, TrainOptions, TrainParams
@@ -68,7 +68,7 @@ def trained(like: Path, run: Path, changes: dict, init: Path | None = None) -> P
 
     meta = load_checkpoint(like / "best.pt")["meta"]
     if not (run / "best.pt").is_file():
-        opts = dataclasses.replace(TrainOptions(**meta["options"]), **changes)
+        opts = dataclasses.replace(TrainOptions(**meta["options"]), **edits)
         run_train(TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]), init), run,
                   TrainParams(opts, CGNNConfig.from_dict(meta["config"]), "cpu"))
     return run / "best.pt"

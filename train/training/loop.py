@@ -184,7 +184,7 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
 
 def adam(model: torch.nn.Module, lr: float) -> torch.optim.Adam:
     """The trainer's Adam, fused: one kernel per parameter instead of some thirty operators
-    (the same update, rounded differently; 6 % of a training step at 26 points)."""
+    (the same update, rounded differently; 6-9 % of a training step at 26 points)."""
     return torch.optim.Adam(model.parameters(), lr=lr, fused=True)
 
 

@@ -1,19 +1,25 @@
-"""Would training several networks as one batched network make the demo faster? G copies of
-the recipe's network (the tip's offsets in the heads) stacked into one, each linear layer a
-batched matrix product over the G weights (``torch.bmm``; the kNN over all G x B samples at
-once), against the same G networks stepped one after another; and the same G copies run by
-``torch.func.vmap`` over ``torch.func.stack_module_state`` (the kNN then ranks a fixed k + 2
-candidates on every row, as a traced graph does: vmap cannot branch on the data; up to about
-180 points, past which the kNN searches in pieces written in place, which vmap refuses).
+"""A training step at the demo's size (the recipe's network, batch 32, 26 points, one thread):
+where it goes, and what would make the demo's training cheaper.
 
-    python benchmarks/bench_grouped.py [--groups 2 5] [--steps 40] [--points 26]
+    python benchmarks/bench_train_step.py [--groups 2 5] [--steps 40] [--points 26]
 
-One thread; batch 32 per network, as the demo's folds train; each step is forward, backward
-and a fused Adam step (the trainer's). The steps alternate between the ways, on the same
-batches; printed: the median ms of G steps each way and the ratio sequential / batched, and
-first the largest difference between a batched member's output and its own network's (the
-stacked network computes the same function). The demo's per-fold training is the case: five
-folds' pre-training, or a fold's TL and scratch runs (G = 2).
+1. The step's parts (median ms): forward, backward, the optimizer, the weights' average.
+2. The optimizer: torch's default Adam and a per-parameter average (the trainer's before
+   2026-11-27) against the trainer's (:func:`train.training.loop.adam`, fused, and
+   :func:`train.training.loop.update_average`, one call), steps alternating on the same batches.
+3. Several networks trained as one: G copies stacked into one network, each linear layer a
+   batched matrix product over the G weights (``torch.bmm``; the kNN over all G x B samples at
+   once), and the same G copies under ``torch.func.vmap`` of ``stack_module_state`` (the kNN
+   then ranks a fixed k + 2 candidates on every row, as a traced graph does: vmap cannot branch
+   on the data; only up to about 180 points, past which the kNN searches in pieces written in
+   place, which vmap refuses), against the G networks stepped one after another. First the
+   largest difference between a stacked member's output and its own network's (the stacked
+   network computes the same function). The demo's case: five folds' pre-training (G = 5), or
+   a fold's TL and scratch runs (G = 2).
+
+The ways run in turn on the same batches, each first in turn; the loss is a stand-in with the
+trainer's shapes (the optimizer's and the graph's costs do not depend on it). Printed: medians
+and the speed-up over the peer of the same run.
 """
 
 from __future__ import annotations
@@ -23,7 +29,9 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 from unittest import mock
 
 import torch
@@ -34,7 +42,7 @@ from train.model import edgeconv  # noqa: E402
 from train.model.cgnn import CGNN, pool  # noqa: E402
 from train.model.config import CGNNConfig, Offsets  # noqa: E402
 from train.model.edgeconv import gather_rows, knn, tiebreak  # noqa: E402
-from train.training.loop import adam  # noqa: E402
+from train.training.loop import adam, update_average  # noqa: E402
 
 BATCH = 32
 Params = dict[str, torch.Tensor]
@@ -94,6 +102,62 @@ def loss(disp: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
     return disp.square().sum() + force.square().sum()
 
 
+def timed(ways: dict[str, Callable[[], object]], steps: int, rotate: bool = True,
+          between: Callable[[], object] = lambda: None) -> dict[str, float]:
+    """Median ms of each way over ``steps`` rounds (after two to warm up); ``between`` runs
+    before each round (the next batch). ``rotate``: each way first in turn (ways compared);
+    else in their order (the parts of one step)."""
+    times: dict[str, list[float]] = {w: [] for w in ways}
+    order = list(ways)
+    for step in range(steps + 2):
+        between()
+        if rotate:
+            order = order[1:] + order[:1]
+        for way in order:
+            tic = time.perf_counter()
+            ways[way]()
+            if step >= 2:
+                times[way].append((time.perf_counter() - tic) * 1e3)
+    return {w: statistics.median(t) for w, t in times.items()}
+
+
+def parts_and_optimizer(n: int, steps: int) -> None:
+    """Sections 1 and 2: one network's step split into its parts, and the optimizer old and
+    new."""
+    torch.manual_seed(0)
+    net, gen = CGNN(CGNNConfig(offsets=Offsets.HEADS)), torch.Generator().manual_seed(1)
+    run = SimpleNamespace(model=net, averaged=CGNN(CGNNConfig(offsets=Offsets.HEADS)))
+    fused, plain = adam(net, 1e-3), torch.optim.Adam(net.parameters(), lr=1e-3)
+    pts, cond = batches(1, n, gen)
+
+    def plain_average() -> None:
+        with torch.no_grad():
+            for avg, w in zip(run.averaged.parameters(), net.parameters(), strict=True):
+                avg.lerp_(w, 0.01)
+
+    out: list[tuple[torch.Tensor, torch.Tensor]] = []
+    parts = {"forward": lambda: out.append(net(pts[0], cond[0])),
+             "backward": lambda: (net.zero_grad(set_to_none=True),
+                                  loss(*out.pop()).backward()),
+             "Adam, fused": fused.step, "average, one call": lambda: update_average(run, 0.99)}
+    ms = timed(parts, steps, rotate=False)
+    print(" one step's parts: " + "; ".join(f"{w} {v:.2f} ms" for w, v in ms.items()))
+
+    def step(opt: torch.optim.Optimizer, average: Callable[[], None]) -> None:
+        net.zero_grad(set_to_none=True)
+        loss(*net(pts[0], cond[0])).backward()
+        opt.step()
+        average()
+
+    ab = timed({"torch's default Adam, per-parameter average": partial(step, plain,
+                                                                       plain_average),
+                "the trainer's": partial(step, fused, lambda: update_average(run, 0.99))},
+               steps * 5)
+    old, new = ab.values()
+    print(f" a whole step: torch's default Adam and a per-parameter average {old:.2f} ms, the "
+          f"trainer's (fused, one call) {new:.2f} ms ({old / new:.3f}x)")
+
+
 def compare(g: int, n: int, steps: int) -> None:
     """One row: G networks stacked (bmm), under vmap, and one after another."""
     torch.manual_seed(0)
@@ -140,17 +204,9 @@ def compare(g: int, n: int, steps: int) -> None:
         "one after another": one_by_one, "stacked (bmm)": as_one}
     if BATCH * n * n <= edgeconv.BLOCK:        # larger: the kNN's pieces write in place,
         ways["vmap"] = vmapped                 # which vmap refuses
-    times: dict[str, list[float]] = {w: [] for w in ways}
-    order = list(ways)
-    for step in range(steps + 2):
-        data = batches(g, n, gen)
-        order = order[1:] + order[:1]                      # each way first in turn
-        for way in order:
-            tic = time.perf_counter()
-            ways[way](*data)
-            if step >= 2:                                  # the first two warm up
-                times[way].append((time.perf_counter() - tic) * 1e3)
-    ms = {w: statistics.median(t) for w, t in times.items()}
+    data = [batches(g, n, gen)]
+    ms = timed({w: (lambda fn=fn: fn(*data[0])) for w, fn in ways.items()}, steps,
+               between=lambda: data.__setitem__(0, batches(g, n, gen)))
     seq = ms["one after another"]
     print("  " + "; ".join(f"{w} {v:.1f} ms ({seq / v:.2f}x)" for w, v in ms.items()))
 
@@ -162,8 +218,11 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=26)
     a = ap.parse_args()
     torch.set_num_threads(1)
-    print(f"G training steps of batch {BATCH} (forward, backward, fused Adam), one thread, "
-          f"torch {torch.__version__}; median ms and speed-up over one after another:")
+    print(f"training steps of batch {BATCH} x {a.points} points, the recipe's network, one "
+          f"thread, torch {torch.__version__}:")
+    parts_and_optimizer(a.points, a.steps)
+    print("G networks' steps (forward, backward, fused Adam); median ms and the speed-up over "
+          "one after another:")
     for g in a.groups:
         compare(g, a.points, a.steps)
 
