@@ -355,7 +355,7 @@ def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
     f = torch.rand(batch, device=device)
     local = torch.rand(batch, n, sum(o for _, o in model.config.edge_widths), device=device,
                        requires_grad=True)
-    opt = adam(model, 1e-4)
+    opt = adam(model.parameters(), 1e-4)
 
     def step(forward: Callable[[], tuple[torch.Tensor, torch.Tensor]]) -> None:
         d, df = forward()
@@ -378,7 +378,7 @@ def training_row(model: CGNN, peer: nn.Module, device: torch.device, steps: int,
 def profile_step(model: CGNN, x, c, y, f) -> None:
     from torch.profiler import ProfilerActivity, profile
 
-    opt = adam(model, 1e-4)
+    opt = adam(model.parameters(), 1e-4)
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         d, df = model(x, c)
         loss = 88 * (d - y).norm(dim=-1).mean() + ((df - f) ** 2).mean()

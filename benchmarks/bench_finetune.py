@@ -40,21 +40,39 @@ def fine_tune(job: tuple[Path, int, str, Path]) -> dict:
     from train.evaluation.evaluate import metrics, test_errors
 
     demo, fold, setting, run = job
-    start, epochs, *rest = setting.split(":")
-    pre = [r[3:] for r in rest if r.startswith("pre")]
+    start, tune, pre = parse(setting)
     tic = time.perf_counter()
     init = demo / "runs" / f"msm_fold{fold}" / "best.pt"
     if pre:
-        init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"),
-                       changes(*pre[0].split("-")))
-    trained(demo / "runs" / f"exp_tl_fold{fold}", run,
-            changes(epochs, *[r for r in rest if not r.startswith("pre")]),
-            init if start == "tl" else None)
+        init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"), pre)
+    trained(demo / "runs" / f"exp_tl_fold{fold}", run, tune, init if start == "tl" else None)
     return score(run, time.perf_counter() - tic, metrics, test_errors)
 
 
+SCHEDULES = ("constant", "cosine")
+
+
+def parse(setting: str) -> tuple[str, dict, dict | None]:
+    """A setting's start (tl or scratch), its fine-tuning's option changes, and its
+    pre-training's (None: the demo's own pre-trained model); ValueError for a malformed one,
+    caught before any run starts."""
+    start, *parts = setting.split(":")
+    epochs, rest = (parts[0] if parts else ""), parts[1:]
+    pre = [r[3:] for r in rest if r.startswith("pre")]
+    schedule = [r for r in rest if not r.startswith("pre")]
+    if start not in ("tl", "scratch") or len(pre) > 1 or len(schedule) > 1 \
+            or (pre and start == "scratch"):
+        raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:preN[-SCHEDULE]]"
+                         " (preN only with tl)")
+    return start, changes(epochs, *schedule), changes(*pre[0].split("-", 1)) if pre else None
+
+
 def changes(epochs: str, schedule: str | None = None) -> dict:
-    """The options a setting changes: the epochs, and the schedule where it names one."""
+    """The options a part of a setting changes: the epochs, and the schedule where it names
+    one (ValueError for epochs that are not a positive whole number, or another schedule)."""
+    if not epochs.isdigit() or int(epochs) < 1 or schedule not in (None, *SCHEDULES):
+        raise ValueError(f"epochs {epochs!r} and schedule {schedule!r}: a positive whole "
+                         f"number, and one of {', '.join(SCHEDULES)}")
     return {"epochs": int(epochs), **({"schedule": schedule} if schedule else {})}
 
 
@@ -95,6 +113,11 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_finetune"))
     a = ap.parse_args()
+    try:
+        for setting in a.settings:
+            parse(setting)
+    except ValueError as e:
+        ap.error(str(e))
     from train.evaluation.evaluate import metrics, test_errors
 
     jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}")

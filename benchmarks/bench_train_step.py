@@ -121,13 +121,18 @@ def timed(ways: dict[str, Callable[[], object]], steps: int, rotate: bool = True
     return {w: statistics.median(t) for w, t in times.items()}
 
 
+Step = Callable[[torch.Tensor, torch.Tensor], None]     # one training step on (points, C)
+CONFIG = CGNNConfig(offsets=Offsets.HEADS)              # the recipe's network
+
+
 def parts_and_optimizer(n: int, steps: int) -> None:
     """Sections 1 and 2: one network's step split into its parts, and the optimizer old and
     new."""
     torch.manual_seed(0)
-    net, gen = CGNN(CGNNConfig(offsets=Offsets.HEADS)), torch.Generator().manual_seed(1)
-    run = SimpleNamespace(model=net, averaged=CGNN(CGNNConfig(offsets=Offsets.HEADS)))
-    fused, plain = adam(net, 1e-3), torch.optim.Adam(net.parameters(), lr=1e-3)
+    net, gen = CGNN(CONFIG), torch.Generator().manual_seed(1)
+    run = SimpleNamespace(model=net, averaged=CGNN(CONFIG))
+    fused, plain = adam(net.parameters(), 1e-3), torch.optim.Adam(net.parameters(), lr=1e-3)
+    average = partial(update_average, run, 0.99)
     pts, cond = batches(1, n, gen)
 
     def plain_average() -> None:
@@ -139,74 +144,97 @@ def parts_and_optimizer(n: int, steps: int) -> None:
     parts = {"forward": lambda: out.append(net(pts[0], cond[0])),
              "backward": lambda: (net.zero_grad(set_to_none=True),
                                   loss(*out.pop()).backward()),
-             "Adam, fused": fused.step, "average, one call": lambda: update_average(run, 0.99)}
+             "Adam, fused": fused.step, "average, one call": average}
     ms = timed(parts, steps, rotate=False)
     print(" one step's parts: " + "; ".join(f"{w} {v:.2f} ms" for w, v in ms.items()))
 
-    def step(opt: torch.optim.Optimizer, average: Callable[[], None]) -> None:
+    def step(opt: torch.optim.Optimizer, then: Callable[[], object]) -> None:
         net.zero_grad(set_to_none=True)
         loss(*net(pts[0], cond[0])).backward()
         opt.step()
-        average()
+        then()
 
-    ab = timed({"torch's default Adam, per-parameter average": partial(step, plain,
-                                                                       plain_average),
-                "the trainer's": partial(step, fused, lambda: update_average(run, 0.99))},
-               steps * 5)
-    old, new = ab.values()
+    old, new = timed({"old": partial(step, plain, plain_average),
+                      "new": partial(step, fused, average)}, steps * 5).values()
     print(f" a whole step: torch's default Adam and a per-parameter average {old:.2f} ms, the "
           f"trainer's (fused, one call) {new:.2f} ms ({old / new:.3f}x)")
 
 
-def compare(g: int, n: int, steps: int) -> None:
-    """One row: G networks stacked (bmm), under vmap, and one after another."""
-    torch.manual_seed(0)
-    config = CGNNConfig(offsets=Offsets.HEADS)
-    nets = [CGNN(config) for _ in range(g)]
-    names = [name for name, _ in nets[0].named_parameters()]
-    stacked = {name: torch.stack([dict(m.named_parameters())[name].detach() for m in nets])
-               .requires_grad_() for name in names}
-    stacked_opt = torch.optim.Adam(list(stacked.values()), lr=1e-3, fused=True)
-    mapped, buffers = torch.func.stack_module_state(nets)
-    mapped_opt = torch.optim.Adam(list(mapped.values()), lr=1e-3, fused=True)
-    base = CGNN(config).to("meta")
-    own_opts = [adam(m, 1e-3) for m in nets]
-    gen = torch.Generator().manual_seed(1)
-    pts, cond = batches(g, n, gen)
-    with torch.no_grad():
-        disp, force = stacked_forward(stacked, config.k, pts, cond)
-        own = [m(pts[i], cond[i]) for i, m in enumerate(nets)]
-        worst = max(max(float((d - disp[i]).abs().max()), float((f - force[i]).abs().max()))
-                    for i, (d, f) in enumerate(own))
-    print(f" G={g}, N={n}: largest |stacked - own network| {worst:.2g}")
+def one_by_one(nets: list[CGNN]) -> Step:
+    """The G networks stepped one after another, each with the trainer's Adam."""
+    opts = [adam(m.parameters(), 1e-3) for m in nets]
 
-    def one_by_one(pts: torch.Tensor, cond: torch.Tensor) -> None:
-        for i, (m, opt) in enumerate(zip(nets, own_opts, strict=True)):
+    def step(pts: torch.Tensor, cond: torch.Tensor) -> None:
+        for i, (m, opt) in enumerate(zip(nets, opts, strict=True)):
             opt.zero_grad(set_to_none=True)
             loss(*m(pts[i], cond[i])).backward()
             opt.step()
+    return step
 
-    def as_one(pts: torch.Tensor, cond: torch.Tensor) -> None:
-        stacked_opt.zero_grad(set_to_none=True)
-        loss(*stacked_forward(stacked, config.k, pts, cond)).backward()
-        stacked_opt.step()
 
-    def vmapped(pts: torch.Tensor, cond: torch.Tensor) -> None:
-        def call(p: Params, b: Params, x: torch.Tensor, c: torch.Tensor):
-            return torch.func.functional_call(base, (p, b), (x, c))
-        mapped_opt.zero_grad(set_to_none=True)
-        with mock.patch.object(edgeconv, "fixed_width", lambda: True):   # no branches
+def stacked_weights(nets: list[CGNN]) -> Params:
+    """The G networks' parameters stacked, by name (G, ...), as new leaves."""
+    named = [dict(m.named_parameters()) for m in nets]
+    return {name: torch.stack([p[name].detach() for p in named]).requires_grad_()
+            for name in named[0]}
+
+
+def as_one(stacked: Params) -> Step:
+    """The G networks as one stacked network (:func:`stacked_forward`)."""
+    opt = adam(stacked.values(), 1e-3)
+
+    def step(pts: torch.Tensor, cond: torch.Tensor) -> None:
+        opt.zero_grad(set_to_none=True)
+        loss(*stacked_forward(stacked, CONFIG.k, pts, cond)).backward()
+        opt.step()
+    return step
+
+
+def vmapped(nets: list[CGNN]) -> Step:
+    """The G networks under ``torch.func.vmap``, the kNN without branches."""
+    mapped, buffers = torch.func.stack_module_state(nets)
+    opt, base = adam(mapped.values(), 1e-3), CGNN(CONFIG).to("meta")
+
+    def call(p: Params, b: Params, x: torch.Tensor, c: torch.Tensor
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.func.functional_call(base, (p, b), (x, c))
+
+    def step(pts: torch.Tensor, cond: torch.Tensor) -> None:
+        opt.zero_grad(set_to_none=True)
+        with mock.patch.object(edgeconv, "fixed_width", lambda: True):
             out = torch.func.vmap(call)(mapped, buffers, pts, cond)
         loss(*out).backward()
-        mapped_opt.step()
+        opt.step()
+    return step
 
-    ways: dict[str, Callable[[torch.Tensor, torch.Tensor], None]] = {
-        "one after another": one_by_one, "stacked (bmm)": as_one}
+
+def largest_difference(nets: list[CGNN], stacked: Params, pts: torch.Tensor,
+                       cond: torch.Tensor) -> float:
+    """The largest difference between the stacked network's outputs and each member's own."""
+    with torch.no_grad():
+        disp, force = stacked_forward(stacked, CONFIG.k, pts, cond)
+        own = [m(pts[i], cond[i]) for i, m in enumerate(nets)]
+    return max(max(float((d - disp[i]).abs().max()), float((f - force[i]).abs().max()))
+               for i, (d, f) in enumerate(own))
+
+
+def compare(g: int, n: int, steps: int) -> None:
+    """Section 3, one row: G networks stacked (bmm), under vmap, and one after another."""
+    torch.manual_seed(0)
+    nets, gen = [CGNN(CONFIG) for _ in range(g)], torch.Generator().manual_seed(1)
+    stacked = stacked_weights(nets)
+    print(f" G={g}, N={n}: largest |stacked - own network| "
+          f"{largest_difference(nets, stacked, *batches(g, n, gen)):.2g}")
+    ways = {"one after another": one_by_one(nets), "stacked (bmm)": as_one(stacked)}
     if BATCH * n * n <= edgeconv.BLOCK:        # larger: the kNN's pieces write in place,
-        ways["vmap"] = vmapped                 # which vmap refuses
-    data = [batches(g, n, gen)]
+        ways["vmap"] = vmapped(nets)           # which vmap refuses
+    data: list[tuple[torch.Tensor, torch.Tensor]] = []      # this round's batches
+
+    def next_batches() -> None:
+        data[:] = [batches(g, n, gen)]
+
     ms = timed({w: (lambda fn=fn: fn(*data[0])) for w, fn in ways.items()}, steps,
-               between=lambda: data.__setitem__(0, batches(g, n, gen)))
+               between=next_batches)
     seq = ms["one after another"]
     print("  " + "; ".join(f"{w} {v:.1f} ms ({seq / v:.2f}x)" for w, v in ms.items()))
 

@@ -82,7 +82,7 @@ def test_the_trainers_adam_is_adams_update() -> None:
     start = [p.detach().double().clone() for p in layer.parameters()]
     grads = [[torch.full_like(p, 0.5 * (s + 1)) * (-1) ** i for i, p in
               enumerate(layer.parameters())] for s in range(3)]
-    opt, lr = adam(layer, 1e-2), 1e-2
+    opt, lr = adam(layer.parameters(), 1e-2), 1e-2
     for g in grads:
         for p, gp in zip(layer.parameters(), g, strict=True):
             p.grad = gp.clone()
