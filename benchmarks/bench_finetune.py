@@ -14,7 +14,8 @@ fine-tuning run, its minutes counted in the setting's) and fine-tune from that
 ``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK`` (a run
 already there is scored again, not retrained). Printed: per demo and setting the pooled mean
 L_d over the folds' test examples (weighted by their count), each fold's, and the mean minutes
-of the fold runs beside it; the demo's own TL and scratch runs first, as they are.
+of the fold runs beside it; first the demo's own TL and scratch runs, as they are, and the
+no-learning references on the same examples (fitted on each fold's training presses).
 """
 
 from __future__ import annotations
@@ -98,6 +99,21 @@ def score(run: Path, seconds: float, metrics, test_errors) -> dict:
     return {"n": m["n"], "ld": m["ld_mean_mm"], "seconds": seconds}
 
 
+def references(demo: Path) -> dict[str, list[dict]]:
+    """Each no-learning reference's rows on the folds' test examples, fitted on each fold's
+    training presses (the demo's TL runs name the folds): what every setting must beat."""
+    from train.evaluation.evaluate import load_run, metrics, reference_errors
+
+    rows: dict[str, list[dict]] = {}
+    for f in range(FOLDS):
+        for name, errs in reference_errors(load_run(demo / "runs" / f"exp_tl_fold{f}")).items():
+            m = metrics(errs)["all"]
+            if m["ld_mean_mm"] is not None:          # the force's reference moves no point
+                rows.setdefault(name, []).append({"n": m["n"], "ld": m["ld_mean_mm"],
+                                                  "seconds": 0.0})
+    return rows
+
+
 def line(name: str, rows: list[dict], timed: bool = True) -> str:
     """One setting's row: pooled L_d, each fold's, the mean minutes of a fold run."""
     pooled = sum(r["ld"] * r["n"] for r in rows) / sum(r["n"] for r in rows)
@@ -132,6 +148,8 @@ def main() -> None:
             own = [score(d / "runs" / f"exp_{kind}_fold{f}", 0.0, metrics, test_errors)
                    for f in range(FOLDS)]
             print(line(f"{d.name}, the demo's {name}", own, timed=False))
+        for name, rows in references(d).items():
+            print(line(f"{d.name}, reference: {name}", rows, timed=False))
         for s in a.settings:
             print(line(f"{d.name}, {s}", [done[(d, s, f)] for f in range(FOLDS)]))
 
