@@ -1,7 +1,7 @@
 """A training step at the demo's size (the recipe's network, batch 32, 26 points, one thread):
 where it goes, and what would make the demo's training cheaper.
 
-    python benchmarks/bench_train_step.py [--groups 2 5] [--steps 40] [--points 26]
+    python benchmarks/bench_train_step.py [--groups 2 5] [--steps 40] [--points 26] [--compile]
 
 1. The step's parts (median ms): forward, backward, the optimizer, the weights' average.
 2. The optimizer: torch's default Adam and a per-parameter average (the trainer's before
@@ -16,6 +16,8 @@ where it goes, and what would make the demo's training cheaper.
    largest difference between a stacked member's output and its own network's (the stacked
    network computes the same function). The demo's case: five folds' pre-training (G = 5), or
    a fold's TL and scratch runs (G = 2).
+4. With ``--compile``: the network under ``torch.compile`` against the trainer's eager step
+   (first the compile time and the largest difference between their outputs).
 
 The ways run in turn on the same batches, each first in turn; the loss is a stand-in with the
 trainer's shapes (the optimizer's and the graph's costs do not depend on it). Printed: medians
@@ -25,6 +27,7 @@ and the speed-up over the peer of the same run.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import time
@@ -190,6 +193,16 @@ def as_one(stacked: Params) -> Step:
     return step
 
 
+def always() -> bool:
+    """True (one function object: a compiled graph's guard sees the same one each step)."""
+    return True
+
+
+def no_branch() -> contextlib.AbstractContextManager:
+    """The kNN as a traced graph runs it: k + 2 candidates on every row, no branch."""
+    return mock.patch.object(edgeconv, "fixed_width", always)
+
+
 def vmapped(nets: list[CGNN]) -> Step:
     """The G networks under ``torch.func.vmap``, the kNN without branches."""
     mapped, buffers = torch.func.stack_module_state(nets)
@@ -201,7 +214,7 @@ def vmapped(nets: list[CGNN]) -> Step:
 
     def step(pts: torch.Tensor, cond: torch.Tensor) -> None:
         opt.zero_grad(set_to_none=True)
-        with mock.patch.object(edgeconv, "fixed_width", lambda: True):
+        with no_branch():
             out = torch.func.vmap(call)(mapped, buffers, pts, cond)
         loss(*out).backward()
         opt.step()
@@ -239,11 +252,45 @@ def compare(g: int, n: int, steps: int) -> None:
     print("  " + "; ".join(f"{w} {v:.1f} ms ({seq / v:.2f}x)" for w, v in ms.items()))
 
 
+def compiled(n: int, steps: int) -> None:
+    """Section 4 (``--compile``): one network's step with the network under ``torch.compile``
+    against the trainer's eager step. Compiled, the kNN ranks k + 2 candidates on every row
+    with no branch (as a traced graph does: a branch on the data breaks Dynamo's graph)."""
+    torch.manual_seed(0)
+    net, gen = CGNN(CONFIG), torch.Generator().manual_seed(1)
+    opt, fast = adam(net.parameters(), 1e-3), torch.compile(net, dynamic=False)
+    data = [tuple(t[0] for t in batches(1, n, gen))]
+
+    def step(model: Callable[..., tuple[torch.Tensor, torch.Tensor]]) -> None:
+        opt.zero_grad(set_to_none=True)
+        with no_branch() if model is fast else contextlib.nullcontext():
+            loss(*model(*data[0])).backward()
+        opt.step()
+
+    tic = time.perf_counter()
+    step(fast)
+    with torch.no_grad(), no_branch():
+        diff = max(float((a - b).abs().max()) for a, b in zip(fast(*data[0]), net(*data[0]),
+                                                              strict=True))
+    print(f" compiled in {time.perf_counter() - tic:.0f} s; largest |compiled - eager| "
+          f"{diff:.2g}")
+
+    def next_batch() -> None:
+        data[:] = [tuple(t[0] for t in batches(1, n, gen))]
+
+    ms = timed({"eager": partial(step, net), "compiled": partial(step, fast)}, steps,
+               between=next_batch)
+    print(f"  eager {ms['eager']:.1f} ms, compiled {ms['compiled']:.1f} ms "
+          f"({ms['eager'] / ms['compiled']:.2f}x)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--groups", type=int, nargs="+", default=[2, 5])
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--points", type=int, default=26)
+    ap.add_argument("--compile", action="store_true",
+                    help="also time the network under torch.compile (about 30 s to compile)")
     a = ap.parse_args()
     torch.set_num_threads(1)
     print(f"training steps of batch {BATCH} x {a.points} points, the recipe's network, one "
@@ -253,6 +300,9 @@ def main() -> None:
           "one after another:")
     for g in a.groups:
         compare(g, a.points, a.steps)
+    if a.compile:
+        print("one network's step, compiled (torch.compile, inductor) against eager:")
+        compiled(a.points, a.steps)
 
 
 if __name__ == "__main__":

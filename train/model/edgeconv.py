@@ -133,7 +133,7 @@ def ranked(cand: torch.Tensor, usable: torch.Tensor, queries: torch.Tensor, poin
     costs more than it saves (each is a wait for the device): they rank every row."""
     rows = (cand.clamp(max=points.n - 1) + base).reshape(-1)
     exact = torch.linalg.vector_norm(points.features.index_select(0, rows).reshape(
-        *cand.shape, -1) - queries.unsqueeze(2), dim=-1)                      # (B, Q, c)
+        *cand.shape, -1).sub_(queries.unsqueeze(2)), dim=-1)                  # (B, Q, c)
     exact = exact.masked_fill(~usable, FAR)
     if fixed_width() or exact.device.type != "cpu":
         pick = choose(exact, points.key.index_select(0, rows).reshape(cand.shape), k)
