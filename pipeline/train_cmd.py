@@ -96,8 +96,10 @@ def train(ctx: click.Context, recipe_name: str, data: Path, splits: Path, out: P
     Reads --data and --splits (refused unless the manifest was made from exactly this data:
     sha256), and --init. Loss 88 x mean distance (m) + MSE of the force change (N), or each in
     its scale (--loss balanced); Adam; validation every epoch. Writes --out/best.pt (lowest
-    validation loss) and last.pt (each epoch; both atomic, loaded with weights_only, with
-    their provenance), log.csv (epoch, losses, validation errors, samples/s), provenance.json
+    validation loss) and last.pt (both atomic, loaded with weights_only, with their
+    provenance; with log.csv's rows, every 10 s and at the end: a killed run started again
+    resumes after the last epoch written), log.csv (epoch, losses, validation errors,
+    samples/s), provenance.json
     (log.csv's) and train.rrd. --recipe names the settings (the paper's by default); options
     given override it. A NaN or exploding loss stops with the epoch and batch named. Refused:
     a fold without validation examples (unless --no-val), training examples in which nothing

@@ -16,7 +16,7 @@ from core.provenance import sha256_file
 from data_schema.json_docs import METRICS, validate_metrics
 from pipeline.cli import cli
 from train.training.checkpoint import load_checkpoint
-from train.training.loop import LOG_FIELDS
+from train.training.run_files import LOG_FIELDS
 
 TINY = ("--epochs", "2", "--batch", "8", "--lr", "3e-3", "--device", "cpu", "--no-rrd")
 

@@ -16,18 +16,18 @@ Training that cannot learn says so: the fold's examples are refused where they c
 (:mod:`train.training.fold_data`); a training loss that does not move over the first epochs is
 a warning, kept in the checkpoints' meta ("notes") and the recording.
 
-The runner names the files (:class:`RunFiles`) and writes the checkpoints (``save``:
-atomically, with their provenance, :mod:`train.training.train_stage`); this module only appends
-``log.csv``. The defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
+The runner names the files (:class:`~train.training.run_files.RunFiles`) and writes the
+checkpoints (``save``: atomically, with their provenance, :mod:`train.training.train_stage`);
+:class:`~train.training.run_files.RunWriter` decides when, and appends ``log.csv``. The
+defaults of :class:`TrainOptions` are the paper's (:mod:`train.paper`).
 """
 
 from __future__ import annotations
 
 import copy
-import csv
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -50,6 +50,7 @@ from train.training.augment import about_normal, move_batch
 from train.training.checkpoint import load_checkpoint
 from train.training.distributed import DistContext, from_env
 from train.training.fold_data import fit_normaliser, fold_examples
+from train.training.run_files import RunFiles, RunWriter, Save
 from train.training.train_params import TrainOptions
 from train.training.variant import make_variant
 
@@ -62,25 +63,6 @@ EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
 STALL_EPOCHS = 3
 STALL_REL = 1e-4
 STALL_PROBE = 64       # training examples in the probe
-LOG_FIELDS = ("epoch", "train_loss", "val_loss", "val_ld_mm", "val_force_abs_n", "seconds",
-              "samples_per_s")
-Save = Callable[[Path, dict[str, Any]], None]    # writes a checkpoint (state) to a path
-
-
-@dataclass(frozen=True)
-class RunFiles:
-    """Where a run's files go, named by its runner: the checkpoints ``best`` (the kept epoch)
-    and ``last`` (each epoch; a killed run resumes from it), and the per-epoch ``log`` (CSV,
-    appended)."""
-
-    best: Path
-    last: Path
-    log: Path
-
-    @classmethod
-    def in_folder(cls, out: Path) -> RunFiles:
-        """A run folder's files: best.pt, last.pt, log.csv."""
-        return cls(out / "best.pt", out / "last.pt", out / "log.csv")
 
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
@@ -324,8 +306,9 @@ def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: StateTensor
 def train_run(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
               config: CGNNConfig, init: Path | None, device: str, save: Save) -> Path:
     """Train (or resume from ``files.last``) one fold: ``save`` writes the checkpoints
-    ``files.best`` and ``files.last`` each epoch, and each epoch's row is appended to
-    ``files.log`` (only the main process writes); returns ``files.best``."""
+    ``files.best`` and ``files.last``, and each epoch's row is appended to ``files.log``,
+    every few seconds and at the end (:class:`RunWriter`; only the main process writes);
+    returns ``files.best``."""
     dev = resolve_device(device)
     ctx = from_env(dev)
     run = prepare(data, splits, files, opts, config, init, dev)
@@ -338,6 +321,7 @@ def train_run(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
     first = None
     probe = probe_loss(run, opts) if run.start_epoch == 0 and ctx.main else None
     probe_at = min(STALL_EPOCHS, opts.epochs) - 1        # the epoch after which it is checked
+    writer = RunWriter(files, save) if ctx.main else None
     for epoch in range(run.start_epoch, opts.epochs):
         if _agreed(ctx, stopped_early(run, opts, epoch), run.train.device):
             say(f"stopped after epoch {epoch}: no better validation in {opts.patience} epochs "
@@ -354,9 +338,11 @@ def train_run(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
         row = {"epoch": epoch, "train_loss": train_loss, **metrics, "seconds": secs,
                "samples_per_s": len(run.train) / secs}
         _track_best(run, epoch, row["val_loss"], last=opts.no_val)
-        if ctx.main:
-            _checkpoint(run, files, save, epoch, row)
+        if writer is not None:
+            writer.epoch(checkpoint_state(run, epoch), row, best=run.best_epoch == epoch)
             say(_epoch_line(row, opts.epochs, validated=len(run.val) > 0))
+    if writer is not None:
+        writer.write()
     return files.best
 
 
@@ -404,20 +390,13 @@ def _track_best(run: Run, epoch: int, val_loss: float, last: bool = False) -> No
         run.best_val, run.best_epoch = min(run.best_val, val_loss), epoch
 
 
-def _checkpoint(run: Run, files: RunFiles, save: Save, epoch: int, row: dict) -> None:
-    """Append the log row; write last.pt, and best.pt when validation improved."""
+def checkpoint_state(run: Run, epoch: int) -> dict[str, Any]:
+    """What a checkpoint holds after ``epoch``: the kept weights, the optimizer, where the run
+    stands, the network's config and normaliser, the run's meta (and with ``ema`` the stepped
+    weights, for resume). Its tensors are the run's own, not copies."""
     state = {"model": run.kept.state_dict(), "optimizer": run.optimizer.state_dict(),
              "epoch": epoch, "best_val": run.best_val, "best_epoch": run.best_epoch,
              "config": run.meta["config"], "norm": run.norm.to_dict(), "meta": run.meta}
     if run.averaged is not None:
         state["trained"] = run.model.state_dict()     # what the optimizer steps, for resume
-    if run.best_epoch == epoch or not files.best.exists():
-        save(files.best, state)
-    save(files.last, state)
-    log = files.log
-    new = not log.exists() or epoch == 0
-    with open(log, "w" if new else "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=LOG_FIELDS)
-        if new:
-            w.writeheader()
-        w.writerow({k: row[k] for k in LOG_FIELDS})
+    return state

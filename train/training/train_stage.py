@@ -23,7 +23,8 @@ from core.provenance import make_provenance
 from core.text import to_json
 from train.training.calibrate import calibrated_state
 from train.training.checkpoint import SCHEMA, load_checkpoint
-from train.training.loop import RunFiles, resolve_device, run_notes, train_run
+from train.training.loop import resolve_device, run_notes, train_run
+from train.training.run_files import RunFiles
 from train.training.train_params import TrainInputs, TrainParams
 from train.training.train_view import write_train_recording
 

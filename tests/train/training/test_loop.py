@@ -1,7 +1,8 @@
 """The training loop's parts (:mod:`train.training.loop`) against hand numbers: the step
 size's schedule, the optimizer and the weights' average, each epoch's seeded draws, the stall
 warning, the options' guard, early stopping and the best epoch, what a run's checkpoints
-record of it, the validation metrics, and the per-epoch files.
+record of it, the validation metrics, and what a run's checkpoint holds. When the files are
+written: ``test_run_files.py``.
 
 Whole runs (learning, resuming, a resumed run of other options refused, patience, ema) are
 ``tests/train/training/test_train_stage.py``'s; runs that cannot learn are
@@ -10,7 +11,6 @@ Whole runs (learning, resuming, a resumed run of other options refused, patience
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import asdict
 from pathlib import Path
@@ -27,11 +27,8 @@ from train.data import StateTensors
 from train.model.config import CGNNConfig
 from train.model.normalise import Envelope, Normaliser
 from train.training.loop import (
-    LOG_FIELDS,
     STALL_PROBE,
     STALL_REL,
-    RunFiles,
-    _checkpoint,
     _track_best,
     adam,
     check_options,
@@ -45,6 +42,7 @@ from train.training.loop import (
     stopped_early,
     update_average,
 )
+from train.training.run_files import RunFiles
 from train.training.train_params import TrainOptions
 
 # --- the step size ---------------------------------------------------------------------------
@@ -339,43 +337,6 @@ def test_a_run_folder_names_best_last_and_log(tmp_path: Path) -> None:
     assert (files.best, files.last, files.log) == (tmp_path / "best.pt", tmp_path / "last.pt",
                                                    tmp_path / "log.csv")
     assert run_notes(files.last) == []                     # no last.pt yet: no notes
-
-
-def _fake_run(best_epoch: int) -> SimpleNamespace:
-    model = nn.Linear(2, 1)
-    return SimpleNamespace(kept=model, model=model, averaged=None, best_val=0.5,
-                           best_epoch=best_epoch,
-                           optimizer=torch.optim.Adam(model.parameters(), lr=1e-3),
-                           meta={"config": {"k": 5}, "notes": []},
-                           norm=Normaliser((0.0, 0.0, 0.0), 0.03, 0.002, 0.5, 0.08))
-
-
-def test_each_epoch_writes_last_and_best_only_when_it_is_the_best(tmp_path: Path) -> None:
-    """Epoch 0 (the best): best.pt and last.pt, the log's header and row; epoch 1 (not
-    better): last.pt alone, a row appended; a run started over at epoch 0 starts the log
-    afresh."""
-    files = RunFiles.in_folder(tmp_path)
-    saved: list[tuple[str, int]] = []
-
-    def save(path: Path, state: dict) -> None:
-        saved.append((path.name, state["epoch"]))
-        path.write_bytes(b"x")
-
-    def row(epoch: int) -> dict:
-        return {"epoch": epoch, "train_loss": 1.0 / (epoch + 1), "val_loss": 0.5,
-                "val_ld_mm": 0.1, "val_force_abs_n": 0.2, "seconds": 1.0,
-                "samples_per_s": 10.0, "extra": "not logged"}
-
-    _checkpoint(_fake_run(0), files, save, 0, row(0))
-    _checkpoint(_fake_run(0), files, save, 1, row(1))
-    assert saved == [("best.pt", 0), ("last.pt", 0), ("last.pt", 1)]
-    with open(files.log, newline="") as f:
-        rows = list(csv.DictReader(f))
-    assert [int(r["epoch"]) for r in rows] == [0, 1] and tuple(rows[0]) == LOG_FIELDS
-    assert float(rows[1]["train_loss"]) == 0.5
-    _checkpoint(_fake_run(0), files, save, 0, row(0))
-    with open(files.log, newline="") as f:
-        assert [int(r["epoch"]) for r in csv.DictReader(f)] == [0]
 
 
 def test_the_device_is_resolved_or_refused() -> None:

@@ -276,6 +276,7 @@ def test_patience_stops_early_and_a_resumed_run_stops_alike(dent, tmp_path) -> N
         epochs = [int(r["epoch"]) for r in csv.DictReader(f)]
     assert epochs == [0, 1, 2]
     assert load_checkpoint(tmp_path / "run" / "last.pt")["best_epoch"] == 0
+    assert load_checkpoint(tmp_path / "run" / "best.pt")["epoch"] == 0   # kept, not the last
     _train(dent, tmp_path / "run", **{**opts, "epochs": 20})
     assert load_checkpoint(tmp_path / "run" / "last.pt")["epoch"] == 2
 
