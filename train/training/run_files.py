@@ -6,9 +6,10 @@ runs (one training press) an epoch is a few tens of milliseconds and each checkp
 so writing two every epoch was a third of such a run. Between writes the log's rows wait in
 memory, and so does the best epoch's state (a copy: training goes on); they are written
 together, in the order the epochs wrote them before: best.pt, last.pt, the log. A run killed
-between writes resumes from the last one: it loses at most ``WRITE_EVERY`` seconds of
-training, and trains them again to the same weights (each epoch draws from a generator seeded
-by the epoch, :mod:`train.training.loop`).
+between writes resumes from the last one: it loses the epochs since (up to ``WRITE_EVERY``
+seconds and the epoch under way; before, the epoch under way), and trains them again to the
+same weights (each epoch draws from a generator seeded by the epoch,
+:mod:`train.training.loop`).
 """
 
 from __future__ import annotations

@@ -32,6 +32,7 @@ from train.training.loop import (
     _track_best,
     adam,
     check_options,
+    checkpoint_state,
     evaluate_pairs,
     learning_rate,
     resolve_device,
@@ -337,6 +338,25 @@ def test_a_run_folder_names_best_last_and_log(tmp_path: Path) -> None:
     assert (files.best, files.last, files.log) == (tmp_path / "best.pt", tmp_path / "last.pt",
                                                    tmp_path / "log.csv")
     assert run_notes(files.last) == []                     # no last.pt yet: no notes
+
+
+def test_a_checkpoint_holds_the_run_and_with_ema_the_stepped_weights() -> None:
+    """What a checkpoint holds after an epoch: the kept (averaged) weights as "model", the
+    stepped ones as "trained" only with ema, the optimizer, where the run stands, its config
+    and normaliser; the run's own tensors (the writer copies what it keeps)."""
+    stepped, averaged = nn.Linear(2, 1), nn.Linear(2, 1)
+    norm = Normaliser((0.0, 0.0, 0.0), 0.03, 0.002, 0.5, 0.08)
+    run = SimpleNamespace(kept=averaged, model=stepped, averaged=averaged, best_val=0.5,
+                          best_epoch=1, optimizer=adam(stepped.parameters(), 1e-3),
+                          meta={"config": {"k": 5}}, norm=norm)
+    state = checkpoint_state(run, 3)
+    assert (state["epoch"], state["best_epoch"], state["best_val"]) == (3, 1, 0.5)
+    assert state["model"]["weight"].data_ptr() == averaged.weight.data_ptr()
+    assert state["trained"]["weight"].data_ptr() == stepped.weight.data_ptr()
+    assert state["config"] == {"k": 5} and state["norm"] == norm.to_dict()
+    assert state["optimizer"]["param_groups"][0]["lr"] == 1e-3
+    run.kept, run.averaged = stepped, None
+    assert "trained" not in checkpoint_state(run, 3)
 
 
 def test_the_device_is_resolved_or_refused() -> None:

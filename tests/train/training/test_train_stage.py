@@ -59,6 +59,37 @@ def test_a_resumed_run_equals_an_uninterrupted_one(dent, tmp_path) -> None:
     assert load_checkpoint(tmp_path / "killed" / "last.pt")["epoch"] == 2
 
 
+def test_a_run_killed_between_writes_resumes_from_the_last(dent, tmp_path, monkeypatch) -> None:
+    """Files written after epoch 0 alone, the run killed in epoch 2 with epoch 1's row and
+    state still waiting: they are lost, and the run started again trains epochs 1 and 2 to
+    the uninterrupted run's weights, its log one row per epoch."""
+    from train.training import loop
+    from train.training.run_files import RunWriter
+
+    _train(dent, tmp_path / "whole", epochs=3)
+    monkeypatch.setattr(loop, "RunWriter", lambda files, save: RunWriter(files, save, 0))
+    _train(dent, tmp_path / "killed", epochs=1)
+    epoch = loop.train_epoch
+
+    def killed_in_epoch_2(run, net, opts, e, ctx, first):
+        if e == 2:
+            raise KeyboardInterrupt
+        return epoch(run, net, opts, e, ctx, first)
+
+    monkeypatch.setattr(loop, "RunWriter", lambda files, save: RunWriter(files, save, 1e9))
+    monkeypatch.setattr(loop, "train_epoch", killed_in_epoch_2)
+    with pytest.raises(KeyboardInterrupt):
+        _train(dent, tmp_path / "killed", epochs=3)
+    assert load_checkpoint(tmp_path / "killed" / "last.pt")["epoch"] == 0
+    monkeypatch.undo()
+    _train(dent, tmp_path / "killed", epochs=3)
+    a, b = _weights(tmp_path / "whole" / "last.pt"), _weights(tmp_path / "killed" / "last.pt")
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], atol=1e-6, rtol=1e-5)
+    with open(tmp_path / "killed" / "log.csv") as f:
+        assert [int(r["epoch"]) for r in csv.DictReader(f)] == [0, 1, 2]
+
+
 def _as_before_head_offsets(path: Path) -> None:
     """Rewrite a checkpoint as one saved before the network had head offsets: its config
     (and its meta's) with ``tip_offsets`` alone, as then."""
