@@ -36,8 +36,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from train.data import example_pairs, load_manifest, make_batch, role_examples  # noqa: E402
 from train.evaluation.coverage import coverage, coverage_doc  # noqa: E402
 from train.evaluation.evaluate import LoadedRun, load_run  # noqa: E402
+from train.intervals.levels import REPORTED  # noqa: E402
+from train.intervals.quantiles import conformal_quantile  # noqa: E402
 from train.model.config import CGNNConfig  # noqa: E402
-from train.model.conformal import REPORTED, conformal_quantile  # noqa: E402
 from train.model.si_units import distances, predict  # noqa: E402
 from train.training.calibrate import residuals  # noqa: E402
 from train.training.checkpoint import load_checkpoint  # noqa: E402
@@ -172,8 +173,8 @@ def latency(repeats: int = 3000) -> None:
 
     from train import Predictor
     from train.inference.si_model import SIModel
+    from train.intervals.table import IntervalTable
     from train.model.cgnn import CGNN
-    from train.model.conformal import IntervalTable
 
     rng = np.random.default_rng(0)
     table = IntervalTable.fit(rng.exponential(1e-4, 4000), rng.uniform(0, 0.05, (4000, 3)),

@@ -6,8 +6,8 @@ markers at 500 Hz) replayed at ``--speed`` times real time, prints:
 
 * frames: sent by the server, received by the client, skipped by number (dropped), and that
   the MCAP holds every one of them;
-* latency: per frame, from its arrival (the SDK's callback) to the end of its work (decode,
-  the journal, the tip's fit, the force tared and flagged, the presses, the view's log calls,
+* latency: per frame, from the client's hand-over of the decoded frame to the end of its work
+  (the journal, the tip's fit, the force tared and flagged, the presses, the view's log calls,
   and with ``--model RUN`` the model's answer while a press goes on), median and p99 in ms,
   for each session of ``--runs``: ``model`` (the recording and the model), ``view`` (the
   recording), ``plain`` (neither), each its own replay;
@@ -37,8 +37,8 @@ from data_schema.states import STATES
 from extract.extract_params import ExtractParams
 from extract.extract_stage import run_extract
 from ingest.mcap_io import read_raw_mcap
-from live.live_params import LiveParams
-from live.live_stage import MCAP_NAME, RRD_NAME, STATES_NAME, LiveSummary, run_live
+from live.session.live_params import LiveParams
+from live.session.live_stage import MCAP_NAME, RRD_NAME, STATES_NAME, LiveSummary, run_live
 from sim.twin.synth_params import SynthParams
 from sim.twin.synth_stage import run_synth
 from sync.sync_params import SyncParams

@@ -43,10 +43,11 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from train.model import edgeconv  # noqa: E402
+from train.model import knn as knn_module  # noqa: E402
 from train.model.cgnn import CGNN, pool  # noqa: E402
 from train.model.config import CGNNConfig, Offsets  # noqa: E402
-from train.model.edgeconv import gather_rows, knn, tiebreak  # noqa: E402
+from train.model.edgeconv import gather_rows  # noqa: E402
+from train.model.knn import knn, tiebreak  # noqa: E402
 from train.training.loop import adam, update_average  # noqa: E402
 
 BATCH = 32
@@ -202,7 +203,7 @@ def always() -> bool:
 
 def no_branch() -> contextlib.AbstractContextManager:
     """The kNN as a traced graph runs it: k + 2 candidates on every row, no branch."""
-    return mock.patch.object(edgeconv, "fixed_width", always)
+    return mock.patch.object(knn_module, "fixed_width", always)
 
 
 def vmapped(nets: list[CGNN]) -> Step:
@@ -241,7 +242,7 @@ def compare(g: int, n: int, steps: int) -> None:
     print(f" G={g}, N={n}: largest |stacked - own network| "
           f"{largest_difference(nets, stacked, *batches(g, n, gen)):.2g}")
     ways = {"one after another": one_by_one(nets), "stacked (bmm)": as_one(stacked)}
-    if BATCH * n * n <= edgeconv.BLOCK:        # larger: the kNN's pieces write in place,
+    if BATCH * n * n <= knn_module.BLOCK:        # larger: the kNN's pieces write in place,
         ways["vmap"] = vmapped(nets)           # which vmap refuses
     data: list[tuple[torch.Tensor, torch.Tensor]] = []      # this round's batches
 

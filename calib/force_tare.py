@@ -156,7 +156,7 @@ def rest_baseline(
     """
     t = np.asarray(time_s, float)
     w = np.asarray(wrench, float)
-    rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 else 1.0
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 1.0     # holes aside
     min_len = max(round(min_s * rate), 1)
     near = _widen(np.linalg.norm(w[:, :3], axis=1) > coarse_n, 3 * guard_s * rate,
                   3 * guard_fraction)

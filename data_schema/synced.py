@@ -17,7 +17,13 @@ straight line between them was subtracted from the press's force and torque (bia
 weight).
 
 The ``presses`` group's attribute ``cut_off`` counts presses left out because the end of the
-mocap recording or of the force log cut them off (onset or release unknown).
+mocap recording or of the force log cut them off (onset or release unknown), and ``in_holes``
+those left out because a hole in a stream touched them (1.4). Root attribute ``holes`` (JSON,
+1.4) lists each hole: its ``stream`` (``mocap`` or ``force``) and file (``source``), the samples
+``lost`` and its ``length_s``, where it starts on the stream's own clock (``after_s``), the
+frames ``[first, last + 1)`` it reaches on the mocap clock (its lost frames, or the frames
+whose force was resampled from its edge; null when none) and the presses it cost
+(``presses_left_out``: each one's onset and release, s on the mocap clock).
 
 ``calibration/`` holds what sync measured, with its uncertainty: the cluster shape and tip
 offset (pivot calibration), the force bias and tare interval at the start of the log, the rest
@@ -30,15 +36,19 @@ to the data).
 
 Force bits: ``outside_log`` (the frame lies outside the force log), ``over_range`` (beyond
 the sensor's rated load on some axis, from the calibration), ``saturated`` (made of gauge
-voltages on the amplifier's rail: the force there is clipped, not measured). Extract leaves
-out every press with ``over_range`` or ``saturated`` between onset and release.
+voltages on the amplifier's rail: the force there is clipped, not measured), ``in_hole`` (1.4:
+in a hole of the force log, or resampled from its edge). Extract leaves out every press with
+``over_range`` or ``saturated`` between onset and release. Quality bit ``lost`` (1.4): the
+mocap never recorded the frame (a hole); sync leaves out the presses a hole touches, and a
+press's margins stop at a hole.
 
 Root attribute ``phantom`` (JSON, from session.toml's ``[phantom]`` table) says how extract
 builds the phantom frame: the footprint's size, its in-plane +x axis and anchor.
 
 Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``; 1.2 the
 ``saturated`` force bit (a 1.1 file simply never sets it); 1.3 any number of phantom markers
-and the ``phantom`` attribute (a 1.2 file has 25 markers and the paper's 100 mm square).
+and the ``phantom`` attribute (a 1.2 file has 25 markers and the paper's 100 mm square); 1.4
+the holes (``lost``, ``in_hole``, ``presses.in_holes``, ``holes``; absent from older files).
 """
 
 from pathlib import Path
@@ -50,8 +60,8 @@ from core.errors import BadInput
 from data_schema.hdf5 import Dataset, H5Schema, h5_reading, validate_h5
 from data_schema.phantom import MIN_MARKERS
 
-QUALITY_BITS = {"filled": 1, "missing": 2, "poor_fit": 4}
-FORCE_BITS = {"outside_log": 1, "over_range": 2, "saturated": 4}
+QUALITY_BITS = {"filled": 1, "missing": 2, "poor_fit": 4, "lost": 8}
+FORCE_BITS = {"outside_log": 1, "over_range": 2, "saturated": 4, "in_hole": 8}
 
 CLOCK_ATTRS = ("clock_method", "clock_offset_s", "clock_offset_sd_s", "clock_drift_ppm",
                "clock_drift_sd_ppm", "clock_rms_s", "clock_n")
@@ -65,7 +75,7 @@ TORQUE_NM = 100.0
 
 SYNCED = H5Schema(
     name="phantom.synced",
-    version="1.3",
+    version="1.4",
     root_attrs=("provenance", "source", "calibration", "quality_bits", "force_bits",
                 "units_length", "units_force", "units_time", "rate_hz"),
     doc=__doc__ or "",

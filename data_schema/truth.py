@@ -18,10 +18,25 @@ is the force the indenter exerts on the phantom.
 ``states`` are the true static states at every 0.5 N of each press's loading phase (step 0 is
 the untouched surface at contact), exactly as the phantom model solved them.
 
-Version 1.1: any number of phantom markers (a 1.0 file has 25).
+``phantom/size`` is the block; ``inclusions`` are spheres of a stiffer (or softer) silicone
+(their centres in the lab, and where they were asked: ``footprint``, on ``[0, L] x [0, W]``
+from the block's corner of smallest x and y, the corner the states' phantom frame puts at its
+origin, and ``depth``, the centre's below the rest surface), ``layers`` the top layer (from the
+rest surface down ``thickness``); each ``ratio`` is the silicone's stiffness over the block's.
+A block without them has none (I = 0, Y = 0).
+
+Version 1.1: any number of phantom markers (a 1.0 file has 25). Version 1.2: the block's size,
+its inclusions and layers (a 1.1 file has none of them: a uniform block of unrecorded size,
+which :func:`read_regions` reads as no inclusion and no layer).
 """
 
-from data_schema.hdf5 import Dataset, H5Schema
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from data_schema.hdf5 import Dataset, H5Schema, read_h5
 
 CLOCK_DOC = ("a true event at mocap time t_m (s) is stamped by the force logger at "
              "t_f = offset_s + (1 + drift_ppm * 1e-6) * t_m, t_f in the force file's time "
@@ -29,7 +44,7 @@ CLOCK_DOC = ("a true event at mocap time t_m (s) is stamped by the force logger 
 
 TRUTH = H5Schema(
     name="phantom.truth",
-    version="1.1",
+    version="1.2",
     root_attrs=("provenance", "seed", "rate_hz", "logger_rate_hz", "clock_convention",
                 "units_length", "units_force", "units_time", "noise_model"),
     doc=__doc__ or "",
@@ -73,6 +88,21 @@ TRUTH = H5Schema(
         Dataset("phantom/to_lab", "f8", (4, 4), "m",
                 doc="homogeneous transform phantom frame (bottom centre, z up) -> lab"),
         Dataset("phantom/rest_points", "f8", ("N", 3), "m", doc="markers untouched, lab"),
+        Dataset("phantom/size", "f8", (3,), "m", required=False,
+                doc="the block: L along its +x, W, thickness (1.2)"),
+        Dataset("inclusions/centre", "f8", ("I", 3), "m", required=False,
+                doc="sphere centres, lab (1.2)"),
+        Dataset("inclusions/footprint", "f8", ("I", 2), "m", required=False,
+                doc="centres on the footprint [0, L] x [0, W] (1.2)"),
+        Dataset("inclusions/depth", "f8", ("I",), "m", required=False,
+                doc="centres below the rest surface (1.2)"),
+        Dataset("inclusions/radius", "f8", ("I",), "m", required=False, doc="(1.2)"),
+        Dataset("inclusions/ratio", "f8", ("I",), "1", required=False,
+                doc="stiffness over the block's (1.2)"),
+        Dataset("layers/thickness", "f8", ("Y",), "m", required=False,
+                doc="from the rest surface down (1.2)"),
+        Dataset("layers/ratio", "f8", ("Y",), "1", required=False,
+                doc="stiffness over the block's (1.2)"),
         Dataset("locations/contact", "f8", ("C", 3), "m", doc="untouched contact points"),
         Dataset("locations/node", "i4", ("C", 2), "1", doc="top lattice node (i, j)"),
         Dataset("presses/location", "i4", ("P",), "1"),
@@ -98,3 +128,15 @@ TRUTH = H5Schema(
         Dataset("pivot/rotation", "f8", ("Q", 3, 3), "1", doc="body -> lab"),
     ),
 )
+
+# the inclusions' and layers' datasets, each with its shape when there are none
+REGIONS = {"inclusions/centre": (0, 3), "inclusions/footprint": (0, 2), "inclusions/depth": (0,),
+           "inclusions/radius": (0,), "inclusions/ratio": (0,), "layers/thickness": (0,),
+           "layers/ratio": (0,)}
+
+
+def read_regions(path: str | Path) -> dict[str, np.ndarray]:
+    """The inclusions and layers of a ``truth.h5`` (validated), by dataset path; a file from
+    before 1.2 (a uniform block) gives each with no rows."""
+    arrays, _ = read_h5(path, TRUTH, REGIONS)
+    return {p: arrays.get(p, np.zeros(shape)) for p, shape in REGIONS.items()}

@@ -45,6 +45,9 @@ class AnalogExport:
     values: np.ndarray             # (T, C) float64: (raw - offset) * scale * gen_scale
     point_rate_hz: float | None = None    # the same file's 3D frame rate (C3D)
     meta: dict[str, Any] = field(default_factory=dict)
+    numbers: np.ndarray | None = None     # (T,) each sample's number from the first, where
+    #                                       the file counts them (QTM's SAMPLE; a skip is a
+    #                                       hole of lost samples); None: consecutive
 
     @property
     def names(self) -> list[str]:
@@ -57,8 +60,10 @@ class AnalogExport:
         return int(self.values.shape[0])
 
     def time_ns(self) -> np.ndarray:
-        """Sample times (int64 ns), 0 at the first 3D frame, on the mocap's clock."""
-        return np.round(np.arange(self.samples) * (1e9 / self.rate_hz)).astype(np.int64)
+        """Sample times (int64 ns), 0 at the first 3D frame, on the mocap's clock (a hole of
+        lost samples stays a jump)."""
+        numbers = np.arange(self.samples) if self.numbers is None else self.numbers
+        return np.round(numbers * (1e9 / self.rate_hz)).astype(np.int64)
 
     def summary(self) -> dict[str, Any]:
         """What ``pipeline inspect`` lists: the rate, and each channel's name, units, scales."""

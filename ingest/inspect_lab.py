@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from core.errors import BadInput
+from core.holes import find_holes
 from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries
 from core.text import attr_text
 from core.units import TIME_UNITS, time_unit_in_name, unit_to_si
@@ -42,8 +43,20 @@ def duration_s(time_ns: np.ndarray) -> float | None:
 
 
 def _series(s: MarkerSeries | BodySeries | ForceSeries) -> dict[str, Any]:
-    """frames, rate and duration of any series."""
-    return {"frames": s.frames, "rate_hz": float(s.rate_hz), "duration_s": duration_s(s.time_ns)}
+    """frames, rate, duration and holes of any series."""
+    return {"frames": s.frames, "rate_hz": float(s.rate_hz), "duration_s": duration_s(s.time_ns),
+            "holes": holes(s.time_ns)}
+
+
+def holes(time_ns: np.ndarray) -> list[str]:
+    """The holes in a stream's clock, each in words (:mod:`core.holes`); a stream whose steps
+    are jitter says so instead (sync refuses it)."""
+    try:
+        timing = find_holes(time_ns, None)
+    except BadInput as e:
+        return [e.what]
+    return [f"{h.length_s:.3f} s lost ({h.lost} samples) after {h.start_ns * 1e-9:.3f} s"
+            for h in timing.holes]
 
 
 def _events(events: list[tuple[str, int]]) -> list[list[Any]]:
@@ -91,6 +104,7 @@ def inspect_qtm_analog(path: Path) -> dict[str, Any]:
     """A QTM analog TSV export: its channels."""
     a = read_qtm_analog(path)
     return {"frames": a.samples, "rate_hz": a.rate_hz, "duration_s": duration_s(a.time_ns()),
+            "holes": holes(a.time_ns()),
             "channels": a.names, "units": dict(zip(a.names, a.units, strict=True)),
             "analog": a.summary(), "details": _plain(a.meta)}
 

@@ -7,7 +7,8 @@ so scripts can rely on them (``pipeline inspect FILE --json``):
 ``rate_hz``, ``duration_s`` (frames x mean sample interval), ``markers``, ``bodies``,
 ``channels`` (force-log channels; an analog export's channel names), ``missing_samples``
 (marker or body samples with no position; None for a force log: one with a missing value is
-bad input), ``units`` (quantity -> unit as stored in the file), ``events`` ([label,
+bad input), ``holes`` (the stretches of samples a lab file's clock skips, each in words:
+:mod:`core.holes`), ``units`` (quantity -> unit as stored in the file), ``events`` ([label,
 seconds]), ``analog`` (the analog channels of a C3D or QTM analog TSV export: rate, samples
 per frame, GEN_SCALE, and per channel its number, name, label, description, units, scale
 and offset), ``schema``, ``schema_version``,
@@ -40,7 +41,7 @@ from ingest.qtm_mat import MAT_ERRORS
 
 _READ_ERRORS = (*MAT_ERRORS, ArithmeticError, LookupError, UnicodeError, RuntimeError)
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
-        "missing_samples", "units", "events", "analog", "schema", "schema_version",
+        "missing_samples", "holes", "units", "events", "analog", "schema", "schema_version",
         "provenance", "streams", "datasets", "entities", "calibration", "details")
 INSPECT: dict[str, Callable[[Path], dict[str, Any]]] = {
     "qtm_tsv_3d": inspect_qtm_3d, "qtm_tsv_6d": inspect_qtm_6d, "c3d": inspect_c3d,

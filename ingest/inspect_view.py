@@ -26,6 +26,8 @@ def format_summary(s: dict[str, Any]) -> str:
             lines.append(f"  {key + ':':12} {len(s[key])}: {', '.join(s[key])}")
     if s["missing_samples"] is not None:
         lines.append(f"  missing:     {s['missing_samples']} samples")
+    if s["holes"]:
+        lines.append(f"  holes:       {len(s['holes'])}: " + "; ".join(s["holes"]))
     if s["units"]:
         lines.append("  units:       " + ", ".join(f"{k} {v}" for k, v in s["units"].items()))
     if s["events"]:

@@ -1,5 +1,6 @@
 """QTM analog TSV exports (``<trial>_a.tsv``): one analog board's channels, in volts as QTM wrote
-them (gain 1), with no sample missing.
+them (gain 1), with no value missing. Where the export has its SAMPLE column, the samples keep
+their numbers: a capture with lost samples (a hole) stays a jump in time.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import BadInput
+from core.holes import counted_numbers
 from ingest.analog import AnalogExport, check_scales
 from ingest.qtm_block import parse_block, require_data
 from ingest.qtm_header import count, finite, rate_problem
@@ -48,13 +50,17 @@ def read_qtm_analog(path: str | Path) -> AnalogExport:
                        key_line(head, "CHANNEL_UNITS"))
     require_data(head)
     n_fields, time_col, cols = _layout_analog(head, names)
-    t, values = parse_block(head, n_fields, time_col, cols)
-    _check_samples(head, values, rate, t)
+    counted = time_col is not None                   # SAMPLE (column 0), then TIME
+    t, block = parse_block(head, n_fields, time_col, [0] * counted + cols)
+    values = block[:, counted:]
+    numbers = counted_numbers(block[:, 0], path) if counted else None
+    _check_samples(head, values, rate, t, numbers)
     return AnalogExport(source=str(path), format="qtm_tsv_analog", labels=names,
                         descriptions=[""] * n, units=units, scales=gains, offsets=np.zeros(n),
                         gen_scale=1.0, rate_hz=rate, values=values,
                         meta={**export_meta(head, "qtm_tsv_analog", units[0] if units else "V"),
-                              "units_stated": "CHANNEL_UNITS" in head.keys})
+                              "units_stated": "CHANNEL_UNITS" in head.keys},
+                        numbers=numbers)
 
 
 def _analog_header_problem(head: QtmHead, names: list[str]) -> tuple[str, str] | None:
@@ -121,10 +127,10 @@ def _layout_analog(head: QtmHead, names: list[str]) -> tuple[int, int | None, li
     return n_fields, time_col, list(range(k, k + len(names)))
 
 
-def _check_samples(head: QtmHead, values: np.ndarray, rate: float,
-                   t: np.ndarray | None) -> None:
+def _check_samples(head: QtmHead, values: np.ndarray, rate: float, t: np.ndarray | None,
+                   numbers: np.ndarray | None) -> None:
     """NO_OF_SAMPLES / CHANNEL_SAMPLE_COUNTS against the rows; the TIME column against the
-    rate; no channel may miss a sample (force with holes is refused, as from a force log)."""
+    rate over the samples' numbers; no channel may miss a value in a row."""
     n = len(values)
     counts = [count(v) for v in head.keys.get("CHANNEL_SAMPLE_COUNTS", [])]
     said = head.scalar("NO_OF_SAMPLES")
@@ -138,7 +144,8 @@ def _check_samples(head: QtmHead, values: np.ndarray, rate: float,
         row, col = bad[0]
         raise head.bad(f"analog channel {col + 1} has no value", head.first_line + int(row))
     if t is not None:
-        off = rate_problem(rate, n, float(t[-1] - t[0]))
+        counted = n if numbers is None else int(numbers[-1]) + 1
+        off = rate_problem(rate, counted, float(t[-1] - t[0]))
         if off is not None:
             raise head.bad(off.replace("FREQUENCY", "the analog rate").replace(
                 "Time column", "TIME column").replace("frames", "samples"), head.first_line)

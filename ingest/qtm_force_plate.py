@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import BadInput
+from core.holes import counted_numbers, grid_numbers
 from ingest.csv_dialect import read_text_table, sniff_dialect
 from ingest.log_table import LogTable
 
@@ -26,13 +27,21 @@ COLUMNS = ("Force_X", "Force_Y", "Force_Z", "Moment_X", "Moment_Y", "Moment_Z",
 UNITS = dict(zip(COLUMNS, ("N",) * 3 + ("N*m",) * 3 + ("mm",) * 3, strict=True))
 WRENCH = list(COLUMNS[:6])
 CORNERS = ("POSX_POSY", "NEGX_POSY", "NEGX_NEGY", "POSX_NEGY")   # QTM's corners 1 to 4
+TIME_PRINT_S = 5e-6    # QTM writes a plate's TIME with 5 decimals
 
 
-def _exact_time(path: str | Path, time: np.ndarray, rate: float) -> np.ndarray:
-    """TIME as QTM writes it (5 decimals: 1200 Hz is not exact) recomputed from FREQUENCY,
-    once it agrees with it to half a sample; else the header contradicts the data."""
-    exact = time[0] + np.arange(len(time)) / rate
-    off = float(np.abs(time - exact).max()) if len(time) else 0.0
+def _exact_time(path: str | Path, time: np.ndarray, rate: float,
+                sample: np.ndarray | None) -> np.ndarray:
+    """TIME as QTM writes it (5 decimals: 1200 Hz is not exact) recomputed from FREQUENCY and
+    the samples' numbers (SAMPLE, else where TIME puts them on FREQUENCY's grid): a hole of
+    lost samples skips numbers and stays a jump. TIME more than half a sample off its
+    number's time contradicts the header."""
+    if len(time) == 0:
+        return time
+    numbers = counted_numbers(sample, path) if sample is not None else \
+        grid_numbers(time, rate, path, "TIME", TIME_PRINT_S)
+    exact = time[0] + numbers / rate
+    off = float(np.abs(time - exact).max())
     if not off <= 0.5 / rate:
         raise BadInput(path, f"TIME departs from FREQUENCY {rate:g} Hz by up to "
                              f"{off * 1e3:.3f} ms: the header contradicts the data")
@@ -84,7 +93,10 @@ def read_force_plate(path: str | Path) -> LogTable:
         t.columns = {k.strip(): v for k, v in t.columns.items()}
         t.time = "TIME" if "TIME" in t.columns else None
         if t.time is not None and t.rate_hz:
-            t.columns["TIME"] = _exact_time(path, np.asarray(t.columns["TIME"], float), t.rate_hz)
+            sample = t.columns.get("SAMPLE")
+            t.columns["TIME"] = _exact_time(path, np.asarray(t.columns["TIME"], float),
+                                            t.rate_hz, None if sample is None else
+                                            np.asarray(sample, float))
     t.time_unit = "s"
     t.units = {k: u for k, u in UNITS.items() if k in t.columns}
     t.details.update(plate=d.metadata.get("FORCE_PLATE_NAME"),

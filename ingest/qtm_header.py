@@ -26,7 +26,7 @@ _LEADING_COLUMNS = ("Frame", "Time")
 # frames and prints the time with 3 decimals, hence the extra millisecond)
 _EVENT_FRAMES, _EVENT_PRINT_S = 2.0, 1e-3
 # the Time column may run this much off FREQUENCY (relative), plus 1 ms for printed rounding
-_RATE_TOLERANCE, _TIME_PRINT_S = 0.01, 1e-3
+_RATE_TOLERANCE, TIME_PRINT_S = 0.01, 1e-3
 
 Problem = tuple[str, str]
 
@@ -164,7 +164,7 @@ def rate_problem(rate: float, frames: int, duration_s: float) -> str | None:
     if frames < 2:
         return None
     expected = (frames - 1) / rate
-    if abs(duration_s - expected) > _RATE_TOLERANCE * expected + _TIME_PRINT_S:
+    if abs(duration_s - expected) > _RATE_TOLERANCE * expected + TIME_PRINT_S:
         return (f"FREQUENCY says {rate:g} Hz but the Time column runs at "
                 f"{(frames - 1) / duration_s:.4g} Hz ({frames} frames in {duration_s:g} s)")
     return None

@@ -2,15 +2,18 @@
 
 A frame's time comes from the Time column when there is one (it must be present, increasing,
 and agree with ``FREQUENCY``), else from its index at ``FREQUENCY``; every EVENT's frame and
-time must agree at the rate the data confirmed.
+time must agree at the rate the data confirmed. A capture with lost frames (a hole,
+:mod:`core.holes`) keeps its times as written: the rate is checked on the steps between the
+holes, and sync finds the holes again from the times.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from core.holes import find_holes
 from core.series import frame_times_ns, time_to_ns
-from ingest.qtm_header import event_problem, rate_problem
+from ingest.qtm_header import TIME_PRINT_S, event_problem, rate_problem
 from ingest.qtm_scan import QtmHead, key_line
 
 
@@ -34,9 +37,12 @@ def frame_times(head: QtmHead, t: np.ndarray | None, n: int) -> tuple[np.ndarray
         i = int(bad[0]) + 1
         raise head.bad(f"Time is not increasing ({t[i]:g} s after {t[i - 1]:g} s, frame {i})",
                        head.first_line + i)
+    timing = find_holes(ns, head.path, "frames", TIME_PRINT_S * 1e9,
+                        where=lambda i: f"line {head.first_line + i}")
     if freq is None:
-        return ns, 1e9 / float(np.median(steps)) if steps.size else float("nan")
-    off = rate_problem(freq, n, (ns[-1] - ns[0]) / 1e9)
+        return ns, 1e9 / timing.period_ns if steps.size else float("nan")
+    recorded = sum(float(ns[b - 1] - ns[a]) for a, b in timing.stretches(n))
+    off = rate_problem(freq, n - len(timing.holes), recorded / 1e9)
     if off is not None:
         raise head.bad(off, key_line(head, "FREQUENCY"))
     return ns, freq

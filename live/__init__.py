@@ -1,2 +1,3 @@
-"""Live sessions: QTM's real-time stream recorded and watched as it arrives (``pipeline
-live``), and a replay server that speaks QTM's real-time protocol (``pipeline replay``)."""
+"""Live sessions over QTM's real-time protocol, by job: ``protocol/`` (the wire format, the
+commands, the parameters document, the client), ``session/`` (``pipeline live``) and
+``replay/`` (``pipeline replay``)."""

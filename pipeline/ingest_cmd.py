@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
+import numpy as np
 
+from core.text import count
 from ingest.ingest_params import IngestParams
 from pipeline.options import resolve_rrd, rrd_option
 
@@ -37,5 +39,15 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
                    rrd_path)
     m, f = s.markers, s.force
     click.echo(f"{out}: {m.frames} mocap frames ({len(m.labels)} markers, {m.rate_hz:g} Hz, "
-               f"{m.missing_samples()} missing samples), {f.frames} force samples "
-               f"({f.kind}, {f.rate_hz:g} Hz)" + (f"; recording {rrd_path}" if rrd_path else ""))
+               f"{m.missing_samples()} missing samples{_holes(m.time_ns)}), {f.frames} force "
+               f"samples ({f.kind}, {f.rate_hz:g} Hz{_holes(f.time_ns)})"
+               + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _holes(time_ns: np.ndarray) -> str:
+    """", 1 hole (0.400 s)" for a stream with holes (sync names each and leaves out the
+    presses they touch)."""
+    from ingest.inspect_lab import holes
+
+    found = holes(time_ns)
+    return f", {count(len(found), 'hole')} ({'; '.join(found)})" if found else ""

@@ -1,4 +1,4 @@
-"""``pipeline live``: the click layer over :func:`live.live_stage.run_live`."""
+"""``pipeline live``: the click layer over :func:`live.session.live_stage.run_live`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ from pathlib import Path
 import click
 import numpy as np
 
-from live.live_params import LiveParams, parse_address
+from core.text import count
+from live.protocol.address import parse_address
+from live.session.live_params import MAX_RECONNECT_S, MAX_TIMEOUT_S, LiveParams
 from pipeline.options import Parsed, finite_float
 
 D = LiveParams
@@ -16,15 +18,17 @@ D = LiveParams
 @click.command()
 @click.argument("session_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--qtm", "address", type=Parsed("HOST[:PORT]", parse_address),
-              default=f"{D.host}:{D.port}", show_default=True,
-              help="QTM's real-time server (little-endian port; QTM's default 22223).")
+              default=(D.host, D.port),
+              help="QTM's real-time server (its little-endian port; 22223 unless said) "
+                   f"[default: {D.host}:{D.port}].")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="A new folder: session.mcap (the session as `pipeline ingest` writes it), "
                    "session.rrd (the live recording) and states.h5 (the states taken live).")
 @click.option("--duration", "duration_s", type=finite_float(0, min_open=True, unit="s"),
               default=None, help="Stop after this many seconds [default: until QTM stops, "
                                  "Ctrl-C, or the connection ends].")
-@click.option("--timeout", "timeout_s", type=finite_float(0, 600, min_open=True, unit="s"),
+@click.option("--timeout", "timeout_s",
+              type=finite_float(0, MAX_TIMEOUT_S, min_open=True, unit="s"),
               default=D.timeout_s, show_default=True,
               help="Seconds to wait for QTM to answer, and for the next frame.")
 @click.option("--calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -42,7 +46,7 @@ D = LiveParams
 @click.option("--recover", is_flag=True,
               help="Connect to nothing: finish the journal a killed session left in --out "
                    "(session.mcap.part, every complete block) as --out/session.mcap.")
-@click.option("--reconnect", "reconnect_s", type=finite_float(0, 3600, unit="s"),
+@click.option("--reconnect", "reconnect_s", type=finite_float(0, MAX_RECONNECT_S, unit="s"),
               default=D.reconnect_s, show_default=True,
               help="After a lost connection, keep trying to reconnect this long and go on "
                    "into the same session.mcap (frames the server sends again are recorded "
@@ -69,7 +73,7 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
     they are written at the end to --out/states.h5 (what `pipeline sync` and `pipeline extract`
     give on session.mcap).
     """
-    from live.live_stage import MCAP_NAME, RRD_NAME, run_live
+    from live.session.live_stage import MCAP_NAME, RRD_NAME, run_live
 
     host, port = address
     params = LiveParams(host=host, port=port, duration_s=duration_s, timeout_s=timeout_s,
@@ -84,6 +88,5 @@ def live(session_dir: Path, address: tuple[str, int], out: Path, duration_s: flo
                f"number{resent}), {s.counts.samples} force samples from {s.source} in "
                f"{s.seconds:.1f} s; ended: {s.ended}; {s.presses} presses at "
                f"{len(s.locations)} locations{timing}" + (f"; {s.states}" if s.states else "")
-               + (f"; recording {s.rrd}" if s.rrd else ""))
-    if s.refused is not None:
-        raise s.refused
+               + (f"; the model refused {count(s.model_refused, 'press')}" if s.model_refused
+                  else "") + (f"; recording {s.rrd}" if s.rrd else ""))

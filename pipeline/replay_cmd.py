@@ -1,4 +1,4 @@
-"""``pipeline replay``: the click layer over :func:`live.replay_stage.run_replay`."""
+"""``pipeline replay``: the click layer over :func:`live.replay.replay_stage.run_replay`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from core.text import count
-from live.replay_params import MAX_SPEED, ReplayParams
+from live.protocol.address import MAX_PORT
+from live.replay.replay_params import MAX_SPEED, ReplayParams
 from pipeline.options import bounded_int, finite_float
 
 D = ReplayParams              # the option defaults are its fields'
@@ -15,7 +16,7 @@ D = ReplayParams              # the option defaults are its fields'
 
 @click.command()
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--port", type=bounded_int(0, 65535), default=D.port, show_default=True,
+@click.option("--port", type=bounded_int(0, MAX_PORT), default=D.port, show_default=True,
               help="TCP port to serve on (QTM's little-endian port; 0: any free one, shown).")
 @click.option("--host", default=D.host, show_default=True,
               help="Address to listen on (0.0.0.0: every interface).")
@@ -42,7 +43,7 @@ def replay(session: Path, port: int, host: str, speed: float, max_clients: int) 
     its own time read as the mocap's, so the client sees one clock; samples outside the
     frames are left out and counted. Ctrl-C stops; one line then says what was served.
     """
-    from live.replay_stage import run_replay
+    from live.replay.replay_stage import run_replay
 
     params = ReplayParams(port=port, host=host, speed=speed, max_clients=max_clients)
     s = run_replay(session, None, params, None)

@@ -75,6 +75,9 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     locations = len({p.press.location for p in r.presses})
     cut = f" ({r.presses_cut_off} cut off by a recording's end, left out)" if \
         r.presses_cut_off else ""
+    if r.holes:
+        cut += (f" ({count(len(r.holes), 'hole')} in the streams; "
+                f"{count(r.presses_in_holes, 'press')} touching one left out)")
     click.echo(f"{out}: {len(r.presses)} presses{cut} at {locations} locations; clock ({c.method}) "
                f"offset {c.offset_s * 1e3:.3f} +- {c.offset_sd_s * 1e3:.3f} ms, drift "
                f"{c.drift_ppm:.2f} +- {c.drift_sd_ppm:.2f} ppm; tip pivot RMS "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -16,14 +17,25 @@ from pipeline.options import (
     seed_option,
 )
 from sim.twin.marker_layout import MIN_PITCH_M, PITCH_SPACINGS, parse_layout, parse_size
+from sim.twin.material_regions import (
+    INCLUSION_FORM,
+    LAYER_FORM,
+    RADIUS_RANGE_M,
+    RATIO_RANGE,
+    parse_inclusion,
+    parse_layer,
+)
+from sim.twin.phantom import PhantomSpec
 from sim.twin.synth_params import SynthParams
 from sim.twin.twin_scene import (
     FORCE_FILES,
     MAX_DRIFT_PPM,
+    MAX_GRID_PLACES,
     MAX_OFFSET_S,
     PIVOT_SECONDS,
     PRESS_SECONDS,
     RATE_HZ,
+    parse_locations,
 )
 
 D = SynthParams             # the option defaults are its fields'
@@ -36,12 +48,35 @@ MARKER_PITCH_MM = finite_float(MIN_PITCH_M * 1e3, unit="mm",
                                    f"{MIN_PITCH_M / PITCH_SPACINGS * 1e3:g} mm")
 SIZE = Parsed("LxW", parse_size, keep_text=True)
 MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
+THICKNESS_MM = PhantomSpec.size[2] * 1e3
+RANDOM_PLACES = bounded_int(1, 10)   # places drawn 15 mm apart: more rarely fit
+INCLUSION = Parsed(INCLUSION_FORM, parse_inclusion, keep_text=True)
+LAYER = Parsed(LAYER_FORM, parse_layer, keep_text=True)
+
+
+class Locations(click.ParamType):
+    """``--locations N`` (places drawn at random, as an int) or ``RxC`` (a grid, as its
+    text), each refused in one line as it is parsed."""
+
+    name = "N|RxC"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> int | str:
+        """``value`` as N or the grid's text, or BadInput naming the option."""
+        if isinstance(value, int) or str(value).strip().isdigit():
+            return RANDOM_PLACES.convert(value, param, ctx)
+        parse_locations(str(value))
+        return str(value).strip()
 
 
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--locations", type=bounded_int(1, 10), default=D.locations, show_default=True,
-              help="Indentation locations on the phantom.")
+@click.option("--locations", type=Locations(), default=D.locations, show_default=True,
+              help="Indentation places on the phantom: N (1 to 10) drawn at random, at least "
+                   f"15 mm apart, or RxC (at most {MAX_GRID_PLACES} places): R rows of C "
+                   "places (rows along +x, stacked along +y) spread evenly over the nodes a "
+                   "press may target (two lattice spacings clear of every marker, 20 mm inside "
+                   "the edges: 4x4 at most with the default markers), numbered row-major.")
 @click.option("--repeats", type=bounded_int(1, 50), default=D.repeats, show_default=True,
               help="Presses per location (in rounds over the locations).")
 @click.option("--press-seconds", type=finite_float(*PRESS_SECONDS, unit="s"),
@@ -85,6 +120,20 @@ MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
               help="Distance between neighbouring grid markers in mm (at least 10).")
 @click.option("--size", type=SIZE, default=D.size, show_default=True,
               help="The block's footprint LxW in mm (L along +x; 40 to 300 each; 32 mm thick).")
+@click.option("--inclusion", "inclusions", type=INCLUSION, multiple=True,
+              help="A sphere of another silicone, X,Y,DEPTH,RADIUS,RATIO (repeat for more; "
+                   "they may not overlap): its centre at X,Y mm on the footprint (from the "
+                   "block's corner at P00's side: 0..L along +x, 0..W along +y) and DEPTH mm "
+                   "below the rest surface (the depth of its centre: 0..{:g}), RADIUS mm ({:g} "
+                   "to {:g}; the block's faces cut a sphere that reaches past them), RATIO its "
+                   "stiffness over the block's ({:g} to {:g}). E.g. 50,50,10,12,3.".format(
+                       THICKNESS_MM, RADIUS_RANGE_M[0] * 1e3, RADIUS_RANGE_M[1] * 1e3,
+                       *RATIO_RANGE))
+@click.option("--layer", type=LAYER, default=D.layer,
+              help="A top layer of another silicone, THICKNESS,RATIO: from the rest surface "
+                   "down THICKNESS mm (less than the block's {:g}), RATIO its stiffness over "
+                   "the block's ({:g} to {:g}; an inclusion in it keeps its own). E.g. 3,2 (a "
+                   "stiff skin).".format(THICKNESS_MM, *RATIO_RANGE))
 @click.option("--mocap-rate", "rate_hz", type=MOCAP_RATE, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
                    "analog or plate needs a rate that divides 1000).")
@@ -92,11 +141,11 @@ MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
               help="Press shown in the rerun recording.")
 @seed_option
 @rrd_option
-def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | None,
+def synth(out_dir: Path, locations: int | str, repeats: int, press_seconds: float | None,
           pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,
           force_via: str, force_file: str | None, markers: str, marker_pitch_mm: float,
-          size: str, rate_hz: float, view_press: int, seed: int, rrd: Path | None,
-          no_rrd: bool) -> None:
+          size: str, inclusions: tuple[str, ...], layer: str | None, rate_hz: float,
+          view_press: int, seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
     Reads nothing. Writes OUT_DIR: session.toml (with the [phantom] table: the footprint, and how
@@ -110,11 +159,12 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
     indentation_f_1.tsv (QTM force-plate export: force N, moment N m, centre of pressure mm);
     FT<serial>.cal (ATI calibration, SI-12-0.12; none with a plate); truth.h5 (noise-free
     markers and tip on the mocap clock, true force, clock offset and drift, tip offset, static
-    states every 0.5 N); and a rerun recording of one press beside its truth (--rrd, default
-    OUT_DIR/recording.rrd). OUT_DIR is new, empty, or an earlier synth session: then the files
-    of that session this run does not rewrite (another FT<serial>.cal, a recording.rrd) are
-    removed, and files the twin does not write are left alone. The same seed gives the same
-    bytes of data. `pipeline ingest OUT_DIR` reads the folder as it is.
+    states every 0.5 N, the inclusions and the layer); and a rerun recording of one press
+    beside its truth (--rrd, default OUT_DIR/recording.rrd). OUT_DIR is new, empty, or an
+    earlier synth session: then the files of that session this run does not rewrite (another
+    FT<serial>.cal, a recording.rrd) are removed, and files the twin does not write are left
+    alone. The same seed gives the same bytes of data. `pipeline ingest OUT_DIR` reads the
+    folder as it is.
     """
     from sim.twin.synth_stage import run_synth
 
@@ -124,9 +174,14 @@ def synth(out_dir: Path, locations: int, repeats: int, press_seconds: float | No
         seed=seed, locations=locations, repeats=repeats, press_seconds=press_seconds,
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
         force_via=force_via, force_file=force_file, rate_hz=rate_hz, markers=markers,
-        marker_pitch_mm=marker_pitch_mm, size=size, view_press=view_press)
+        marker_pitch_mm=marker_pitch_mm, size=size, inclusions=inclusions, layer=layer,
+        view_press=view_press)
     folder = run_synth(None, out_dir, params, rrd_path)
-    click.echo(f"{folder}: {locations * repeats} presses at {locations} locations, {markers} "
-               f"markers on {size} mm at {rate_hz:g} Hz, seed {seed}, "
+    grid = "" if isinstance(locations, int) else f" (a {locations} grid)"
+    found, top = params.regions()
+    regions = "".join(f", inclusion {i.describe()}" for i in found) + (
+        f", layer {top.describe()}" if top else "")
+    click.echo(f"{folder}: {params.places * repeats} presses at {params.places} locations"
+               f"{grid}, {markers} markers on {size} mm{regions} at {rate_hz:g} Hz, seed {seed}, "
                f"in {time.perf_counter() - start:.1f} s"
                + (f"; recording {rrd_path}" if rrd_path else ""))

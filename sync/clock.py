@@ -108,7 +108,7 @@ def rising_edges(time_s: np.ndarray, signal: np.ndarray, threshold: float | None
                  ) -> np.ndarray:
     """Times (s) where ``signal`` rises through ``threshold`` (default: half-way between its
     lowest and highest values), linearly interpolated between the two samples around the
-    crossing."""
+    crossing; none is read between two samples a hole parts (a step of two periods or more)."""
     t = np.asarray(time_s, float)
     x = np.asarray(signal, float)
     ok = np.isfinite(x)
@@ -120,7 +120,9 @@ def rising_edges(time_s: np.ndarray, signal: np.ndarray, threshold: float | None
             return np.empty(0)
         threshold = 0.5 * (lo + hi)
     below = np.where(ok, x < threshold, True)
-    i = np.flatnonzero(below[:-1] & ~below[1:] & ok[:-1] & ok[1:])
+    step = np.diff(t)
+    adjacent = step < 1.9 * np.median(step)
+    i = np.flatnonzero(below[:-1] & ~below[1:] & ok[:-1] & ok[1:] & adjacent)
     frac = (threshold - x[i]) / (x[i + 1] - x[i])
     return t[i] + frac * (t[i + 1] - t[i])
 

@@ -1,8 +1,9 @@
 """A session's force log made ready to resample onto the mocap frames.
 
 The log is tared from its unloaded start and calibrated with the 6x6 matrix (gauge voltages),
-checked to have started unloaded and to be uniformly sampled, then re-tared from the rest level
-next to every press (bias creep, the tool's weight). Samples beyond the sensor's range are
+checked to have started unloaded and to be uniformly sampled between its holes (stretches of
+lost samples, :mod:`sync.holes`; jitter is bad input), then re-tared from the rest level next
+to every press (bias creep, the tool's weight). Samples beyond the sensor's range are
 flagged after resampling (:func:`over_range`), and so are the frames whose force was read
 from gauge voltages on the amplifier's rail (:func:`on_rail`, :func:`near_samples`): a
 clipped voltage is a wrong force that looks like a right one (a flat top a little below the
@@ -24,6 +25,7 @@ from calib.force_tare import (
     unloaded_start,
 )
 from core.errors import BadInput
+from core.holes import Timing, find_holes
 from core.series import AtiCalibration, RawSession
 from sync.sync_params import SyncParams
 
@@ -35,19 +37,39 @@ class ConditionedForce:
     tare: Tare
     noise: float                 # sd of the tared force components while unloaded (N)
     contact: float               # contact level: the larger of contact_n and 5 noise widths
-    time_s: np.ndarray           # (L,) logger clock, uniform
+    time_s: np.ndarray           # (L,) logger clock, uniform between the holes
     wrench: np.ndarray           # (L, 6) Fx..Tz, the re-tare subtracted
     rest: RestBaseline           # the re-tare (empty when switched off)
+    timing: Timing               # the log's period and holes
+
+    @property
+    def stretches(self) -> list[tuple[int, int]]:
+        """The uniform runs of samples between the holes, as [start, stop) pairs."""
+        return self.timing.stretches(len(self.time_s))
 
 
 def condition_force(raw: RawSession, p: SyncParams) -> ConditionedForce:
     """Tare, calibrate, check and re-tare the session's force log."""
     tare, wrench, noise = tare_and_calibrate(raw, p)
-    contact = max(p.contact_n, 5 * noise)
-    t_f = force_times(raw)
+    return retared(raw, p, tare, wrench, noise)
+
+
+def retared(raw: RawSession, p: SyncParams, tare: Tare, wrench: np.ndarray, noise: float
+            ) -> ConditionedForce:
+    """The tared, calibrated ``wrench`` (L, 6) of ``raw``'s force log re-tared from its rest
+    next to every press (unless ``p.retare`` is off), with the log's clock and holes; the
+    contact level is the larger of ``p.contact_n`` and 5 noise widths. Sync tares the log
+    from its start; ``pipeline live`` with the session's tare, stretch by stretch."""
+    contact = contact_level(p, noise)
+    t_f, timing = force_times(raw)
     rest = (rest_baseline(t_f, wrench, contact, max(contact, 0.5 * p.detect_n)) if p.retare
             else RestBaseline(np.empty(0), np.empty((0, wrench.shape[1]))))
-    return ConditionedForce(tare, noise, contact, t_f, wrench - rest.at(t_f), rest)
+    return ConditionedForce(tare, noise, contact, t_f, wrench - rest.at(t_f), rest, timing)
+
+
+def contact_level(p: SyncParams, noise: float) -> float:
+    """The force a contact must exceed (N): ``p.contact_n``, or 5 noise widths if higher."""
+    return max(p.contact_n, 5 * noise)
 
 
 def tare_and_calibrate(raw: RawSession, p: SyncParams) -> tuple[Tare, np.ndarray, float]:
@@ -68,7 +90,7 @@ def tare_and_calibrate(raw: RawSession, p: SyncParams) -> tuple[Tare, np.ndarray
     matrix = raw.calibration.matrix if f.kind == "gauge" else None
     wrench = apply_calibration(f.values, tare.bias, matrix)
     noise = noise_level(wrench, tare)
-    contact = max(p.contact_n, 5 * noise)
+    contact = contact_level(p, noise)
     rest = rest_after_first_press(np.linalg.norm(wrench[:, :3], axis=1), p.detect_n)
     if rest is not None and rest > contact:
         raise BadInput(f.source, f"force log did not start unloaded: after taring its start, "
@@ -98,16 +120,15 @@ def rest_after_first_press(magnitude: np.ndarray, detect_n: float) -> float | No
     return float(np.median(m[start:stop]))
 
 
-def force_times(raw: RawSession) -> np.ndarray:
-    """Logger times (s); the resampler needs a uniform grid, so jitter is bad input."""
-    t = raw.force.time_ns.astype(np.float64) * 1e-9
-    step = np.diff(t)
-    nominal = np.median(step)
-    jitter = np.abs(step - nominal).max() if len(step) else 0.0
-    if len(t) < 64 or jitter > 0.1 * nominal:
-        raise BadInput(raw.force.source, "force log is too short or not uniformly sampled "
-                                         f"(largest step deviation {jitter * 1e3:.3f} ms)")
-    return t
+def force_times(raw: RawSession) -> tuple[np.ndarray, Timing]:
+    """Logger times (s) and the log's holes; the resampler needs a uniform grid between the
+    holes, so jitter is bad input (:func:`core.holes.find_holes`), and so is a log too short
+    to filter."""
+    f = raw.force
+    if len(f.time_ns) < 64:
+        raise BadInput(f.source, f"force log is too short ({len(f.time_ns)} samples)")
+    return f.time_ns.astype(np.float64) * 1e-9, find_holes(f.time_ns, f.source,
+                                                           "force samples")
 
 
 def noise_level(wrench: np.ndarray, tare: Tare) -> float:

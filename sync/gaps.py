@@ -17,6 +17,7 @@ from core.runs import true_runs
 
 FILLED = np.uint8(1)   # quality bit: value interpolated across a short gap
 MISSING = np.uint8(2)  # quality bit: no value (gap too long, or at an end)
+LOST = np.uint8(8)     # quality bit: the frame was never recorded (a hole, :mod:`sync.holes`)
 
 
 def fill_gaps(

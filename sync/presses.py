@@ -40,12 +40,22 @@ def segment_presses(
 
     Runs above ``contact_n`` closer than ``merge_s`` are merged (noise flicker at the contact
     level); a press is a merged run that peaks above ``detect_n`` and lasts ``min_duration_s``.
-    A press that touches either end of the series or an unknown (NaN) sample was cut off by
-    the end of a recording: its onset or release is not known, so it is left out and only
-    counted (the second value).
+    A press that touches either end of the series or the unknown (NaN) samples before or after
+    the force was recorded was cut off by the end of a recording: its onset or release is not
+    known, so it is left out and only counted (the second value). Unknown samples between
+    known ones (a hole in the force log) are bridged by a straight line for finding the
+    presses only: a press across a hole stays one press (for the caller to leave out, as
+    :mod:`sync.holes` does), and a hole at rest makes none.
     """
     f = np.asarray(force_magnitude, float)
     known = np.isfinite(f)
+    inside = np.zeros(len(f), bool)
+    if known.any():
+        first, last = np.flatnonzero(known)[[0, -1]]
+        inside[first:last + 1] = True
+        f = np.where(known | ~inside, f, np.interp(np.arange(len(f)), np.flatnonzero(known),
+                                                   f[known]))
+        known = known | inside
     f = np.where(known, f, 0.0)
     spans: list[list[int]] = []
     for a, b in true_runs(f > contact_n):
@@ -111,21 +121,29 @@ class PressRecord:
     rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
 
 
-def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
-                ) -> list[PressRecord]:
-    """Each press with ``margin`` frames either side (never into a neighbouring press)."""
+def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int,
+                barrier: np.ndarray | None = None) -> list[PressRecord]:
+    """Each press with ``margin`` frames either side (never into a neighbouring press, nor
+    into a ``barrier`` frame: a hole's)."""
     out = []
     for k in range(len(presses)):
-        local, lo, hi = cut_span(presses, k, len(series["time_ns"]), margin)
+        local, lo, hi = cut_span(presses, k, len(series["time_ns"]), margin, barrier)
         out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
                                rest=np.zeros((2, 6))))
     return out
 
 
-def cut_span(presses: list[Press], k: int, frames: int, margin: int) -> tuple[Press, int, int]:
+def cut_span(presses: list[Press], k: int, frames: int, margin: int,
+             barrier: np.ndarray | None = None) -> tuple[Press, int, int]:
     """Press ``k`` of a series of ``frames`` frames cut out with ``margin`` frames either side,
-    never into a neighbouring press: the press on the cut's frames, and the cut [lo, hi)."""
+    never into a neighbouring press nor a ``barrier`` frame (a hole's, none inside the press):
+    the press on the cut's frames, and the cut [lo, hi)."""
     pr = presses[k]
     lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
     hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else frames)
+    if barrier is not None:
+        before = np.flatnonzero(barrier[lo:pr.onset])
+        after = np.flatnonzero(barrier[pr.release:hi])
+        lo = lo + int(before[-1]) + 1 if before.size else lo
+        hi = pr.release + int(after[0]) if after.size else hi
     return Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat), lo, hi

@@ -63,23 +63,51 @@ def _fit_end(x: np.ndarray, degree: int = 2) -> np.ndarray:
 
 
 def antialiased_interpolant(
-    t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float = 0.8
+    t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float = 0.8,
+    stretches: list[tuple[int, int]] | None = None,
 ) -> Callable[[np.ndarray], np.ndarray]:
     """A function of time (s) giving ``x`` (N, ...), sampled at uniform ``t_src`` (s), low-passed
-    for an output rate ``fs_out``; NaN outside the source's span. Build once, query often."""
+    for an output rate ``fs_out``; NaN outside the source's span. Build once, query often.
+
+    ``stretches`` ([start, stop) sample ranges, each uniform: the runs between the holes of a
+    log, :meth:`core.holes.Timing.stretches`) are filtered and interpolated each on its own,
+    and a query between two of them is NaN: nothing is interpolated across a hole. A stretch
+    shorter than the filter gives NaN too.
+    """
     t_src = np.asarray(t_src, float)
-    fs_in = (len(t_src) - 1) / (t_src[-1] - t_src[0])
-    y = lowpass_zero_phase(x, antialias_taps(fs_in, fs_out, passband))
-    spline = make_interp_spline(t_src, y, k=3)
-    lo, hi = t_src[0], t_src[-1]
+    parts = [_stretch_interpolant(t_src[a:b], x[a:b], fs_out, passband)
+             for a, b in (stretches or [(0, len(t_src))])]
+    parts = [part for part in parts if part is not None]
 
     def at(t_query: np.ndarray) -> np.ndarray:
         tq = np.asarray(t_query, float)
-        out = spline(tq)
-        out[(tq < lo) | (tq > hi)] = np.nan
+        out = np.full((len(tq), *np.shape(x)[1:]), np.nan)
+        for part in parts:
+            part(tq, out)
         return out
 
     return at
+
+
+def _stretch_interpolant(t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float
+                         ) -> Callable[[np.ndarray, np.ndarray], None] | None:
+    """One uniform stretch's filtered cubic interpolant, writing the queries inside its span
+    into ``out``; None for a stretch shorter than the filter's half length."""
+    if len(t_src) < 2:
+        return None
+    fs_in = (len(t_src) - 1) / (t_src[-1] - t_src[0])
+    taps = antialias_taps(fs_in, fs_out, passband)
+    if len(t_src) <= len(taps) // 2:
+        return None
+    spline = make_interp_spline(t_src, lowpass_zero_phase(x, taps), k=3)
+    lo, hi = t_src[0], t_src[-1]
+
+    def write(tq: np.ndarray, out: np.ndarray) -> None:
+        inside = (tq >= lo) & (tq <= hi)
+        if inside.any():
+            out[inside] = spline(tq[inside])
+
+    return write
 
 
 def resample_at(

@@ -27,6 +27,7 @@ one :class:`BadInput` line.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -36,6 +37,7 @@ from calib.force_tare import Tare
 from calib.pivot import PivotResult
 from calib.rest_plane import rest_surface
 from core.errors import BadInput
+from core.progress import warn
 from core.series import RawSession
 from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
@@ -49,8 +51,18 @@ from sync.force_conditioning import (
     output_rails,
     over_range,
 )
-from sync.gaps import fill_gaps
-from sync.presses import PressRecord, assign_locations, cut_presses, segment_presses
+from sync.gaps import LOST, MISSING, fill_gaps
+from sync.holes import (
+    HoleSpan,
+    SessionHoles,
+    hole_line,
+    hole_record,
+    hole_spans,
+    leave_out_touched,
+    session_holes,
+    touch_reach,
+)
+from sync.presses import Press, PressRecord, assign_locations, cut_presses, segment_presses
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
 from sync.surface import contact_points, tip_depth
@@ -78,15 +90,18 @@ class SyncResult:
     rate_hz: float
     calibration: dict[str, Any]
     presses_cut_off: int = 0         # presses left out: cut off by the end of a recording
+    presses_in_holes: int = 0        # presses left out: touching a hole in a stream
     rail_samples: int = 0            # force log samples with a gauge on the amplifier's rail
     phantom: dict = field(default_factory=dict)   # the phantom's layout (data_schema.phantom)
     session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
+    holes: list[dict[str, Any]] = field(default_factory=list)   # each hole, as JSON values
 
 
 def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResult:
     """Synchronise a raw session (see the module docstring for the steps)."""
     p = params or SyncParams()
     check_params(p)
+    raw, holes = session_holes(raw)
     mk = raw.markers
     rate = float(mk.rate_hz)
     t_m = mk.time_ns.astype(np.float64) * 1e-9
@@ -95,15 +110,13 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
 
     track = track_tip(raw, p)
     pose = track.pose
-    points, quality = fill_gaps(t_m, np.concatenate([phantom, track.tip[:, None]], axis=1),
-                                p.max_gap_s)
-    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
+    points, quality = session_points(t_m, phantom, track.tip, holes.lost, rate, p)
     quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
     surface_point, normal = rest_surface(phantom, cluster, track.tip, mk.source)
     depth = tip_depth(points[:, -1], surface_point, normal)
 
     cf = condition_force(raw, p)
-    force_at = antialiased_interpolant(cf.time_s, cf.wrench, rate, p.passband)
+    force_at = antialiased_interpolant(cf.time_s, cf.wrench, rate, p.passband, cf.stretches)
 
     def magnitude_at(t: np.ndarray) -> np.ndarray:
         return np.linalg.norm(force_at(t)[:, :3], axis=1)
@@ -111,29 +124,29 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     clock, clock_note = estimate_clock(raw, p, t_m, depth, cf.time_s, magnitude_at)
     check_overlap(raw, clock, t_m, cf.time_s)
 
-    sampled = force_at(clock.to_logger(t_m))
+    t_log = clock.to_logger(t_m)
+    on = frame_force(force_at, cf, raw, holes, t_log, p)
     rail = on_rail(raw)
-    force_q = force_bits(sampled, over_range(raw, sampled),
-                         near_samples(cf.time_s, rail, clock.to_logger(t_m),
-                                      _filter_reach_s(cf.time_s, rate, p.passband)))
-    force, torque = sampled[:, :3], sampled[:, 3:]
-    magnitude = np.linalg.norm(force, axis=1)
+    force_q = force_bits(on.sampled, over_range(raw, on.sampled),
+                         near_samples(cf.time_s, rail, t_log,
+                                      _filter_reach_s(cf.time_s, rate, p.passband)),
+                         on.in_force_hole)
+    force, torque = on.sampled[:, :3], on.sampled[:, 3:]
+    magnitude = on.magnitude
 
-    presses, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
+    found, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
+    loc_centres = place(found, contact_points(points[:, -1], found, surface_point, normal),
+                        p.location_radius_m)
+    presses = leave_out_touched(found, on.spans, touch_reach(rate, p))
+    for span in on.spans:
+        warn(hole_line(span, mk.time_ns, depth))
     if not presses:
-        whole = "" if not cut_off else (f"; {cut_off} cut off by the end of a recording "
-                                         "left out")
-        raise BadInput(raw.force.source, f"no complete press found (force never rises above "
-                                         f"{p.detect_n:g} N{whole})")
+        raise BadInput(raw.force.source, _no_press(p, cut_off, len(found)))
     check_cluster(raw, pose, presses)
-    centres = contact_points(points[:, -1], presses, surface_point, normal)
-    loc, rep, loc_centres = assign_locations(centres, p.location_radius_m)
-    for pr, lo, re in zip(presses, loc, rep, strict=True):
-        pr.location, pr.repeat = int(lo), int(re)
     series = {"time_ns": mk.time_ns, "points": points, "quality": quality, "force": force,
               "torque": torque, "force_magnitude": magnitude, "depth": depth,
               "force_quality": force_q}
-    records = cut_presses(presses, series, int(round(p.margin_s * rate)))
+    records = cut_presses(presses, series, int(round(p.margin_s * rate)), on.hole_frames)
     for rec in records:
         ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
         rec.rest = cf.rest.at(clock.to_logger(ends))
@@ -142,22 +155,89 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     session = {"time_ns": mk.time_ns, "tip": points[:, -1], "depth": depth,
                "force_magnitude": magnitude, "cluster": cluster,
                "force_magnitude_unaligned": magnitude_at(IDENTITY.to_logger(t_m)),
-               "quality": quality, "points": points, "force_quality": force_q}
+               "quality": quality, "points": points, "force_quality": force_q,
+               "hole": on.hole_frames}
     return SyncResult(
         name=raw.name, point_names=list(raw.phantom_markers) + [TIP], presses=records,
         clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,
         surface_point=surface_point, surface_normal=normal, location_centres=loc_centres,
         rate_hz=rate, calibration=calibration, presses_cut_off=cut_off, session=session,
         rail_samples=int(rail.sum()), phantom=PhantomLayout.from_json(raw.phantom).as_json(),
+        holes=[hole_record(span, mk.time_ns) for span in on.spans],
+        presses_in_holes=len(found) - len(presses),
     )
 
 
-def force_bits(sampled: np.ndarray, over: np.ndarray, saturated: np.ndarray) -> np.ndarray:
-    """Each frame's force quality bits (:data:`FORCE_BITS`): outside the log (NaN), beyond
-    the rated range, made of gauge samples on the amplifier's rail."""
-    q = np.where(np.isnan(sampled).any(axis=1), FORCE_BITS["outside_log"], 0)
+def session_points(t_m: np.ndarray, phantom: np.ndarray, tip: np.ndarray, lost: np.ndarray,
+                   rate: float, p: SyncParams) -> tuple[np.ndarray, np.ndarray]:
+    """The phantom markers and the tip (T, N + 1, 3) with short gaps filled, a hole's frames
+    left empty (flagged ``lost``), the tip low-passed; and their quality bits."""
+    points, quality = fill_gaps(t_m, np.concatenate([phantom, tip[:, None]], axis=1),
+                                p.max_gap_s)
+    points[lost] = np.nan
+    quality[lost] = MISSING | LOST
+    points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
+    return points, quality
+
+
+@dataclass
+class FrameForce:
+    """The force resampled on the mocap frames, and where the holes of both streams reach."""
+
+    sampled: np.ndarray          # (T, 6) Fx..Tz, sensor frame; NaN off the log and in its holes
+    spans: list[HoleSpan]        # every hole, with the frames it reaches
+    hole_frames: np.ndarray      # (T,) bool: a hole of either stream reaches the frame
+    in_force_hole: np.ndarray    # (T,) bool: a hole of the force log does
+
+    @property
+    def magnitude(self) -> np.ndarray:
+        """The force magnitude (T,), N."""
+        return np.linalg.norm(self.sampled[:, :3], axis=1)
+
+
+def frame_force(force_at: Callable[[np.ndarray], np.ndarray], cf: ConditionedForce,
+                raw: RawSession, holes: SessionHoles, t_log: np.ndarray, p: SyncParams
+                ) -> FrameForce:
+    """The conditioned force at the frames' logger times ``t_log`` (s), and the frames each
+    hole reaches: a mocap hole its lost frames, a force hole the frames resampled from it."""
+    spans = hole_spans(holes, raw, t_log, _filter_reach_s(cf.time_s, raw.markers.rate_hz,
+                                                          p.passband))
+    in_force_hole = np.zeros(len(t_log), bool)
+    for span in spans:
+        if span.stream == "force":
+            in_force_hole |= span.frames
+    return FrameForce(force_at(t_log), spans, holes.lost | in_force_hole, in_force_hole)
+
+
+def place(presses: list[Press], centres: np.ndarray, radius_m: float) -> np.ndarray:
+    """Each press's location and repeat from its contact point (:func:`assign_locations`),
+    set on the press; the locations' centres. Sync places every complete press, those a hole
+    touched too: the others keep the ids they would have without the hole."""
+    loc, rep, loc_centres = assign_locations(centres, radius_m)
+    for pr, lo, re in zip(presses, loc, rep, strict=True):
+        pr.location, pr.repeat = int(lo), int(re)
+    return loc_centres
+
+
+def _no_press(p: SyncParams, cut_off: int, in_holes: int) -> str:
+    """Why no press is left (``in_holes`` complete ones a hole touched), in words."""
+    why = [f"{cut_off} cut off by the end of a recording"] if cut_off else []
+    why += [f"{in_holes} touching a hole"] if in_holes else []
+    if not why:
+        return f"no complete press found (force never rises above {p.detect_n:g} N)"
+    return f"no complete press found ({' and '.join(why)} left out)"
+
+
+def force_bits(sampled: np.ndarray, over: np.ndarray, saturated: np.ndarray,
+               in_hole: np.ndarray | None = None) -> np.ndarray:
+    """Each frame's force quality bits (:data:`FORCE_BITS`): outside the log (NaN, and not in
+    a hole of it), beyond the rated range, made of gauge samples on the amplifier's rail, in
+    or within the resampler's reach of a hole of the log."""
+    hole = np.zeros(len(sampled), bool) if in_hole is None else np.asarray(in_hole, bool)
+    q = np.where(np.isnan(sampled).any(axis=1) & ~hole, FORCE_BITS["outside_log"], 0)
     q |= np.where(over, FORCE_BITS["over_range"], 0)
     q |= np.where(saturated, FORCE_BITS["saturated"], 0)
+    q |= np.where(hole, FORCE_BITS["in_hole"], 0)
     return q.astype(np.uint8)
 
 
@@ -172,7 +252,7 @@ def flagged_presses(presses: list[PressRecord], bit: str) -> tuple[int, int]:
 def _filter_reach_s(t_log_s: np.ndarray, rate_hz: float, passband: float) -> float:
     """Half the resampling filter's length (s): how far a log sample reaches into the
     resampled force."""
-    fs = (len(t_log_s) - 1) / (t_log_s[-1] - t_log_s[0])
+    fs = 1.0 / float(np.median(np.diff(t_log_s)))         # holes aside
     return (len(antialias_taps(fs, rate_hz, passband)) // 2 + 1) / fs
 
 

@@ -17,8 +17,11 @@ camera frames the phantom. Entities:
 * ``quality/filled``, ``quality/missing``: points filled or missing per frame;
   ``quality/saturated``, ``quality/over_range``: 1 where the force was read from a gauge on the
   amplifier's rail or lies beyond the sensor's rating (extract leaves those presses out);
-* ``presses``: a TextLog line at each contact onset (press, location, repeat, peak): clicking
-  one moves every view to that press.
+  ``quality/hole``: 1 on the frames a hole in either stream reaches (mocap frames never
+  recorded, or force resampled from a hole's edge: :mod:`sync.holes`);
+* ``presses``: a TextLog line at each contact onset (press, location, repeat, peak), and a
+  warning at each hole (its stream, length, and the presses it cost): clicking one moves
+  every view there.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ from core.recording import (
     send_series,
     time_column,
 )
+from core.text import count
 from data_schema.synced import FORCE_BITS
 from sync.gaps import FILLED, MISSING
 from sync.sync import SyncResult
@@ -53,7 +57,8 @@ SCATTER_MAX = 20000          # points per force-vs-depth cloud, at most
 COLORS = {"phantom": (60, 140, 230), "tip": (230, 30, 30), "cluster": (245, 140, 30),
           "filled": (255, 220, 0), "before": (150, 150, 150), "after": (40, 170, 80),
           "depth": (200, 120, 230), "path": (255, 160, 160, 90), "shaft": (200, 200, 200),
-          "missing": (150, 150, 150), "saturated": (230, 30, 30), "over_range": (140, 0, 140)}
+          "missing": (150, 150, 150), "saturated": (230, 30, 30), "over_range": (140, 0, 140),
+          "hole": (0, 200, 255)}
 FLAG_NAMES = {"saturated": "force on the amplifier's rail", "over_range": "force beyond rating"}
 RADIUS_M = 0.0015
 
@@ -73,7 +78,8 @@ def blueprint(centre: np.ndarray, size: float, moved_mm: float) -> rrb.Blueprint
                 plot("tip depth below the rest surface [mm]", "/depth", legend=False),
                 rrb.Spatial2DView(name="force over tip depth, before and after alignment",
                                   origin="/force_vs_depth"),
-                plot("per frame: points filled, missing; force on rail, over range", "/quality"),
+                plot("per frame: points filled, missing; force on rail, over range; hole",
+                     "/quality"),
                 row_shares=[3, 2, 4, 2],
             ),
             column_shares=[1, 1],
@@ -116,8 +122,11 @@ def log_sync(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: fl
         send_series(rec, f"quality/{bit}", TIMELINE, t,
                     ((s["force_quality"] & FORCE_BITS[bit]) > 0).astype(np.int64),
                     FLAG_NAMES[bit], COLORS[bit])
+    send_series(rec, "quality/hole", TIMELINE, t, s["hole"].astype(np.int64),
+                "a hole (frames lost, or force read from a hole's edge)", COLORS["hole"])
     _log_scene(rec, r, rest, scale)
     _presses(rec, r)
+    _holes(rec, r)
 
 
 def _rest(markers: np.ndarray) -> np.ndarray:
@@ -224,3 +233,16 @@ def _presses(rec: rr.RecordingStream, r: SyncResult) -> None:
             f"{p.force_magnitude[p.press.peak]:.2f} N" for k, p in enumerate(r.presses)]
     rec.send_columns("presses", indexes=[time_column(TIMELINE, times)],
                      columns=rr.TextLog.columns(text=text))
+
+
+def _holes(rec: rr.RecordingStream, r: SyncResult) -> None:
+    """A warning at the first frame each hole reaches: what was lost and what it cost."""
+    holes = [h for h in r.holes if h["frames"] is not None]
+    if not holes:
+        return
+    times = np.array([r.session["time_ns"][h["frames"][0]] for h in holes], np.int64)
+    what = {"mocap": "mocap frames", "force": "force samples"}
+    text = [f"hole: {h['length_s']:.3f} s of {what[h['stream']]} lost ({h['lost']} samples), "
+            f"{count(len(h['presses_left_out']), 'press')} left out" for h in holes]
+    rec.send_columns("presses", indexes=[time_column(TIMELINE, times)],
+                     columns=rr.TextLog.columns(text=text, level=["WARN"] * len(text)))

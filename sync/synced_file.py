@@ -39,6 +39,7 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
         "calibration/force_bias/units": ",".join(result.calibration["force"]["units"]),
         **{f"calibration/{k}": v for k, v in _calibration_attrs(result).items()},
         "presses/cut_off": result.presses_cut_off,
+        "presses/in_holes": result.presses_in_holes, "holes": result.holes,
     }
     for k, rec in enumerate(result.presses):
         group = f"presses/{k:03d}"

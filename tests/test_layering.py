@@ -36,11 +36,15 @@ from pipeline.cli import COMMANDS
 ROOT = Path(__file__).resolve().parents[1]
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
 LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "calib": 2, "sync": 2, "extract": 2, "split": 2,
-         "sim": 2, "sim.twin": 2, "sim.msm": 2, "train": 2, "live": 2, "pipeline": 3}
+         "sim": 2, "sim.twin": 2, "sim.msm": 2, "train": 2, "live": 2, "live.protocol": 2,
+         "live.session": 2, "live.replay": 2, "pipeline": 3}
 # narrower than their layer allows: train/ is used without the lab stages; the twin checks
-# sync and extract against its truth, so it must not share their code
+# sync and extract against its truth, so it must not share their code; live/'s protocol is the
+# ground of its two commands, and the replay uses nothing of the live session
 ONLY = {"train": {"core", "data_schema", "train"},
-        "sim.twin": {"core", "data_schema", "ingest", "sim", "sim.twin"}}
+        "sim.twin": {"core", "data_schema", "ingest", "sim", "sim.twin"},
+        "live.protocol": {"core", "data_schema", "ingest", "live.protocol"},
+        "live.replay": {"core", "data_schema", "ingest", "live.protocol", "live.replay"}}
 # Imports inside functions, allowed only here: the commands load their stage when run (so
 # `pipeline --help` stays fast), and `from train import Predictor` loads torch on demand.
 LAZY = ("pipeline", "train")
@@ -364,9 +368,12 @@ def test_the_checks_can_fail():
 # train/ by job: what a job may import of another (docs/ARCHITECTURE.md, "train/ by job"); the
 # modules at train/'s top (its data and the paper's settings) are the ground of every job
 TRAIN_JOBS = {"train.model": {"train.model"},
-              "train.training": {"train.model", "train.training"},
-              "train.evaluation": {"train.model", "train.training", "train.evaluation"},
-              "train.inference": {"train.model", "train.training", "train.inference"}}
+              "train.intervals": {"train.model", "train.intervals"},
+              "train.training": {"train.model", "train.intervals", "train.training"},
+              "train.evaluation": {"train.model", "train.intervals", "train.training",
+                                   "train.evaluation"},
+              "train.inference": {"train.model", "train.intervals", "train.training",
+                                  "train.inference"}}
 
 
 def _job(module: str) -> str | None:

@@ -19,6 +19,12 @@ centre press's depth stays within 2.5 % of the 5 mm lattice's from 1 to 7.5 N. T
 energy is convex, so every load has exactly one equilibrium and the depth along the load rises
 monotonically with the force (its derivative is ``f^T K^-1 f > 0``).
 
+Parts of the block may be another silicone (:mod:`sim.twin.material_regions`: inclusions, a
+top layer): the springs through them are scaled, as springs in series along each
+(``Phantom.spring_scale``); without any, every spring is the block's. Nothing in the
+linearised lattice stops a press at the table: a press whose tip would sink below it (softer
+silicone under a strong press) is refused.
+
 A press is a dead load ``F * direction`` shared by a contact node (60 %) and its four neighbours
 on the top surface, the rounded tip. Equilibria are found by nonlinear conjugate gradients
 preconditioned with one sparse factorisation of the rest stiffness, shared by every solve.
@@ -34,7 +40,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import PchipInterpolator
 
+from core.errors import BadInput
 from sim.twin.marker_layout import SPACING_M, MarkerLayout, lattice_axes, marker_nodes
+from sim.twin.material_regions import Inclusion, Layer, check_regions, spring_scale
 
 # the 13 lattice directions of a node: 3 edges, 6 face diagonals, 4 body diagonals
 _DIRECTIONS = ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
@@ -57,6 +65,11 @@ class PhantomSpec:
     tip_share: float = 0.6           # share of the load on the contact node (rest: neighbours)
     tol: float = 1e-4                # N: largest force component left unbalanced on any node
     #                                  (x, y or z; positions ~1 um)
+    inclusions: tuple[Inclusion, ...] = ()   # spheres of another silicone
+    layer: Layer | None = None       # the top of the block, another silicone
+
+    def __post_init__(self) -> None:
+        check_regions(self.inclusions, self.layer, self.size)
 
 
 @dataclass
@@ -107,7 +120,11 @@ class Phantom:
         self._A = sp.csr_matrix((coef.ravel(), (rows, ends.ravel())),
                                 shape=(len(length), self.n_dof))
         self._AT = self._A.T.tocsr()
-        self._energy = self.kappa * length**2     # kappa * L^2 per spring
+        spec = self.spec
+        self.spring_scale = spring_scale(self.rest[self.springs[:, 0]],
+                                         self.rest[self.springs[:, 1]], spec.inclusions,
+                                         spec.layer, spec.size, lz / (spec.layers - 1))
+        self._energy = self.kappa * length**2 * self.spring_scale   # kappa * L^2 per spring
         self._rest_k = (self._AT @ sp.diags(self._energy) @ self._A).tocsc()
         self.solves = 0
         self.iterations = 0
@@ -173,8 +190,9 @@ class Phantom:
             guess = sum(w * u for w, u in zip(weights, states[known], strict=True))
             states.append(self.solve(levels[k] * unit, guess))
         obs = [self.observe(u, ij) for u in states]
-        return LoadPath(forces=levels, direction=d,
-                        tip=np.array([o[0] for o in obs]),
+        tips = np.array([o[0] for o in obs])
+        self._check_above_table(ij, levels, tips)
+        return LoadPath(forces=levels, direction=d, tip=tips,
                         markers=np.array([o[1] for o in obs]),
                         surface=np.array([o[2] for o in obs]))
 
@@ -223,6 +241,26 @@ class Phantom:
         if ij is not None:
             tip = sum(w * pos[node] for node, w in self._patch(ij))
         return tip, markers, surface
+
+    def _check_above_table(self, ij: tuple[int, int], levels: np.ndarray,
+                           tips: np.ndarray) -> None:
+        """Refuse a press whose tip sinks below the table (z < 0): far beyond what the
+        lattice's linearised kinematics can carry. The uniform block keeps the tip about 3 mm
+        above it at the twin's strongest presses; a region of softer silicone under it may not
+        (the contact node itself may dip a little below the table before the tip does)."""
+        below = np.flatnonzero(tips[:, 2] < 0.0)
+        if below.size == 0:
+            return
+        k = int(below[0])
+        spec = self.spec
+        at = (self.contact_point(ij)[:2] + np.array(spec.size[:2]) / 2) * 1e3
+        regions = [r.describe() for r in (*spec.inclusions, spec.layer)
+                   if r is not None and r.ratio < 1.0]
+        raise BadInput(None, f"a press of {levels[k]:.2f} N at ({at[0]:.0f}, {at[1]:.0f}) mm "
+                       f"sinks the tip {-tips[k, 2] * 1e3:.1f} mm below the table, through the "
+                       f"{spec.size[2] * 1e3:g} mm block: more than its lattice can carry"
+                       + (f"; its softer silicone ({'; '.join(regions)}) is too soft under "
+                          "the press: use a ratio nearer 1" if regions else ""))
 
     @cached_property
     def _rest_lu(self) -> spla.SuperLU:

@@ -37,16 +37,19 @@ def run_synth(inputs: None, out: str | Path, params: SynthParams | None = None,
     the folder. Reads nothing (``inputs`` is None).
 
     ``params.markers`` (``RxC`` or ``scattered:N``), ``marker_pitch_mm`` and ``size``
-    (``LxW`` mm) lay out the phantom (:mod:`sim.twin.marker_layout`); ``rrd`` also writes a
+    (``LxW`` mm) lay out the phantom (:mod:`sim.twin.marker_layout`), ``inclusions`` and
+    ``layer`` its other silicones (:mod:`sim.twin.material_regions`); ``rrd`` also writes a
     rerun recording of press ``params.view_press``.
     """
     s = params or SynthParams()
-    spec = phantom_spec(s.markers, s.marker_pitch_mm, s.size, s.seed)
+    inclusions, layer = s.regions()
+    spec = replace(phantom_spec(s.markers, s.marker_pitch_mm, s.size, s.seed),
+                   inclusions=inclusions, layer=layer)
     p = TwinParams(**s.session_fields(), phantom=spec)
     folder = _output_folder(out)
-    if rrd is not None and not 0 <= s.view_press < s.locations * s.repeats:
+    if rrd is not None and not 0 <= s.view_press < s.places * s.repeats:
         raise BadInput("--view-press",
-                       f"press {s.view_press} does not exist (0..{s.locations * s.repeats - 1})")
+                       f"press {s.view_press} does not exist (0..{s.places * s.repeats - 1})")
     twin = simulate_twin(p)
     write_twin(twin, folder, s, rrd)
     return folder

@@ -11,8 +11,14 @@ viridis, range in the view's name), ``truth/markers``, ``truth/cluster`` (Boxes3
 wireframe cube around each true marker), ``measured/markers``, ``measured/cluster`` (Points3D:
 orange balls inside the cubes, gaps left out), ``truth/tip`` (Points3D, red) and
 ``truth/shaft`` (LineStrips3D from the tip to the indenter's markers), ``truth/states``
-(static Points3D: the tip at every 0.5 N state, magenta); ``force/truth`` (thick green line),
-``force/measured`` (thin orange line) and ``force/states`` (magenta dots), N.
+(static Points3D: the tip at every 0.5 N state, magenta); ``phantom/places`` (static Points3D,
+grey: every place the session presses, at rest); where the block has other silicones,
+``phantom/inclusions`` (static Ellipsoids3D: each sphere, translucent, red when stiffer than the
+block and blue when softer, labelled with its ratio), ``phantom/inclusion_outlines`` (static
+LineStrips3D: each sphere's outline on the rest surface, seen from above through the pressed
+surface) and ``phantom/layer`` (static Boxes3D: the top layer's slab as a wireframe, coloured
+alike); ``force/truth`` (thick green line), ``force/measured`` (thin orange line) and
+``force/states`` (magenta dots), N.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+from scipy.spatial.transform import Rotation
 
 from core.protocol import STEP_N
 from core.recording import (
@@ -40,9 +47,11 @@ VIEW_HZ = 50.0
 TIMELINE = "mocap_time"
 COLORS = {"truth": (40, 180, 90), "truth_line": (40, 180, 90, 120),
           "measured": (245, 140, 30), "tip": (220, 40, 40),
-          "shaft": (200, 200, 200), "states": (230, 60, 230)}
+          "shaft": (200, 200, 200), "states": (230, 60, 230), "places": (150, 150, 150),
+          "stiffer": (230, 60, 40, 90), "softer": (50, 110, 230, 90)}
 RADIUS_M = 0.0015        # the 3 mm marker spheres
 BOX_M = 0.0025           # half side of the cube drawn around a true marker
+OUTLINE_LIFT_M = 0.0005  # an inclusion's outline this far above the rest surface
 
 
 def blueprint(twin: Twin, k: int, depth_mm: float) -> rrb.Blueprint:
@@ -52,12 +61,16 @@ def blueprint(twin: Twin, k: int, depth_mm: float) -> rrb.Blueprint:
     rest = twin.paths[k].interpolate(np.zeros(1), "surface").reshape(-1, 3)
     centre = twin.lab(rest.mean(axis=0))
     up = twin.to_lab[:3, 2]
+    regions = [f"inclusion {i.describe()}" for i in spec.inclusions] + (
+        [] if spec.layer is None else [f"layer {spec.layer.describe()}"])
     return rrb.Blueprint(
         rrb.Horizontal(
             phantom_view(f"press {k}: {spec.markers.describe()} on {size[0] * 1e3:g} x "
                          f"{size[1] * 1e3:g} mm; depth 0 .. {depth_mm:.0f} mm; true markers in "
-                         "green cubes, measured orange", ["+ /phantom/**", "+ /truth/**",
-                                                    "+ /measured/**"],
+                         "green cubes, measured orange; places grey"
+                         + "".join(f"; {r}" for r in regions)
+                         + (" (red: stiffer, blue: softer)" if regions else ""),
+                         ["+ /phantom/**", "+ /truth/**", "+ /measured/**"],
                          centre, max(size[:2]), up),
             plot(f"force magnitude [N]: truth green, logger orange, {STEP_N:g} N states",
                  "/force"),
@@ -115,6 +128,42 @@ def log_press(rec: rr.RecordingStream, twin: Twin, k: int, frames: np.ndarray,
     rec.log("truth/states", rr.Points3D(twin.states.points[mine, n],
                                         colors=[COLORS["states"]], radii=[0.0012]), static=True)
     _log_force(rec, twin, frames, mine)
+    rec.log("phantom/places", rr.Points3D(twin.contacts, colors=[COLORS["places"]],
+                                          radii=[0.001]), static=True)
+    log_regions(rec, twin)
+
+
+def log_regions(rec: rr.RecordingStream, twin: Twin) -> None:
+    """The block's inclusions (spheres and their outlines on the rest surface) and its top
+    layer (a slab), in the lab, coloured by whether they are stiffer or softer."""
+    spec = twin.phantom.spec
+    inc = spec.inclusions
+    if inc:
+        colors = [_region_color(i.ratio) for i in inc]
+        rec.log("phantom/inclusions", rr.Ellipsoids3D(
+            centers=twin.lab(np.array([i.centre(spec.size) for i in inc])),
+            half_sizes=[[i.radius] * 3 for i in inc], colors=colors, fill_mode="solid",
+            labels=[f"{i.ratio:g}x" for i in inc], show_labels=True), static=True)
+        turn = np.linspace(0.0, 2 * np.pi, 65)
+        rings = [np.stack([i.centre(spec.size)[0] + i.radius * np.cos(turn),
+                           i.centre(spec.size)[1] + i.radius * np.sin(turn),
+                           np.full(turn.shape, spec.size[2] + OUTLINE_LIFT_M)], axis=1)
+                 for i in inc]
+        rec.log("phantom/inclusion_outlines", rr.LineStrips3D(
+            [twin.lab(r) for r in rings], colors=[c[:3] for c in colors], radii=[0.0004]),
+            static=True)
+    if spec.layer is not None:
+        t = spec.layer.thickness
+        turn = Rotation.from_matrix(twin.to_lab[:3, :3]).as_quat()      # x, y, z, w
+        rec.log("phantom/layer", rr.Boxes3D(
+            centers=twin.lab(np.array([[0.0, 0.0, spec.size[2] - t / 2]])),
+            half_sizes=[[spec.size[0] / 2, spec.size[1] / 2, t / 2]],
+            quaternions=[rr.Quaternion(xyzw=turn)], colors=[_region_color(spec.layer.ratio)],
+            fill_mode="majorwireframe", radii=[0.0004]), static=True)
+
+
+def _region_color(ratio: float) -> tuple[int, int, int, int]:
+    return COLORS["stiffer"] if ratio >= 1.0 else COLORS["softer"]
 
 
 def _ns(time_s: np.ndarray) -> np.ndarray:

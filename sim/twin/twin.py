@@ -29,6 +29,7 @@ from sim.twin.twin_scene import (
     TwinParams,
     check_params,
     choose_locations,
+    grid_locations,
     placement,
     solve_presses,
     to_lab_frame,
@@ -80,10 +81,11 @@ def simulate_twin(p: TwinParams) -> Twin:
     phantom = Phantom(p.phantom)
     to_lab = placement(g_place)
     lab = partial(to_lab_frame, to_lab)
-    nodes = choose_locations(g_place, phantom, p.locations)
+    nodes = (choose_locations(g_place, phantom, p.locations) if isinstance(p.locations, int)
+             else grid_locations(phantom, *p.locations))
     contacts = lab(np.array([phantom.contact_point(tuple(ij)) for ij in nodes]))
     targets = [(loc, rep, contacts[loc]) for rep in range(p.repeats)
-               for loc in range(p.locations)]
+               for loc in range(p.places)]
     style = HandStyle()
     if p.press_seconds is not None:
         style = replace(style, scale=p.press_seconds / style.mean_press_s)

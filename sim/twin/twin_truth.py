@@ -49,6 +49,7 @@ def truth_arrays(twin: Twin) -> dict[str, Any]:
         "indenter/markers": ind.markers, "indenter/tip": ind.tip, "indenter/sensor": ind.sensor,
         "indenter/marker_names": list(ind.names),
         "phantom/to_lab": twin.to_lab, "phantom/rest_points": m.points[0, :-1],
+        **region_arrays(twin),
         "locations/contact": twin.contacts, "locations/node": twin.nodes,
         "presses/location": [p.location for p in presses],
         "presses/repeat": [p.repeat for p in presses],
@@ -67,6 +68,22 @@ def truth_arrays(twin: Twin) -> dict[str, Any]:
         data["trigger/mocap_time_s"] = log.pulses
         data["trigger/logger_time_s"] = log.offset_s + scale * log.pulses
     return data
+
+
+def region_arrays(twin: Twin) -> dict[str, np.ndarray]:
+    """The block's size, its inclusions (centres in the lab) and its top layer, as truth.h5
+    holds them (no rows where there are none)."""
+    spec = twin.phantom.spec
+    inc, layer = spec.inclusions, [] if spec.layer is None else [spec.layer]
+    centres = np.array([i.centre(spec.size) for i in inc]).reshape(-1, 3)
+    return {"phantom/size": np.array(spec.size),
+            "inclusions/centre": twin.lab(centres),
+            "inclusions/footprint": np.array([(i.x, i.y) for i in inc]).reshape(-1, 2),
+            "inclusions/depth": np.array([i.depth for i in inc]),
+            "inclusions/radius": np.array([i.radius for i in inc]),
+            "inclusions/ratio": np.array([i.ratio for i in inc]),
+            "layers/thickness": np.array([y.thickness for y in layer]),
+            "layers/ratio": np.array([y.ratio for y in layer])}
 
 
 def _root_attrs(twin: Twin) -> dict[str, Any]:

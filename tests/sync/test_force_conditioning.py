@@ -183,26 +183,33 @@ def test_no_rest_without_a_press_or_a_release(m: list) -> None:
 # --- the log's clock and noise ---------------------------------------------------------------
 
 def test_force_times_are_the_stamps_in_seconds() -> None:
-    """int64 ns stamps (from a logger's epoch) in float seconds, exact to the ns."""
+    """int64 ns stamps (from a logger's epoch) in float seconds, exact to the ns; no hole."""
     raw = _raw(np.zeros((100, 6)), time_ns=5_000_000_000 + np.arange(100) * 1_000_000)
-    np.testing.assert_allclose(force_times(raw), 5.0 + np.arange(100) * 1e-3, rtol=0,
-                               atol=1e-12)
+    t, timing = force_times(raw)
+    np.testing.assert_allclose(t, 5.0 + np.arange(100) * 1e-3, rtol=0, atol=1e-12)
+    assert timing.period_ns == 1_000_000 and timing.holes == ()
 
 
-def test_a_jittered_or_short_log_is_refused() -> None:
-    """One step 0.2 ms long in a 1 kHz log (20 % of a step, more than 10 %): the deviation is
-    named; 63 samples are too few."""
+def test_a_jittered_or_short_log_is_refused_and_a_hole_is_found() -> None:
+    """One step 0.2 ms long in a 1 kHz log (20 % of a step, more than 10 %): jitter, named
+    with its sample; 0.15 ms still; 0.05 ms (5 %) is a uniform log. A step of 51 ms is a hole
+    of 50 lost samples, not jitter. 63 samples are too few."""
     t = np.arange(200, dtype=np.int64) * 1_000_000
     t[100:] += 200_000
     with pytest.raises(BadInput) as e:
         force_times(_raw(np.zeros((200, 6)), time_ns=t))
-    assert e.value.path == "force.csv"
-    assert "not uniformly sampled (largest step deviation 0.200 ms)" in e.value.what
+    assert e.value.path == "force.csv" and e.value.where == "sample 100"
+    assert "not uniformly sampled: a step of 1.200 ms where the period is 1.000 ms" \
+        in e.value.what
     t[100:] -= 50_000                                   # 0.15 ms: 15 %, still refused
     with pytest.raises(BadInput):
         force_times(_raw(np.zeros((200, 6)), time_ns=t))
     t[100:] -= 100_000                                  # 0.05 ms: 5 %, a uniform log
-    assert len(force_times(_raw(np.zeros((200, 6)), time_ns=t))) == 200
+    assert len(force_times(_raw(np.zeros((200, 6)), time_ns=t))[0]) == 200
+    t = np.arange(200, dtype=np.int64) * 1_000_000
+    t[100:] += 50_000_000
+    (hole,) = force_times(_raw(np.zeros((200, 6)), time_ns=t))[1].holes
+    assert (hole.index, hole.lost, hole.length_s) == (100, 50, pytest.approx(0.050))
     with pytest.raises(BadInput, match="too short"):
         force_times(_raw(np.zeros((63, 6))))
 

@@ -23,7 +23,7 @@ from train.inference.predictor import Predictor
 from train.inference.si_model import SIModel, to_onnx
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.edgeconv import knn
+from train.model.knn import knn
 from train.model.normalise import Envelope, Normaliser, highest_tip
 from train.training.checkpoint import check_checkpoint, load_checkpoint
 from train.training.migrate import migrate

@@ -1,6 +1,6 @@
 """Whether a run's intervals hold: their coverage on its fold's test presses.
 
-At each reported level (:data:`train.model.conformal.REPORTED`): the share of test points
+At each reported level (:data:`train.intervals.levels.REPORTED`): the share of test points
 whose error lies within their radius, the mean radius, and the same for the force (the share
 of test examples whose |dF error| lies within the half-width, the mean half-width); and at
 90 %, by the points' distance from the tip's path (:data:`NEAR_MM` bins), so that "beside the
@@ -21,7 +21,8 @@ import numpy as np
 
 from core.progress import warn
 from train.data import Batch
-from train.model.conformal import REPORTED, IntervalTable, level_index
+from train.intervals.levels import REPORTED, level_index
+from train.intervals.table import IntervalTable
 from train.model.normalise import TIP_POINT
 from train.model.si_units import Prediction
 from train.training.calibrate import Residuals, batch_residuals

@@ -32,7 +32,7 @@ from train.data import (
 )
 from train.evaluation.coverage import Coverage, absent, coverage, coverage_doc, coverage_table
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
-from train.model.conformal import IntervalTable
+from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
 from train.model.si_units import Prediction, distances, predict
 from train.training.calibrate import residuals

@@ -32,8 +32,8 @@ from train.evaluation.evaluate import (
     reference_errors,
 )
 from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from train.intervals.levels import REPORTED
 from train.model.config import CGNNConfig
-from train.model.conformal import REPORTED
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train

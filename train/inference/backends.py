@@ -42,13 +42,10 @@ class OnnxBackend:
 
     Intra-op threads are chosen per call, by its size (the most points of its per-point
     inputs, ``PER_POINT``): one thread at or below ``SMALL`` points, ``threads`` above. A
-    thread pool's hand-offs cost more than they save on a small scene (measured with
-    ``benchmarks/bench_cgnn.py``'s thread table, head offsets, 2 threads against 1, best of
-    25 on a shared 2-core host: a press on a known mesh 0.030 against 0.033 ms at 26 points,
-    equal at 256, 0.32 against 0.50 ms at 1024; the force alone 0.015 against 0.015 ms at 26,
-    0.040 against 0.021 at 256; a new mesh 0.55 against 0.26 ms at 26 and 2.8 against 1.5 ms
-    at 256). A call with no per-point input (the paper's force on a known mesh: one vector)
-    always runs on one thread.
+    thread pool's hand-offs cost more than they save on a small scene (measured by
+    ``benchmarks/bench_cgnn.py``'s thread table; the figures: benchmarks/README.md). A call
+    with no per-point input (the paper's force on a known mesh: one vector) always runs on
+    one thread.
     """
 
     name = "onnx"

@@ -27,17 +27,19 @@ import onnx
 
 from train.inference.predictor import EXTRAPOLATION_FACTOR, LARGE, UNIT_FACTOR
 from train.inference.si_model import SIModel, to_onnx
-from train.model.edgeconv import EXTRA
+from train.model.knn import EXTRA
+from train.model.normalise import TIP_POINT
 from train.model.si_units import GATE_SHARE
 from train.training.checkpoint import load_checkpoint, model_from
 
 INTERVALS_LOOKUP = (
-    "split conformal, binned (train/model/conformal.py): level index i = ceil(100 level) - 1 "
+    "split conformal, binned (train/intervals/): level index i = ceil(100 level) - 1 "
     "into levels 0.01..0.99; a feature's bin is the count of its edges <= its value (the first "
-    "distance edge, 0.1 mm, sets a lab's tip marker apart); a point's "
+    f"distance edge, {TIP_POINT * 1e3:g} mm, sets a lab's tip marker apart); a point's "
     "radius (m) is points.width[distance bin][depth bin][height bin][i], distance = the "
     "point's (input) distance from the segment tip start - tip end, depth = |tip end - tip "
     "start|, height = the tip start's z less that of the surface point nearest it in x, y "
+    f"(a point within {TIP_POINT * 1e3:g} mm of the tip start left out; 0 where none is left) "
     "(m); the change of force's interval is dforce +- force.width[depth bin][height bin][i] "
     "(N); null widths are unbounded; count = the calibration scores behind each; none holds "
     "beyond the training envelope")

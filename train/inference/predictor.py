@@ -1,9 +1,10 @@
 """Using a trained cGNN: ``Predictor.load(path).predict(points, condition)``.
 
 Points (N, 3) and the condition C = [tip start, tip end] (6,) are metres in the phantom frame;
-``predict`` gives the deformed points and the change of force, ``predict_force`` (a haptic loop)
-the force alone. A scene's points are checked and their neighbour graph built once, and reused
-while the caller passes the same points again. How each network runs a press (a known scene's
+``predict`` gives the deformed points and the change of force (a :class:`Prediction`, with how
+far they may be off at a level asked), ``predict_force`` (a haptic loop) the force alone. A
+scene's points are checked and their neighbour graph built once, and reused while the caller
+passes the same points again. How each network runs a press (a known scene's
 head terms, region mode), what is refused (ValueError) and what is flagged (``extrapolating``,
 with a warning saying where): docs/model.md, "Using a trained model" and "Latency".
 """
@@ -16,25 +17,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import overload
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 
 from train.inference.backends import TorchBackend, make_backend
 from train.inference.head_split import check_split
+from train.inference.prediction import Prediction
 from train.inference.region import near_path, neighbour_table, region
 from train.inference.si_model import SIModel, press_entries
-from train.model.conformal import (
-    Interval,
-    IntervalTable,
-    SceneLookup,
-    force_interval,
-    interval,
-    level_index,
-)
-from train.model.normalise import TIP_POINT, tip_height
+from train.intervals.levels import level_index
+from train.intervals.lookup import SceneLookup, TableLookup
+from train.intervals.table import IntervalTable
+from train.model.normalise import tip_height
 from train.training.checkpoint import load_checkpoint, model_from
 
 UNIT_FACTOR = 20.0
@@ -44,8 +39,6 @@ DEFAULT_REGION = 0.03     # m: the radius benchmarks/bench_cgnn.py times
 LARGE = 8192              # points: above it a call that builds the graph runs in torch
 NOT_HOLDING = "; its intervals do not hold there (calibrated inside the envelope)"
 GRAPH_ENTRIES = ("full", "force", "new_scene")      # the entries that search neighbours
-NEAREST = 8               # points nearest the tip in x, y that its height is measured from
-NEAR_TIP2 = (1.001 * TIP_POINT) ** 2   # m^2: in x, y farther than this, no point is the tip's
 
 
 @dataclass
@@ -57,9 +50,7 @@ class Scene:
     reach: float               # the farthest point's distance from the training centre, m
     terms: tuple[np.ndarray, np.ndarray] | None = None   # a press-independent model's
     #                                                 head terms, once its first press has run
-    plan: cKDTree | None = None   # of the points' x, y, once a tip's height is asked
     last: tuple[bytes, float] = (b"", 0.0)    # the last tip asked about, and its height
-    start: tuple[list[float] | None, float] = (None, 0.0)   # the last press's tip start, its height
 
     @cached_property
     def lookup(self) -> SceneLookup:
@@ -76,40 +67,13 @@ class Scene:
         """The lowest point's z, m: no tip is higher above the surface than above it."""
         return float(self.points[:, 2].min())
 
-    @cached_property
-    def plane(self) -> np.ndarray:
-        """The points' x, y (N, 2) in float64, as :func:`train.model.normalise.tip_height`
-        measures a tip's distance in them."""
-        return self.points[:, :2].astype(np.float64)
-
     def height(self, tip: np.ndarray) -> float:
-        """The tip's height above the surface (:func:`train.model.normalise.tip_height`): one
-        vectorised pass over the scene's x, y for the point nearest the tip (a press's start,
-        the same call after call, is looked up once)."""
-        if tip.tobytes() == self.last[0]:
-            return self.last[1]
-        d2 = ((self.plane - tip[:2]) ** 2).sum(1)                          # (N,)
-        near = np.flatnonzero(d2 <= NEAR_TIP2)          # the only points that can be the tip's
-        if len(near):
-            d2[near[np.linalg.norm(self.points[near] - tip, axis=1) <= TIP_POINT]] = np.inf
-        i = int(d2.argmin())
-        if not np.isfinite(d2[i]):
-            h = float("nan")
-        elif np.count_nonzero(d2 == d2[i]) > 1:         # a tie: the points nearest in order
-            h = self._from_tree(tip)
-        else:
-            h = float(tip[2] - self.points[i, 2])
-        self.last = (tip.tobytes(), h)
-        return h
-
-    def _from_tree(self, tip: np.ndarray) -> float:
-        """The tip's height from the ``NEAREST`` points nearest it in x, y in the order a tree
-        gives them (which of two points at the same distance is taken, where they tie)."""
-        if self.plan is None:
-            self.plan = cKDTree(self.points[:, :2])
-        _, idx = self.plan.query(tip[:2], k=min(NEAREST, len(self.points)))
-        h = tip_height(tip, self.points[np.atleast_1d(idx)])
-        return tip_height(tip, self.points) if np.isnan(h) else h
+        """The tip's height above the surface (:func:`train.model.normalise.tip_height`, the
+        training envelope's measure; NaN where no other point is left), kept for the last tip
+        asked (a press's start, the same call after call)."""
+        if tip.tobytes() != self.last[0]:
+            self.last = (tip.tobytes(), tip_height(tip, self.points))
+        return self.last[1]
 
 
 @dataclass
@@ -142,7 +106,7 @@ class Predictor:
         self.backend = make_backend(si, device, backend)
         self.large = self.backend if self.backend.name == "torch" else TorchBackend(si, device)
         self.extrapolating = False
-        self.intervals: IntervalTable | None = None   # the checkpoint's (load); None: absent
+        self._table: TableLookup | None = None      # the checkpoint's intervals, as looked up
         self._scene: Scene | None = None
         self.point_names: list[str] | None = None   # the points it was trained on (load)
         # how a press runs, by whether a region is asked: the heads alone on a known scene
@@ -171,29 +135,29 @@ class Predictor:
         """Whether a known scene's presses run the heads alone."""
         return self.offsets.press_independent
 
-    @overload
-    def predict(self, points: np.ndarray, condition: np.ndarray,
-                region: float | None = None, level: None = None) -> tuple[np.ndarray, float]:
-        ...
+    @property
+    def intervals(self) -> IntervalTable | None:
+        """The calibrated intervals' table (the checkpoint's, at load); None: absent."""
+        return None if self._table is None else self._table.table
 
-    @overload
-    def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None,
-                *, level: float) -> tuple[np.ndarray, float, Interval]:
-        ...
+    @intervals.setter
+    def intervals(self, table: IntervalTable | None) -> None:
+        self._table = None if table is None else TableLookup(table)
 
     def predict(self, points: np.ndarray, condition: np.ndarray, region: float | None = None,
-                level: float | None = None) -> tuple:
-        """Deformed points (N, 3) float32 in metres, and the change of force in newtons; with
-        ``level`` in (0, 1) also how far they may be off (:class:`Interval`: each point's
-        radius, the force's interval, calibrated at that level; a table lookup)."""
-        self._check_level(level)
+                level: float | None = None) -> Prediction:
+        """The deformed points (N, 3) float32 in metres and the change of force in newtons
+        (``.points``, ``.dforce``); with ``level`` in (0, 1) also how far they may be off
+        (``.sure``, an :class:`~train.intervals.lookup.Interval`: each point's radius, the
+        force's interval, calibrated at that level; a table lookup)."""
+        index = self._level_index(level)
         press = self._press(points, condition, region)
         deformed, df = self._ways[region is not None](press, False)
         df = self._flag(press, df, NOT_HOLDING if level is not None else "")
-        if level is None:
-            return deformed, df
-        return deformed, df, interval(self.intervals, level, press.scene.lookup, press.tips,
-                                      self._height(press), df, not self.extrapolating)
+        if index is None:
+            return Prediction(deformed, df)
+        return Prediction(deformed, df, press.scene.lookup.interval(
+            self._table, level, index, press.tips, df, not self.extrapolating))
 
     def predict_force(self, points: np.ndarray, condition: np.ndarray,
                       region: float | None = None, level: float | None = None
@@ -201,34 +165,26 @@ class Predictor:
         """The change of force (N) alone: the displacement head is not run (but for the
         paper's network's first press of a new scene, which keeps both heads' terms); with
         ``level``, also its interval (low, high) N at that level."""
-        self._check_level(level)
+        index = self._level_index(level)
         press = self._press(points, condition, region)
         df = self._flag(press, self._ways[region is not None](press, True)[1],
                         NOT_HOLDING if level is not None else "")
-        if level is None:
+        if index is None:
             return df
-        return df, force_interval(self.intervals, level, press.c[0], self._height(press), df)
+        return df, press.scene.lookup.force_interval(self._table, index, press.tips, df)
 
-    def _check_level(self, level: float | None) -> None:
-        """Refuse (ValueError, one line) a level outside (0, 1), or any level where the
-        checkpoint keeps no intervals."""
+    def _level_index(self, level: float | None) -> int | None:
+        """The index of ``level`` among the table's levels (None without one); refused
+        (ValueError, one line) outside (0, 1), or wherever the checkpoint keeps no
+        intervals."""
         if level is None:
-            return
-        level_index(level)
-        if self.intervals is None:
+            return None
+        index = level_index(level)
+        if self._table is None:
             raise ValueError("intervals absent: this checkpoint keeps none (trained before "
                              "they existed, or without validation presses); retrain it, or "
                              "predict without level")
-
-    @staticmethod
-    def _height(press: Press) -> float:
-        """The tip start's height above the scene (0 where no other point is left), kept for
-        the press's start: a haptic loop's tip moves its end, call after call."""
-        scene, start = press.scene, press.tips[:3]
-        if start != scene.start[0]:
-            height = scene.height(np.array(start))
-            scene.start = (start, 0.0 if height != height else height)   # NaN: no other point
-        return scene.start[1]
+        return index
 
     def _known(self, press: Press, force_only: bool) -> Answer:
         """A press-independent network: a new scene runs the network once and keeps its head

@@ -17,15 +17,15 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from train.model.conformal import path_distance
-from train.model.edgeconv import TIE, WIDEST, Points, ranked, tiebreak
+from train.intervals.features import path_distance
+from train.model.knn import TIE, WIDEST, Points, ranked, tiebreak
 
 
 def neighbour_table(points: np.ndarray, k: int) -> np.ndarray:
     """Each point's k nearest points (N, k) int64, itself included, nearest first (a 3-D
     tree, no N x N), as the network's own kNN chooses them: the tree's order where the k + 1
     nearest distances are all apart by more than ``TIE`` (relative), and elsewhere (ties: a
-    grid) the tree's candidates ranked by :func:`train.model.edgeconv.ranked`, which breaks a tie
+    grid) the tree's candidates ranked by :func:`train.model.knn.ranked`, which breaks a tie
     by the points' coordinates, not by their order, searching again with more where a tie
     crosses the k-th."""
     tree, n = cKDTree(points), len(points)

@@ -19,7 +19,7 @@ be given each point's offsets from the tip (:class:`train.model.config.Offsets`)
 
 The first layer's graph is the kNN of the points themselves (with "graph" offsets the distance of
 two inputs is sqrt(3) times that of their points: the same neighbours). Every layer breaks a
-tie between neighbours by the points' own coordinates (:func:`train.model.edgeconv.knn`), so the
+tie between neighbours by the points' own coordinates (:func:`train.model.knn.knn`), so the
 output does not depend on the order of the points, even on a regular grid. A caller that already
 has it, for a mesh whose points do not change or from a 3-D tree, passes it as ``neighbours``.
 
@@ -39,7 +39,8 @@ import torch
 from torch import nn
 
 from train.model.config import CGNNConfig, Offsets
-from train.model.edgeconv import DynamicEdgeConv, tiebreak
+from train.model.edgeconv import DynamicEdgeConv
+from train.model.knn import tiebreak
 
 CONDITION = 6
 OFFSET_INPUTS = 8     # a point's offsets from the tip's start and end, and their lengths

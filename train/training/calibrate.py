@@ -4,7 +4,8 @@ The validation presses are groups of the manifest (presses, or places) that the 
 trains nor tests on, so no frame of a calibration press is on the other side. Each of their
 examples is predicted by the run's best model; every valid point's displacement error norm and
 every example's |dF error| are the scores (:class:`Residuals`), with the features the bins read
-(:mod:`train.model.conformal`). The train runner stores the table in ``best.pt``
+(:func:`train.intervals.features.press_features`, as a predictor's lookup measures them). The
+train runner stores the table (:class:`train.intervals.table.IntervalTable`) in ``best.pt``
 (``intervals``), evaluation scores the test presses the same way to measure coverage.
 """
 
@@ -20,8 +21,9 @@ import torch
 from torch import nn
 
 from train.data import StateTensors, make_batch
-from train.model.conformal import IntervalTable, path_distance
-from train.model.normalise import Normaliser, tip_height
+from train.intervals.features import press_features
+from train.intervals.table import IntervalTable
+from train.model.normalise import Normaliser
 from train.model.si_units import Prediction, distances, predict
 from train.training.checkpoint import model_from
 from train.training.fold_data import fold_examples
@@ -33,34 +35,20 @@ class Residuals:
     """Scores and bin features of a set of examples: per valid point and per example."""
 
     point_error: np.ndarray      # (M,) m, the displacement error norm
-    point_features: np.ndarray   # (M, 3): distance from the tip's path m, depth m, height m
+    point_features: np.ndarray   # (M, 3) m: distance from the tip's path, depth, height
     point_example: np.ndarray    # (M,) the example each point belongs to
     force_error: np.ndarray      # (E,) N, predicted - true
-    force_features: np.ndarray   # (E, 2): depth m, height m
-
-
-def example_features(points: np.ndarray, valid: np.ndarray, cond: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per example (B) of inputs (B, N, 3) with validity (B, N) and C (B, 6): each point's
-    distance from the tip's path (B, N), the press's depth (B,) and the tip start's height
-    above the surface (B,) (0 where no other point is left)."""
-    heights = [tip_height(c[:3], p[v]) for p, v, c in zip(points, valid, cond, strict=True)]
-    return (path_distance(points, cond[:, :3], cond[:, 3:]),
-            np.linalg.norm(cond[:, 3:] - cond[:, :3], axis=1),
-            np.nan_to_num(np.array(heights, dtype=np.float64)))
+    force_features: np.ndarray   # (E, 2) m: depth, height
 
 
 def batch_residuals(b: Any, p: Prediction, first: int) -> Residuals:
     """The residuals of one predicted batch (examples numbered from ``first``)."""
     err = distances(p, b).double().cpu().numpy()
     mask = b.mask.cpu().numpy()
-    points, cond = b.points.double().cpu().numpy(), b.cond.double().cpu().numpy()
-    dist, depth, height = example_features(points, mask, cond)
+    f = press_features(b.points.double().cpu().numpy(), mask, b.cond.double().cpu().numpy())
     ex = np.broadcast_to(np.arange(len(mask))[:, None], mask.shape)
-    feats = np.stack([dist, *np.broadcast_to(np.stack([depth, height])[:, :, None],
-                                             (2, *mask.shape))], -1)
-    return Residuals(err[mask], feats[mask], ex[mask] + first,
-                     (p.dforce - b.dforce).double().cpu().numpy(), np.stack([depth, height], 1))
+    return Residuals(err[mask], f.of_points()[mask], ex[mask] + first,
+                     (p.dforce - b.dforce).double().cpu().numpy(), f.of_force())
 
 
 def joined(parts: list[Residuals]) -> Residuals:

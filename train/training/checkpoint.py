@@ -6,7 +6,7 @@ by the train runner).
 "data": {"file", "sha256"}, "splits", "init", "variant"}, "provenance": {...}}``, and with
 ``--ema`` "trained": the weights the optimizer steps (``model`` is then their average), and in
 ``best.pt`` "intervals": the conformal table calibrated on the fold's validation presses
-(:class:`train.model.conformal.IntervalTable`; absent from a run before them or without
+(:class:`train.intervals.table.IntervalTable`; absent from a run before them or without
 validation):
 everything inference needs travels with the weights, and nothing needs unpickling, so a
 checkpoint from elsewhere cannot run code on load. ``provenance`` (:data:`SCHEMA`, written by
@@ -33,9 +33,9 @@ import torch
 from core.errors import BadInput
 from data_schema.hdf5 import SCALED_UNIT
 from data_schema.states import PLAUSIBLE_M, PLAUSIBLE_N
+from train.intervals.table import IntervalTable
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.conformal import IntervalTable
 from train.model.normalise import Normaliser
 from train.training.migrate import migrate
 

@@ -314,13 +314,13 @@ def test_recording_shows_the_layout_as_it_is(tmp_path: Path) -> None:
 
 
 def test_truth_readers_take_any_1x_version(scattered: Path, tmp_path: Path) -> None:
-    """A 1.1 file has any N; a 1.0 file (25 markers) reads, a 2.0 one is refused."""
+    """A 1.x file has any N; a 1.0 file (25 markers) reads, a 2.0 one is refused."""
     from core.errors import BadInput
 
     copy = tmp_path / "truth.h5"
     copy.write_bytes((scattered / "truth.h5").read_bytes())
     with h5py.File(scattered / "truth.h5") as f:
-        assert f.attrs["schema_version"] == TRUTH.version == "1.1"
+        assert f.attrs["schema_version"] == TRUTH.version == "1.2"
     for version, ok in (("1.0", True), ("1.7", True), ("2.0", False)):
         with h5py.File(copy, "r+") as f:
             f.attrs["schema_version"] = version

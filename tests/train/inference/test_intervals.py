@@ -1,7 +1,9 @@
 """The predictor's intervals: each point's radius and the force's interval are the table's
 for the press (a table whose radii are known), on every backend and path, beside an unchanged
-answer; refused in one line where they cannot be given; said not to hold beyond the envelope;
-carried by the exported ONNX file."""
+answer; a run's own validation presses, looked up, get the radii calibrated for them; a
+checkpoint whose table was written before this version, and one without a table, load;
+refused in one line where they cannot be given; said not to hold beyond the envelope; carried
+by the exported ONNX file."""
 
 from __future__ import annotations
 
@@ -15,11 +17,15 @@ import onnx
 import pytest
 import torch
 from helpers.cgnn_data import TINY, dent_fold
-from helpers.interval_table import EDGE, FAR, HALF, NEAR, known_table
+from helpers.interval_table import EDGE, FAR, HALF, NEAR, known_table, stored_table
 
 from train import Predictor
 from train.inference.export import export_onnx
-from train.model.conformal import IntervalTable
+from train.intervals.levels import level_index
+from train.intervals.table import IntervalTable
+from train.training.calibrate import residuals
+from train.training.checkpoint import load_checkpoint, model_from
+from train.training.fold_data import fold_examples
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
 
@@ -53,7 +59,8 @@ def test_radii_and_force_interval_are_the_tables(run, backend: str, region: floa
     p = Predictor.load(path, backend=backend)
     p.intervals = known_table()
     for _ in range(2):                       # a new scene, then the known mesh's fast path
-        deformed, df, sure = p.predict(points, cond, region=region, level=0.9)
+        answer = p.predict(points, cond, region=region, level=0.9)
+        deformed, df, sure = answer.points, answer.dforce, answer.sure
         plain, plain_df = p.predict(points, cond, region=region)
         np.testing.assert_array_equal(deformed, plain)
         assert df == plain_df
@@ -67,7 +74,7 @@ def test_radii_and_force_interval_are_the_tables(run, backend: str, region: floa
 def test_the_trained_radii_grow_with_the_level(run) -> None:
     path, points, cond = run
     p = Predictor.load(path)
-    radii = [p.predict(points, cond, level=q)[2].radius for q in (0.5, 0.8, 0.9, 0.95)]
+    radii = [p.predict(points, cond, level=q).sure.radius for q in (0.5, 0.8, 0.9, 0.95)]
     assert all((b >= a).all() for a, b in zip(radii, radii[1:], strict=False))
     assert np.isfinite(radii[1]).all() and (radii[1] > 0).all()
 
@@ -82,7 +89,7 @@ def test_levels_and_absent_intervals_are_refused_in_one_line(run, tmp_path: Path
     del old["intervals"]                     # a checkpoint from before intervals
     torch.save(old, tmp_path / "old.pt")
     before = Predictor.load(tmp_path / "old.pt")
-    assert len(before.predict(points, cond)) == 2          # it still predicts
+    assert before.predict(points, cond).sure is None       # it still predicts
     for call in (before.predict, before.predict_force):
         with pytest.raises(ValueError, match="^intervals absent") as e:
             call(points, cond, level=0.9)
@@ -96,12 +103,12 @@ def test_beyond_the_envelope_the_intervals_do_not_hold(run) -> None:
     deep[5] -= 0.02                           # a press four times the longest learned
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        *_, sure = p.predict(points, deep, level=0.9)
+        sure = p.predict(points, deep, level=0.9).sure
     assert not sure.holds
     assert any("intervals do not hold" in str(w.message) for w in caught)
     with warnings.catch_warnings():
         warnings.simplefilter("error")       # inside: no warning, and they hold
-        assert p.predict(points, cond, level=0.9)[2].holds
+        assert p.predict(points, cond, level=0.9).sure.holds
 
 
 def test_the_onnx_file_carries_the_table(run, tmp_path: Path) -> None:
@@ -113,3 +120,36 @@ def test_the_onnx_file_carries_the_table(run, tmp_path: Path) -> None:
     np.testing.assert_array_equal(table.points.width, want.points.width)
     assert table.points.edges == want.points.edges
     assert "level index" in props["intervals_lookup"]
+
+
+def test_a_validation_press_looked_up_gets_its_calibrated_radius(run) -> None:
+    """The run's table was calibrated on its validation presses: each of them, predicted
+    with a level, gets for each point the radius the table gives the features calibration
+    measured for it (many lie on a bin's edge: the dent's depths are whole millimetres), and
+    the force's half-width for the press's."""
+    path, _, _ = run
+    p = Predictor.load(path)
+    state = load_checkpoint(path / "best.pt")
+    data, splits = path.parent / "states.h5", path.parent / "splits.json"
+    states, _, val, _ = fold_examples(data, splits, TrainOptions(epochs=4, batch=8, lr=1e-2))
+    r = residuals(*model_from(state), states, val)
+    table, i = p.intervals, level_index(0.9)
+    assert np.isin(r.force_features[:, 0], table.force.edges[0]).any()
+    points, tips = states.points.numpy(), states.tip.numpy()
+    for e, (s, t) in enumerate(val.tolist()):
+        mine = r.point_example == e
+        sure = p.predict(points[s], np.r_[tips[s], tips[t]], level=0.9).sure
+        np.testing.assert_array_equal(sure.radius, table.radii(i, *r.point_features[mine].T))
+        assert sure.force[1] - sure.force[0] == 2 * table.force.widths(i, *r.force_features[e])
+
+
+def test_a_checkpoint_with_a_table_of_the_first_form_loads(run, tmp_path: Path) -> None:
+    """``best.pt`` whose ``intervals`` were written by the first version (the form spelled
+    out by hand in tests/train/intervals/test_table.py): its radii are what it says."""
+    path, points, cond = run
+    old = torch.load(path / "best.pt", weights_only=True)
+    old["intervals"] = stored_table()
+    torch.save(old, tmp_path / "old.pt")
+    sure = Predictor.load(tmp_path / "old.pt").predict(points, cond, level=0.9).sure
+    np.testing.assert_array_equal(sure.radius, np.where(_expected(points, cond) == NEAR,
+                                                        1e-3, 1e-4))

@@ -1,4 +1,5 @@
-"""The cGNN's layers compute what the paper's network computes (PyG's EdgeConv as reference)."""
+"""The cGNN as a whole: the same answer for any order and number of points, the heads' split
+layer, the refusals (its edge convolution against PyG: test_edgeconv.py, its kNN: test_knn.py)."""
 
 from __future__ import annotations
 
@@ -7,57 +8,6 @@ import torch
 
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.edgeconv import BLOCK, DynamicEdgeConv, knn
-
-
-def _pyg_edge_index(idx: torch.Tensor) -> torch.Tensor:
-    """Edges j -> i of a (B, N, k) neighbour table, nodes numbered across the batch."""
-    b, n, k = idx.shape
-    offset = (torch.arange(b) * n).view(b, 1, 1)
-    src = (idx + offset).reshape(-1)
-    dst = (torch.arange(n).view(1, n, 1).expand(b, n, k) + offset).reshape(-1)
-    return torch.stack([src, dst])
-
-
-@pytest.mark.parametrize("n", [6, 26, 300])
-def test_edgeconv_matches_pytorch_geometric(n: int) -> None:
-    pyg = pytest.importorskip("torch_geometric.nn")
-    torch.manual_seed(n)
-    layer = DynamicEdgeConv(3, 64, 64, k=5).double()
-    peer = pyg.EdgeConv(layer.mlp, aggr="mean")    # shares (and re-initialises) layer.mlp
-    x = torch.randn(2, n, 3, dtype=torch.float64)
-    ours = layer(x)
-    ref = peer(x.reshape(-1, 3), _pyg_edge_index(knn(x, 5)))
-    torch.testing.assert_close(ours.reshape(-1, 64), ref, atol=1e-5, rtol=0)
-
-
-def test_knn_is_the_nearest_points_itself_included() -> None:
-    torch.manual_seed(1)
-    x = torch.randn(1, 50, 3)
-    idx = knn(x, 5)
-    brute = torch.cdist(x, x).argsort(dim=-1)[..., :5]
-    assert (idx.sort(-1).values == brute.sort(-1).values).all()
-    assert (idx == torch.arange(50).view(1, 50, 1)).any(-1).all()
-
-
-def test_knn_in_pieces_is_the_brute_force_nearest() -> None:
-    """Past BLOCK distances the search runs in pieces (samples, then rows of one sample):
-    the same neighbours as sorting every distance, masked points never chosen."""
-    torch.manual_seed(2)
-    n = 1100                                 # 2 x 1100^2 > BLOCK, and 1100 rows > BLOCK // n
-    x = torch.randn(2, n, 16)
-    mask = torch.rand(2, n) > 0.1
-    assert 2 * n * n > BLOCK and n > BLOCK // n
-    d = torch.cdist(x, x).masked_fill(~mask.unsqueeze(1), float("inf"))
-    brute = d.argsort(dim=-1)[..., :5]
-    assert (knn(x, 5, mask).sort(-1).values == brute.sort(-1).values).all()
-
-
-def test_masked_points_are_never_neighbours() -> None:
-    x = torch.randn(1, 20, 3)
-    mask = torch.ones(1, 20, dtype=torch.bool)
-    mask[0, :4] = False
-    assert not torch.isin(knn(x, 5, mask), torch.arange(4)).any()
 
 
 def _model(**kw) -> CGNN:

@@ -1,0 +1,77 @@
+"""The live session's parts on hand-made input: the journal cut short, the session's checks
+against QTM's labels and analog board (force plates: test_live_plate.py), and the presses found
+sample by sample."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.errors import BadInput
+from data_schema.session import read_session
+from live.protocol.parameters import AnalogDevice, QtmParameters
+from live.session.journal import FORCE, MARKERS, Journal, read_journal
+from live.session.layout import live_layout
+
+SOURCE = "QTM RT 127.0.0.1:1"
+
+
+def test_the_journal_keeps_every_complete_block_of_a_file_cut_short(tmp_path: Path) -> None:
+    path = tmp_path / "session.mcap.part"
+    journal = Journal(path, {"labels": ["a"], "channels": ["c0", "c1"]})
+    for i in range(3):
+        journal.append(MARKERS, np.arange(i * 5, i * 5 + 5) * 2_000_000, np.full((5, 3), i))
+        before = path.stat().st_size
+        journal.append(FORCE, np.arange(i * 10, i * 10 + 10) * 1_000_000, np.full((10, 2), i))
+    cut = (before + path.stat().st_size) // 2   # the last block cut short, as by a kill
+    journal.close()
+    whole = read_journal(path)
+    assert whole.complete and len(whole.streams[MARKERS][0]) == 15
+    assert (whole.blocks, whole.cut_bytes) == (6, 0)
+    np.testing.assert_array_equal(whole.streams[MARKERS][0], np.arange(15) * 2_000_000)
+    (tmp_path / "cut.part").write_bytes(path.read_bytes()[:cut])
+    part = read_journal(tmp_path / "cut.part")
+    assert not part.complete and (part.blocks, part.cut_bytes) == (5, cut - before)
+    assert len(part.streams[MARKERS][0]) == 15 and len(part.streams[FORCE][0]) == 20
+    (tmp_path / "other.part").write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(BadInput, match="not a live session's journal"):
+        read_journal(tmp_path / "other.part")
+
+
+def test_the_session_is_held_against_qtms_labels_and_boards(twin_session: Path) -> None:
+    cfg = read_session(twin_session)
+    labels = cfg.mocap.phantom_markers + cfg.mocap.indenter_markers + ["stray"]
+    gauges = AnalogDevice(2, "USB-2533", 1000.0, list(cfg.force.channels), ["V"] * 6)
+    emg = AnalogDevice(1, "EMG", 2000.0, ["e0", "e1"], ["V", "V"])
+    assert live_layout(QtmParameters(SOURCE, 500.0, labels, [emg, gauges]), cfg).device == gauges
+    with pytest.raises(BadInput, match="not in file: P03"):
+        live_layout(QtmParameters(SOURCE, 500.0, [n for n in labels if n != "P03"],
+                                  [gauges]), cfg)
+    newtons = AnalogDevice(2, "USB-2533", 1000.0, list(cfg.force.channels), ["N"] * 6)
+    with pytest.raises(BadInput, match="is in N as the file states, but force.units says V"):
+        live_layout(QtmParameters(SOURCE, 500.0, labels, [newtons]), cfg)
+    with pytest.raises(BadInput, match="no analog board"):
+        live_layout(QtmParameters(SOURCE, 500.0, labels, []), cfg)
+
+
+def test_presses_are_found_as_the_samples_arrive() -> None:
+    """Three raised cosines on a 1 kHz force, fed a frame (2 samples) at a time: peaks 6, 0.4
+    (below detect: a touch) and 3 N, a flicker below contact inside the first (one contact)."""
+    from live.session.presses import PressTracker
+
+    rate, t = 1000.0, np.arange(12000) / 1000.0
+    force = np.zeros_like(t)
+    for start, peak in ((1.0, 6.0), (5.0, 0.4), (8.0, 3.0)):
+        inside = (t >= start) & (t < start + 2.0)
+        force[inside] = peak * 0.5 * (1 - np.cos(np.pi * (t[inside] - start)))
+    force[1500:1510] = 0.0                        # 10 ms below contact: the same contact
+    tracker, done = PressTracker(rate, detect_n=0.5, contact_n=0.05), []
+    times = np.round(t * 1e9).astype(np.int64)
+    for i in range(0, len(t), 2):
+        done += tracker.add(times[i:i + 2], force[i:i + 2])
+    assert [d.number for d in done] == [1, 2]
+    assert [round(d.peak_n, 3) for d in done] == [6.0, 3.0]
+    assert [d.peak_ns for d in done] == [2_000_000_000, 9_000_000_000]
+    assert abs(done[0].start_ns - 1.0e9) < 0.2e9 and abs(done[1].end_ns - 10.0e9) < 0.2e9
