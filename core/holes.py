@@ -20,6 +20,9 @@ import numpy as np
 from core.errors import BadInput
 
 JITTER = 0.1     # a step within this share of the period of it is one period
+PRINT_CAP = 0.45  # the printed stamps' rounding widens that to at most this share: beyond it a
+#                   whole lost sample could pass for a step
+JUMP = 2 - JITTER  # a step this many periods long or more (less the rounding) is a hole
 
 
 @dataclass(frozen=True)
@@ -38,15 +41,22 @@ class Hole:
         return max(int(round((self.stop_ns - self.start_ns) / self.period_ns)) - 1, 1)
 
     @property
+    def whole(self) -> bool:
+        """Whether the jump is a whole number of periods (samples lost, the clock running
+        on), not a pause of another length."""
+        periods = (self.stop_ns - self.start_ns) / self.period_ns
+        return abs(periods - round(periods)) <= JITTER
+
+    @property
     def length_s(self) -> float:
         """How long the stream recorded nothing: the jump less one period (s)."""
         return (self.stop_ns - self.start_ns - self.period_ns) * 1e-9
 
-    def describe(self, what: str) -> str:
-        """``"0.400 s of <what> lost (200 samples) after 10.000 s"`` (the stream's own time,
+    def describe(self, what: str, unit: str = "samples") -> str:
+        """``"0.400 s of <what> lost (200 <unit>) after 10.000 s"`` (the stream's own time,
         as its file writes it), for a warning line."""
         return (f"{self.length_s:.3f} s of {what} lost ({self.lost} "
-                f"{'sample' if self.lost == 1 else 'samples'}) after "
+                f"{unit[:-1] if self.lost == 1 else unit}) after "
                 f"{self.start_ns * 1e-9:.3f} s")
 
 
@@ -64,33 +74,57 @@ class Timing:
 
 
 def find_holes(time_ns: np.ndarray, source: str | Path | None, what: str = "samples",
-               resolution_ns: float = 0.0, where: Callable[[int], str] | None = None
-               ) -> Timing:
-    """The period (the median step) and the holes of increasing times ``time_ns``.
+               where: Callable[[int], str] | None = None) -> Timing:
+    """The period and the holes of increasing times ``time_ns``.
 
-    A step within :data:`JITTER` of the period (plus ``resolution_ns``, how finely the times
-    were written) is one period; any longer step of at least two periods less that tolerance
-    is a hole; any other step is jitter, refused in one line naming ``source`` and the sample
-    (``where(i)`` names sample ``i`` in the file's own terms, "line 12").
+    A step within :data:`JITTER` of the period, plus the stamps' own rounding
+    (:func:`rounding_ns`: a time column written to the millisecond), is one period
+    (the tolerance at most :data:`PRINT_CAP` of it); a longer step of at least two periods
+    less that tolerance is a hole; any other step is jitter, refused in one line naming
+    ``source`` and the sample (``where(i)`` names sample ``i`` in the file's own terms, "line
+    12"). The period is the mean of the steps that are one period (their median first picks
+    them), so a hole of thousands of samples at 300 Hz counts them exactly.
     """
     t = np.asarray(time_ns, np.int64)
     steps = np.diff(t).astype(np.float64)
     if steps.size == 0:
         return Timing(float("nan"))
-    period = float(np.median(steps))
-    tol = JITTER * period + resolution_ns
-    normal = np.abs(steps - period) <= tol
-    jump = ~normal & (steps >= 2 * period - tol)
+    median = float(np.median(steps))
+    tol = min(JITTER * median + rounding_ns(t, steps, median), PRINT_CAP * median)
+    normal = np.abs(steps - median) <= tol
+    jump = ~normal & (steps >= 2 * median - tol)
     jitter = np.flatnonzero(~normal & ~jump)
     if jitter.size:
         i = int(jitter[0]) + 1
-        raise BadInput(source, f"{what} are not uniformly sampled: a step of "
+        raise BadInput(source, f"{what} are not evenly spaced: a step of "
                                f"{steps[i - 1] * 1e-6:.3f} ms where the period is "
-                               f"{period * 1e-6:.3f} ms (jitter, not a hole of lost samples)",
+                               f"{median * 1e-6:.3f} ms (jitter, not a hole of lost samples)",
                        where=where(i) if where is not None else f"sample {i}")
+    period = float(steps[normal].mean())
     holes = tuple(Hole(int(i) + 1, int(t[i]), int(t[i + 1]), period)
                   for i in np.flatnonzero(jump))
     return Timing(period, holes)
+
+
+def rounding_ns(time_ns: np.ndarray, steps: np.ndarray, median: float) -> float:
+    """How far a step may be off for the stamps' rounding alone: their resolution
+    (:func:`stamp_resolution_ns`) where the period is no whole number of it (300 Hz written to
+    the millisecond: steps of 3 and 4 ms), else 0 (exact stamps round to themselves)."""
+    res = stamp_resolution_ns(time_ns)
+    near = steps[np.abs(steps - median) <= PRINT_CAP * median]
+    ratio = float(near.mean()) / res if near.size else 0.0
+    return 0.0 if abs(ratio - round(ratio)) < 0.05 else res
+
+
+def stamp_resolution_ns(time_ns: np.ndarray) -> float:
+    """The coarsest power-of-ten step (1 ns .. 1 s) that every stamp is a multiple of: the
+    rounding of times written with a fixed number of decimals (a QTM Time column to the
+    millisecond)."""
+    t = np.asarray(time_ns, np.int64)
+    step = 1
+    while step < 10**9 and t.size and np.all(t % (step * 10) == 0):
+        step *= 10
+    return float(step)
 
 
 GRID_SHARE = 0.1     # a written time may lie this share of a sample off its rate's grid

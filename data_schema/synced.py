@@ -20,10 +20,12 @@ The ``presses`` group's attribute ``cut_off`` counts presses left out because th
 mocap recording or of the force log cut them off (onset or release unknown), and ``in_holes``
 those left out because a hole in a stream touched them (1.4). Root attribute ``holes`` (JSON,
 1.4) lists each hole: its ``stream`` (``mocap`` or ``force``) and file (``source``), the samples
-``lost`` and its ``length_s``, where it starts on the stream's own clock (``after_s``), the
-frames ``[first, last + 1)`` it reaches on the mocap clock (its lost frames, or the frames
-whose force was resampled from its edge; null when none) and the presses it cost
-(``presses_left_out``: each one's onset and release, s on the mocap clock).
+``lost`` and its ``length_s``, where it starts on the stream's own clock (``after_s``) and on
+the mocap's (``at_s``), whether it was ``bridged`` (at most 2 samples, a whole number of
+periods: a straight line across it, no press left out), the frames ``[first, last + 1)`` it
+reaches (its lost frames, or the frames whose force was resampled from its edge; null when
+none) and the presses it cost (``presses_left_out``: each one's onset and release, s on the
+mocap clock).
 
 ``calibration/`` holds what sync measured, with its uncertainty: the cluster shape and tip
 offset (pivot calibration), the force bias and tare interval at the start of the log, the rest

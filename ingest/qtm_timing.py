@@ -13,7 +13,7 @@ import numpy as np
 
 from core.holes import find_holes
 from core.series import frame_times_ns, time_to_ns
-from ingest.qtm_header import TIME_PRINT_S, event_problem, rate_problem
+from ingest.qtm_header import event_problem, rate_problem
 from ingest.qtm_scan import QtmHead, key_line
 
 
@@ -37,8 +37,7 @@ def frame_times(head: QtmHead, t: np.ndarray | None, n: int) -> tuple[np.ndarray
         i = int(bad[0]) + 1
         raise head.bad(f"Time is not increasing ({t[i]:g} s after {t[i - 1]:g} s, frame {i})",
                        head.first_line + i)
-    timing = find_holes(ns, head.path, "frames", TIME_PRINT_S * 1e9,
-                        where=lambda i: f"line {head.first_line + i}")
+    timing = find_holes(ns, head.path, "frames", where=lambda i: f"line {head.first_line + i}")
     if freq is None:
         return ns, 1e9 / timing.period_ns if steps.size else float("nan")
     recorded = sum(float(ns[b - 1] - ns[a]) for a, b in timing.stretches(n))

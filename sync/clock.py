@@ -29,6 +29,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from core.errors import BadInput
+from core.holes import JUMP, stamp_resolution_ns
 
 MAX_DRIFT_PPM = 200.0      # a crystal oscillator drifts tens of ppm; hundreds is no lock
 MAX_OFFSET_SD_S = 5e-3     # a data lock must pin the offset to a few mocap frames
@@ -121,7 +122,7 @@ def rising_edges(time_s: np.ndarray, signal: np.ndarray, threshold: float | None
         threshold = 0.5 * (lo + hi)
     below = np.where(ok, x < threshold, True)
     step = np.diff(t)
-    adjacent = step < 1.9 * np.median(step)
+    adjacent = step < JUMP * np.median(step)
     i = np.flatnonzero(below[:-1] & ~below[1:] & ok[:-1] & ok[1:] & adjacent)
     frac = (threshold - x[i]) / (x[i + 1] - x[i])
     return t[i] + frac * (t[i + 1] - t[i])
@@ -189,13 +190,8 @@ def match_trigger(
 
 
 def stamp_resolution_s(time_ns: np.ndarray) -> float:
-    """The coarsest power-of-ten step (1 ns .. 1 s) that every time stamp is a multiple of:
-    the rounding of times written with a fixed number of decimals (events to the ms)."""
-    t = np.asarray(time_ns, np.int64)
-    step = 1
-    while step < 10**9 and t.size and np.all(t % (step * 10) == 0):
-        step *= 10
-    return step * 1e-9
+    """The rounding of written time stamps (s): :func:`core.holes.stamp_resolution_ns`."""
+    return stamp_resolution_ns(time_ns) * 1e-9
 
 
 def _pairs(e: np.ndarray, m: np.ndarray, to_logger: Callable[[np.ndarray], np.ndarray],

@@ -21,13 +21,15 @@ LOST = np.uint8(8)     # quality bit: the frame was never recorded (a hole, :mod
 
 
 def fill_gaps(
-    time_s: np.ndarray, positions: np.ndarray, max_gap_s: float = 0.020, support: int = 16
+    time_s: np.ndarray, positions: np.ndarray, max_gap_s: float = 0.020, support: int = 16,
+    never: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fill short gaps of each point in ``positions`` (T, P, 3) sampled at ``time_s`` (T,).
 
     A gap's length is its number of missing frames times the frame period (a single missing
-    frame at 500 Hz is a 2 ms gap; 20 ms is ten frames). Returns the filled copy and
-    per-(frame, point) flags: ``FILLED`` or ``MISSING``.
+    frame at 500 Hz is a 2 ms gap; 20 ms is ten frames); a gap that runs over a frame of
+    ``never`` (T,) (a hole's: nothing was recorded there) is not filled, however short.
+    Returns the filled copy and per-(frame, point) flags: ``FILLED`` or ``MISSING``.
     """
     t = np.asarray(time_s, float)
     out = np.array(positions, float, copy=True)
@@ -36,7 +38,7 @@ def fill_gaps(
     for p in range(out.shape[1]):
         missing = ~np.isfinite(out[:, p]).all(axis=1)
         for a, b in true_runs(missing):
-            inner = a > 0 and b < len(t)
+            inner = a > 0 and b < len(t) and (never is None or not never[a:b].any())
             if inner and (t[b] - t[a - 1]) - period <= max_gap_s + 1e-9:
                 ends = [a - 1, b]
                 secant = (out[b, p] - out[a - 1, p]) / (t[b] - t[a - 1])

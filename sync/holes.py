@@ -5,15 +5,18 @@ stream's own clock; jitter stays bad input). Sync never interpolates across one:
 
 - the mocap's lost frames come back as frames with no marker in them (:func:`regular_frames`),
   so every later step keeps its uniform frame axis and sees the hole as missing data, flagged
-  ``lost`` in the synced file's quality bits;
+  ``lost`` in the synced file's quality bits, never filled in (nor a marker gap that runs into
+  it);
 - the force log is resampled stretch by stretch (:mod:`sync.resample`); the frames whose force
   the resampler read from a hole's edge are flagged ``in_hole`` in the force bits;
-- a hole of at most :data:`BRIDGED` lost samples (a real-time client that drops a frame under
-  load, a DAQ that slips one sample) is bridged: a straight line between its neighbours for
-  the force, the marker gap filler for the mocap, well below either stream's noise;
-- a press whose loaded span, widened by the filters' reach, touches a hole is left out, after
+- a hole of at most :data:`BRIDGED` lost samples that is a whole number of periods (a real-time
+  client that drops a frame under load, a DAQ that slips one sample) is bridged: a straight
+  line between its neighbours for the force, the marker gap filler for the mocap (where it
+  fills that short a gap); it is still named and recorded, and costs no press;
+- a press is left out when a hole reaches into its record (its loaded span with sync's
+  margins, and at least the tip filter's reach: every frame its states are read from), after
   it has been given its location (so the other presses keep theirs), and said
-  (:func:`touched`, :func:`hole_lines`).
+  (:func:`leave_out_touched`, :func:`hole_line`).
 """
 
 from __future__ import annotations
@@ -35,35 +38,49 @@ PRESSING_M = 1e-3   # a tip this deep below the rest plane during a hole was pre
 
 @dataclass(frozen=True)
 class SessionHoles:
-    """The holes of a session's two streams, each on its own clock (the force log's holes
-    after bridging), and the frames that stand for lost mocap frames."""
+    """The holes of a session's two streams, each on its own clock: those kept (the presses
+    they reach are left out) and those bridged; and the frames that stand for the kept
+    holes' lost mocap frames."""
 
     mocap: tuple[Hole, ...]
     force: tuple[Hole, ...]
-    lost: np.ndarray            # (T,) bool, on the regular frame axis: a hole's frame
+    lost: np.ndarray            # (T,) bool, on the regular frame axis: a kept hole's frame
+    bridged_mocap: tuple[Hole, ...] = ()
+    bridged_force: tuple[Hole, ...] = ()
 
 
-def session_holes(raw: RawSession) -> tuple[RawSession, SessionHoles]:
-    """The session on a regular mocap frame axis and a bridged force log, and its holes.
+def session_holes(raw: RawSession, max_gap_s: float) -> tuple[RawSession, SessionHoles]:
+    """The session on a regular mocap frame axis and a bridged force log, and its holes; a
+    short mocap hole is bridged only where the gap filler fills ``max_gap_s``.
 
     Jitter in either stream is bad input (:func:`core.holes.find_holes`)."""
     mk = raw.markers
     mocap = find_holes(mk.time_ns, mk.source, "mocap frames")
-    markers, lost = regular_frames(mk, mocap)
+    short_mocap = [h for h in mocap.holes if bridgeable(h) and
+                   h.lost * h.period_ns * 1e-9 <= max_gap_s + 1e-9]
+    markers, lost = regular_frames(mk, mocap, short_mocap)
     force_timing = find_holes(raw.force.time_ns, raw.force.source, "force samples")
-    force = bridge(raw.force, force_timing)
-    kept = tuple(h for h in force_timing.holes if h.lost > BRIDGED)
-    holes = SessionHoles(tuple(h for h in mocap.holes if h.lost > BRIDGED), kept, lost)
-    return replace(raw, markers=markers, force=force), holes
+    short_force = [h for h in force_timing.holes if bridgeable(h)]
+    holes = SessionHoles(tuple(h for h in mocap.holes if h not in short_mocap),
+                         tuple(h for h in force_timing.holes if h not in short_force), lost,
+                         tuple(short_mocap), tuple(short_force))
+    return replace(raw, markers=markers, force=bridge(raw.force, short_force)), holes
 
 
-def regular_frames(markers: MarkerSeries, timing: Timing) -> tuple[MarkerSeries, np.ndarray]:
+def bridgeable(hole: Hole) -> bool:
+    """A hole of at most :data:`BRIDGED` lost samples, a whole number of periods long."""
+    return hole.lost <= BRIDGED and hole.whole
+
+
+def regular_frames(markers: MarkerSeries, timing: Timing, bridged: list[Hole] | None = None
+                   ) -> tuple[MarkerSeries, np.ndarray]:
     """``markers`` with a frame of NaN markers for each frame a hole lost, at the times the
     frames would have had (a pause that is no whole number of frames ends on the next real
-    frame); and which frames are a long hole's (more than :data:`BRIDGED` lost: never
-    filled in)."""
+    frame); and which frames are a kept hole's (every hole's but the ``bridged`` ones, which
+    the gap filler may fill)."""
     if not timing.holes:
         return markers, np.zeros(markers.frames, bool)
+    bridged = bridged or []
     times, index, long_hole = [], [], []
     start = 0
     for h in timing.holes:
@@ -71,7 +88,7 @@ def regular_frames(markers: MarkerSeries, timing: Timing) -> tuple[MarkerSeries,
         fill = fill[fill < h.stop_ns]
         times += [markers.time_ns[start:h.index], fill]
         index += [np.arange(start, h.index), np.full(len(fill), -1)]
-        long_hole += [np.zeros(h.index - start, bool), np.full(len(fill), h.lost > BRIDGED)]
+        long_hole += [np.zeros(h.index - start, bool), np.full(len(fill), h not in bridged)]
         start = h.index
     times.append(markers.time_ns[start:])
     index.append(np.arange(start, markers.frames))
@@ -87,11 +104,9 @@ def regular_frames(markers: MarkerSeries, timing: Timing) -> tuple[MarkerSeries,
                    residuals=residuals), np.concatenate(long_hole)
 
 
-def bridge(force: ForceSeries, timing: Timing) -> ForceSeries:
-    """The force log with each hole of at most :data:`BRIDGED` lost samples filled by a
-    straight line between its neighbours (values and trigger); longer holes stay jumps."""
-    short = [h for h in timing.holes if h.lost <= BRIDGED and
-             abs((h.stop_ns - h.start_ns) / h.period_ns - (h.lost + 1)) < 0.5]
+def bridge(force: ForceSeries, short: list[Hole]) -> ForceSeries:
+    """The force log with each of the ``short`` holes (:func:`bridgeable`) filled by a
+    straight line between its neighbours (values and trigger); other holes stay jumps."""
     if not short:
         return force
     t = force.time_ns
@@ -113,36 +128,51 @@ class HoleSpan:
     source: str
     hole: Hole
     frames: np.ndarray          # (T,) bool
+    at_s: float                 # where it starts on the mocap clock (s)
+    bridged: bool = False       # bridged: it reaches no frame and costs no press
     presses: list[Press] = field(default_factory=list)
+
+    @property
+    def unit(self) -> str:
+        return "frames" if self.stream == "mocap" else "samples"
 
 
 def hole_spans(holes: SessionHoles, raw: RawSession, t_log_s: np.ndarray, reach_s: float
                ) -> list[HoleSpan]:
     """Every hole of both streams with the mocap frames it reaches: a mocap hole its lost
     frames; a force hole the frames whose logger time ``t_log_s`` lies in it or within the
-    resampler's ``reach_s`` of it."""
+    resampler's ``reach_s`` of it; a bridged hole none."""
     t_m = raw.markers.time_ns
+    none = np.zeros(len(t_m), bool)
     spans = [HoleSpan("mocap", raw.markers.source, h,
-                      holes.lost & (t_m > h.start_ns) & (t_m < h.stop_ns))
-             for h in holes.mocap]
-    for h in holes.force:
-        near = (t_log_s >= h.start_ns * 1e-9 - reach_s) & (t_log_s <= h.stop_ns * 1e-9 + reach_s)
-        spans.append(HoleSpan("force", raw.force.source, h, near))
-    return spans
+                      none if bridged else holes.lost & (t_m > h.start_ns) & (t_m < h.stop_ns),
+                      h.start_ns * 1e-9, bridged)
+             for bridged, group in ((False, holes.mocap), (True, holes.bridged_mocap))
+             for h in group]
+    ok = np.isfinite(t_log_s)
+    for bridged, group in ((False, holes.force), (True, holes.bridged_force)):
+        for h in group:
+            lo, hi = h.start_ns * 1e-9 - reach_s, h.stop_ns * 1e-9 + reach_s
+            near = none if bridged else ok & (t_log_s >= lo) & (t_log_s <= hi)
+            at = float(np.interp(h.start_ns * 1e-9, t_log_s[ok], t_m[ok] * 1e-9))
+            spans.append(HoleSpan("force", raw.force.source, h, near, at, bridged))
+    return sorted(spans, key=lambda s: s.at_s)
 
 
 def touch_reach(rate_hz: float, p: SyncParams) -> int:
-    """Frames a mocap hole reaches into the tip through its low-pass: half the filter's length
-    (at least one frame)."""
+    """Frames a hole reaches into a press's record: sync's margin (every frame its states are
+    read from, the rest before contact included), and at least half the tip filter's length
+    (what the filter spreads a hole's edge over)."""
+    margin = int(round(p.margin_s * rate_hz))
     if p.tip_cutoff_hz <= 0 or p.tip_cutoff_hz >= 0.25 * rate_hz:
-        return 1
-    return max(len(smoothing_taps(rate_hz, p.tip_cutoff_hz)) // 2, 1)
+        return max(margin, 1)
+    return max(margin, len(smoothing_taps(rate_hz, p.tip_cutoff_hz)) // 2, 1)
 
 
 def leave_out_touched(presses: list[Press], spans: list[HoleSpan], reach: int) -> list[Press]:
     """The presses no hole touches: none of the frames a hole reaches lies in a press's
-    loaded span widened by ``reach`` frames (the tip's low-pass). Each span keeps the presses
-    it cost."""
+    loaded span widened by ``reach`` frames (:func:`touch_reach`). Each span keeps the
+    presses it cost."""
     kept = []
     for pr in presses:
         lo, hi = max(pr.onset - reach, 0), pr.release + reach
@@ -154,26 +184,39 @@ def leave_out_touched(presses: list[Press], spans: list[HoleSpan], reach: int) -
     return kept
 
 
-def hole_line(span: HoleSpan, time_ns: np.ndarray, depth: np.ndarray) -> str:
-    """One warning line: the file, the hole, and the presses it cost (a press the force
-    hole swallowed whole is seen by the tip's ``depth`` alone)."""
+def hole_line(span: HoleSpan, time_ns: np.ndarray, depth: np.ndarray,
+              found: list[Press] = (), reach: int = 0) -> str:
+    """One warning line: the file, the hole (on its stream's clock, and on the mocap's for a
+    force hole), and what it cost: the presses left out, or a press the force hole swallowed
+    whole, seen by the tip's ``depth`` below the surface away from every ``found`` press
+    (widened by ``reach`` frames)."""
     what = "mocap frames" if span.stream == "mocap" else "force samples"
+    where = "" if span.stream == "mocap" else \
+        f" of the log ({span.at_s:.3f} s on the mocap clock)"
+    head = f"{span.source}: {span.hole.describe(what, span.unit)}{where}"
+    if span.bridged:
+        return (f"{head}: bridged by a straight line (at most {BRIDGED} {span.unit}); no "
+                "press left out")
     cost = "; ".join(f"the press at {_span_s(pr, time_ns)}"
                      f"{f' (location {pr.location})' if pr.location >= 0 else ''} left out"
                      for pr in span.presses)
     if not cost:
-        deepest = np.nanmax(depth[span.frames], initial=-np.inf)
+        away = span.frames.copy()
+        for pr in found:
+            away[max(pr.onset - reach, 0):pr.release + reach] = False
+        deepest = np.nanmax(depth[away], initial=-np.inf)
         cost = (f"the tip pressed {deepest * 1e3:.1f} mm deep during it: that press is lost"
                 if deepest > PRESSING_M else "no press touched")
-    return f"{span.source}: {span.hole.describe(what)}: {cost}"
+    return f"{head}: {cost}"
 
 
 def hole_record(span: HoleSpan, time_ns: np.ndarray) -> dict[str, Any]:
-    """A hole as JSON values for the synced file (times on the mocap clock, s)."""
+    """A hole as JSON values for the synced file (times on the mocap clock, s, but
+    ``after_s``, on the stream's own)."""
     frames = np.flatnonzero(span.frames)
     return {"stream": span.stream, "source": span.source, "lost": span.hole.lost,
-            "length_s": span.hole.length_s,
-            "after_s": span.hole.start_ns * 1e-9,          # on the stream's own clock
+            "length_s": span.hole.length_s, "bridged": span.bridged,
+            "after_s": span.hole.start_ns * 1e-9, "at_s": span.at_s,
             "frames": [int(frames[0]), int(frames[-1]) + 1] if frames.size else None,
             "presses_left_out": [[float(time_ns[pr.onset] * 1e-9),
                                   float(time_ns[pr.release - 1] * 1e-9)]

@@ -121,29 +121,21 @@ class PressRecord:
     rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
 
 
-def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int,
-                barrier: np.ndarray | None = None) -> list[PressRecord]:
-    """Each press with ``margin`` frames either side (never into a neighbouring press, nor
-    into a ``barrier`` frame: a hole's)."""
+def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int
+                ) -> list[PressRecord]:
+    """Each press with ``margin`` frames either side (never into a neighbouring press)."""
     out = []
     for k in range(len(presses)):
-        local, lo, hi = cut_span(presses, k, len(series["time_ns"]), margin, barrier)
+        local, lo, hi = cut_span(presses, k, len(series["time_ns"]), margin)
         out.append(PressRecord(local, **{key: v[lo:hi] for key, v in series.items()},
                                rest=np.zeros((2, 6))))
     return out
 
 
-def cut_span(presses: list[Press], k: int, frames: int, margin: int,
-             barrier: np.ndarray | None = None) -> tuple[Press, int, int]:
+def cut_span(presses: list[Press], k: int, frames: int, margin: int) -> tuple[Press, int, int]:
     """Press ``k`` of a series of ``frames`` frames cut out with ``margin`` frames either side,
-    never into a neighbouring press nor a ``barrier`` frame (a hole's, none inside the press):
-    the press on the cut's frames, and the cut [lo, hi)."""
+    never into a neighbouring press: the press on the cut's frames, and the cut [lo, hi)."""
     pr = presses[k]
     lo = max(pr.onset - margin, presses[k - 1].release if k else 0, 0)
     hi = min(pr.release + margin, presses[k + 1].onset if k + 1 < len(presses) else frames)
-    if barrier is not None:
-        before = np.flatnonzero(barrier[lo:pr.onset])
-        after = np.flatnonzero(barrier[pr.release:hi])
-        lo = lo + int(before[-1]) + 1 if before.size else lo
-        hi = pr.release + int(after[0]) if after.size else hi
     return Press(pr.onset - lo, pr.release - lo, pr.peak - lo, pr.location, pr.repeat), lo, hi

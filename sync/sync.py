@@ -66,7 +66,7 @@ from sync.presses import Press, PressRecord, assign_locations, cut_presses, segm
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
 from sync.surface import contact_points, tip_depth
-from sync.sync_params import SyncParams, check_params
+from sync.sync_params import SyncParams
 from sync.tip_track import check_cluster, track_tip
 
 POOR_FIT = np.uint8(QUALITY_BITS["poor_fit"])
@@ -100,8 +100,7 @@ class SyncResult:
 def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResult:
     """Synchronise a raw session (see the module docstring for the steps)."""
     p = params or SyncParams()
-    check_params(p)
-    raw, holes = session_holes(raw)
+    raw, holes = session_holes(raw, p.max_gap_s)
     mk = raw.markers
     rate = float(mk.rate_hz)
     t_m = mk.time_ns.astype(np.float64) * 1e-9
@@ -137,16 +136,17 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     found, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
     loc_centres = place(found, contact_points(points[:, -1], found, surface_point, normal),
                         p.location_radius_m)
-    presses = leave_out_touched(found, on.spans, touch_reach(rate, p))
+    reach = touch_reach(rate, p)
+    presses = leave_out_touched(found, on.spans, reach)
     for span in on.spans:
-        warn(hole_line(span, mk.time_ns, depth))
+        warn(hole_line(span, mk.time_ns, depth, found, reach))
     if not presses:
         raise BadInput(raw.force.source, _no_press(p, cut_off, len(found)))
     check_cluster(raw, pose, presses)
     series = {"time_ns": mk.time_ns, "points": points, "quality": quality, "force": force,
               "torque": torque, "force_magnitude": magnitude, "depth": depth,
               "force_quality": force_q}
-    records = cut_presses(presses, series, int(round(p.margin_s * rate)), on.hole_frames)
+    records = cut_presses(presses, series, int(round(p.margin_s * rate)))
     for rec in records:
         ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
         rec.rest = cf.rest.at(clock.to_logger(ends))
@@ -173,8 +173,7 @@ def session_points(t_m: np.ndarray, phantom: np.ndarray, tip: np.ndarray, lost: 
     """The phantom markers and the tip (T, N + 1, 3) with short gaps filled, a hole's frames
     left empty (flagged ``lost``), the tip low-passed; and their quality bits."""
     points, quality = fill_gaps(t_m, np.concatenate([phantom, tip[:, None]], axis=1),
-                                p.max_gap_s)
-    points[lost] = np.nan
+                                p.max_gap_s, never=lost)
     quality[lost] = MISSING | LOST
     points[:, -1] = lowpass_track(points[:, -1], rate, p.tip_cutoff_hz)
     return points, quality

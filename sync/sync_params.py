@@ -5,8 +5,12 @@ The fields' defaults are the command line's: ``pipeline/sync_cmd.py`` reads them
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import ClassVar
 
+from core.bounds import Bound, check_bounds
 from core.errors import BadInput
 
 CLOCKS = ("auto", "trigger", "data")   # the clock alignments --clock names
@@ -14,9 +18,10 @@ CLOCKS = ("auto", "trigger", "data")   # the clock alignments --clock names
 
 @dataclass(frozen=True)
 class SyncParams:
-    """Every setting of the sync stage (stored in the output's provenance)."""
+    """Every setting of the sync stage (stored in the output's provenance); bad input, in one
+    line naming the setting, where one is out of its bounds."""
 
-    clock: str = "auto"              # auto (trigger when recorded, else data) | trigger | data
+    clock: str = CLOCKS[0]           # auto (trigger when recorded, else data) | trigger | data
     max_gap_s: float = 0.020         # longest marker gap filled
     margin_s: float = 0.5            # unloaded frames kept before onset and after release
     detect_n: float = 0.5            # a press must rise above this force
@@ -32,25 +37,26 @@ class SyncParams:
     min_correlation: float = 0.5     # data-driven clock: force must follow the depth this well
     retare: bool = True              # re-tare from the rest next to every press (False: start)
 
+    # > 0, or >= 0 where 0 means off (or none); the command line's options read them here
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "max_gap_s": Bound(0, unit="s"),
+        "margin_s": Bound(0, unit="s"),
+        "robust_scale_m": Bound(0, unit="m"),
+        "tip_cutoff_hz": Bound(0, unit="Hz"),
+        "location_radius_m": Bound(0, min_open=True, unit="m"),
+        "detect_n": Bound(0, min_open=True, unit="N"),
+        "contact_n": Bound(0, min_open=True, unit="N"),
+        "max_fit_rms_m": Bound(0, min_open=True, unit="m"),
+        "max_offset_s": Bound(0, min_open=True, unit="s"),
+        "passband": Bound(0, 1, min_open=True, max_open=True),
+    })
 
-# The numbers that must be > 0, and those that must be >= 0 (0: off, or none): check_params
-# refuses the rest, and the command line's options take their bounds from here.
-POSITIVE = ("location_radius_m", "detect_n", "contact_n", "max_fit_rms_m")
-AT_LEAST_ZERO = ("max_gap_s", "margin_s", "robust_scale_m", "tip_cutoff_hz")
+    def __post_init__(self) -> None:
+        check_params(self)
 
 
 def check_params(p: SyncParams) -> None:
     """Refuse settings outside their meaning (the CLI checks its options the same way)."""
     if p.clock not in CLOCKS:
-        raise BadInput(None, f"--clock must be {', '.join(CLOCKS[:-1])} or {CLOCKS[-1]}, got "
-                             f"{p.clock!r}")
-    for name in POSITIVE + AT_LEAST_ZERO:
-        value, strict = getattr(p, name), name in POSITIVE
-        if not (value > 0 if strict else value >= 0):
-            raise BadInput(None, f"sync parameter {name} must be "
-                                 f"{'positive' if strict else 'zero or more'}, got {value:g}")
-    if p.max_offset_s is not None and not p.max_offset_s > 0:
-        raise BadInput(None, f"sync parameter max_offset_s must be positive or None, got "
-                             f"{p.max_offset_s:g}")
-    if not 0 < p.passband < 1:
-        raise BadInput(None, f"sync parameter passband must be in (0, 1), got {p.passband:g}")
+        raise BadInput(None, f"clock {p.clock!r}: must be one of {', '.join(CLOCKS)}")
+    check_bounds(p, p.BOUNDS)

@@ -236,13 +236,14 @@ def _presses(rec: rr.RecordingStream, r: SyncResult) -> None:
 
 
 def _holes(rec: rr.RecordingStream, r: SyncResult) -> None:
-    """A warning at the first frame each hole reaches: what was lost and what it cost."""
-    holes = [h for h in r.holes if h["frames"] is not None]
-    if not holes:
+    """A warning where each hole starts (mocap clock): what was lost and what it cost."""
+    if not r.holes:
         return
-    times = np.array([r.session["time_ns"][h["frames"][0]] for h in holes], np.int64)
-    what = {"mocap": "mocap frames", "force": "force samples"}
-    text = [f"hole: {h['length_s']:.3f} s of {what[h['stream']]} lost ({h['lost']} samples), "
-            f"{count(len(h['presses_left_out']), 'press')} left out" for h in holes]
+    times = np.array([round(h["at_s"] * 1e9) for h in r.holes], np.int64)
+    what = {"mocap": ("mocap frames", "frames"), "force": ("force samples", "samples")}
+    text = [f"hole: {h['length_s']:.3f} s of {what[h['stream']][0]} lost ({h['lost']} "
+            f"{what[h['stream']][1]}), " + ("bridged" if h["bridged"] else
+                                            f"{count(len(h['presses_left_out']), 'press')} "
+                                            "left out") for h in r.holes]
     rec.send_columns("presses", indexes=[time_column(TIMELINE, times)],
                      columns=rr.TextLog.columns(text=text, level=["WARN"] * len(text)))

@@ -143,9 +143,10 @@ class Connection:
         self._device = device
         self._send(StreamFrames((Component.THREE_D, DEVICE_COMPONENTS[device.component])))
         self._streaming = True
+        deadline = self._clock() + self.timeout_s
         while True:
             packet = await self._next(f"sent no frame within {self.timeout_s:g} s of "
-                                      "StreamFrames")
+                                      "StreamFrames", deadline)
             if packet.type == PacketType.DATA:
                 self._queue.insert(0, packet)
                 return
@@ -155,6 +156,9 @@ class Connection:
             if packet.type == PacketType.NO_MORE_DATA:
                 raise BadInput(self.source, "has no frames to stream (no more data: is QTM "
                                             "capturing, or playing a file in real time?)")
+            if packet.type == PacketType.EVENT and \
+                    (why := END_EVENTS.get(decode_event(packet.payload))) is not None:
+                raise BadInput(self.source, f"sent no frame: {why}")
 
     async def run(self, on_frame: Callable[[Frame], None], duration_s: float | None
                   ) -> Ending:
@@ -201,7 +205,10 @@ class Connection:
     # -- the dialogue before streaming ------------------------------------------------------
 
     async def _greeting(self) -> None:
-        packet = await self._next(f"did not greet within {self.timeout_s:g} s")
+        deadline = self._clock() + self.timeout_s
+        packet = await self._next(f"did not greet within {self.timeout_s:g} s", deadline)
+        while packet.type == PacketType.EVENT:
+            packet = await self._next(f"did not greet within {self.timeout_s:g} s", deadline)
         text = text_of(packet.payload)
         if packet.type == PacketType.ERROR:
             raise BadInput(self.source, f"refused the connection: {text}")
@@ -219,20 +226,24 @@ class Connection:
         """Send ``command`` and return its answer (an XML or command packet); events that
         come first are passed by; an error packet is QTM's refusal of ``what``."""
         self._send(command)
+        deadline = self._clock() + self.timeout_s     # events do not extend it
         while True:
             packet = await self._next(f"did not answer {command_text(command)!r} within "
-                                      f"{self.timeout_s:g} s")
+                                      f"{self.timeout_s:g} s", deadline)
             if packet.type == PacketType.ERROR:
                 raise BadInput(self.source, f"refused {what}: {text_of(packet.payload)}")
             if packet.type in (PacketType.COMMAND, PacketType.XML):
                 return packet
 
-    async def _next(self, silent: str) -> Packet:
-        """The next packet, waiting at most ``timeout_s``: bad input ``silent`` after it, or
-        where the server closes the connection or sends what is no packet."""
+    async def _next(self, silent: str, deadline: float | None = None) -> Packet:
+        """The next packet, waiting until ``deadline`` (the loop's clock; default
+        ``timeout_s`` from now): bad input ``silent`` after it, or where the server closes the
+        connection or sends what is no packet."""
+        deadline = self._clock() + self.timeout_s if deadline is None else deadline
         while not self._queue:
             try:
-                data = await asyncio.wait_for(self._reader.read(READ_BYTES), self.timeout_s)
+                data = await asyncio.wait_for(self._reader.read(READ_BYTES),
+                                              max(deadline - self._clock(), 0.0))
             except TimeoutError:
                 raise BadInput(self.source, silent) from None
             except OSError as e:

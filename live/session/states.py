@@ -208,8 +208,8 @@ def coverage(taken: list[LivePress]) -> list[Coverage]:
 
 class OnlineStates:
     """Presses queued as they end, taken once their stretch is complete: sync's and extract's
-    steps on a worker thread (a press costs some 50-200 ms, 25-100 frames at 500 Hz: the
-    frames go on meanwhile), the results taken back in order."""
+    steps on a worker thread (a press costs many frames' time: the frames go on meanwhile),
+    the results taken back in order."""
 
     def __init__(self, cfg: SessionConfig, layout: LiveLayout, tip: TipModel, history: History,
                  surface: Surface, force: Conditioning, sync: SyncParams | None = None,
@@ -365,7 +365,7 @@ def press_record(stretch: tuple[np.ndarray, ...], done: PressDone, on: OnlineSta
     None where sync's segmentation finds no complete press at its peak."""
     t_ns, markers, f_ns, values, flags = stretch
     p, rate = on.sync, on.layout.rate_hz
-    raw, holes = session_holes(on.stretch_session(t_ns, markers, f_ns, values))
+    raw, holes = session_holes(on.stretch_session(t_ns, markers, f_ns, values), p.max_gap_s)
     t_m, frames = raw.markers.time_ns * 1e-9, raw.markers.positions
     tip = on.tip.tips(frames[:, on.phantom:], p)
     points, _ = session_points(t_m, frames[:, :on.phantom], tip, holes.lost, rate, p)
@@ -381,11 +381,10 @@ def press_record(stretch: tuple[np.ndarray, ...], done: PressDone, on: OnlineSta
         return None
     loaded = presses[hit[0]]
     if not leave_out_touched([loaded], on_frames.spans, touch_reach(rate, p)):
-        lines = [hole_line(s, raw.markers.time_ns, np.full(len(t_m), np.nan))
+        lines = [hole_line(s, raw.markers.time_ns, np.full(len(t_m), np.nan), presses)
                  for s in on_frames.spans if s.presses]
         return Touched(Cut(loaded, raw.markers.time_ns, points, magnitude), lines)
-    local, lo, hi = cut_span(presses, hit[0], len(t_m), int(round(p.margin_s * rate)),
-                             on_frames.hole_frames)
+    local, lo, hi = cut_span(presses, hit[0], len(t_m), int(round(p.margin_s * rate)))
     t_f = f_ns * 1e-9
     span = (t_f >= t_m[loaded.onset] - FORCE_PAD_S) & (t_f <= t_m[loaded.release - 1] + FORCE_PAD_S)
     return Cut(local, raw.markers.time_ns[lo:hi], points[lo:hi], magnitude[lo:hi]), \

@@ -81,7 +81,13 @@ class Link:
                 raise BadInput(again.source, "reconnected, but QTM now streams another "
                                              f"capture (its markers, rate or "
                                              f"{before.device.what} changed)")
+            if self._stopped:               # stopped while connecting: no stream started
+                await self.close()
+                return False
             await self.start()
+            if self._stopped:
+                await self.close()
+                return False
             return True
         return False
 

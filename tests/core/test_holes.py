@@ -41,14 +41,15 @@ def test_one_lost_sample_and_a_pause_are_holes() -> None:
 
 @pytest.mark.parametrize("step", [1.2, 1.5, 1.85, 0.85])
 def test_jitter_is_refused_with_its_sample(step: float) -> None:
-    """A step that is neither one period (within 10 %) nor a jump of two or more is jitter."""
+    """A step that is neither one period (within 10 %: exact stamps, a whole number of their
+    0.1 ms resolution a period) nor a jump of two or more is jitter."""
     t = np.arange(50, dtype=np.float64) * MS
     t[20:] += (step - 1) * MS
     with pytest.raises(BadInput) as e:
         find_holes(t.astype(np.int64), "f.csv", "force samples",
                    where=lambda i: f"line {i + 2}")
     assert e.value.path == "f.csv" and e.value.where == "line 22"
-    assert "force samples are not uniformly sampled" in e.value.what
+    assert "force samples are not evenly spaced" in e.value.what
 
 
 def test_written_times_within_their_print_resolution_are_uniform() -> None:
@@ -56,7 +57,7 @@ def test_written_times_within_their_print_resolution_are_uniform() -> None:
     resolution, and a lost frame among them is still a hole."""
     t = np.round(np.arange(300) / 300, 3)
     t = np.delete(t, 150)
-    timing = find_holes(np.round(t * 1e9).astype(np.int64), "m.tsv", resolution_ns=1e6)
+    timing = find_holes(np.round(t * 1e9).astype(np.int64), "m.tsv")
     assert [h.index for h in timing.holes] == [150]
 
 
@@ -74,3 +75,26 @@ def test_sample_numbers_from_a_column_and_from_a_grid() -> None:
         grid_numbers(np.arange(10) / 500, 1000.0, "p.tsv")
     with pytest.raises(BadInput, match="does not increase"):
         counted_numbers(np.r_[1.0, 2, 2, 3], "a.tsv")
+
+
+def test_a_millisecond_print_hides_no_jitter_and_no_lost_sample() -> None:
+    """At 500 Hz written to the millisecond, a frame 1 ms late is jitter (the print's rounding
+    widens the tolerance to at most 45 % of a period); at 1 kHz so written, one lost sample
+    is still a hole."""
+    t = np.arange(100) * 2 * MS
+    t[50:] += MS
+    with pytest.raises(BadInput, match="jitter"):
+        find_holes(t, "m.tsv")
+    (hole,) = find_holes(np.r_[np.arange(10), np.arange(11, 30)] * MS, "f.csv").holes
+    assert hole.lost == 1 and hole.whole
+
+
+def test_a_long_hole_at_300_hz_counts_its_frames_exactly() -> None:
+    """QTM writes 300 Hz times with 5 decimals (steps of 3.33 and 3.34 ms): 1500 frames lost
+    are 1500, not the 1502 the median step would give."""
+    frames = np.r_[np.arange(3000), np.arange(4500, 6000)]
+    t = np.round(np.round(frames / 300, 5) * 1e9).astype(np.int64)
+    (hole,) = find_holes(t, "m.tsv").holes
+    assert hole.lost == 1500 and hole.whole
+    assert not find_holes(np.r_[np.arange(10) * 10, 124 + np.arange(10) * 10] * MS,
+                          "f.csv").holes[0].whole

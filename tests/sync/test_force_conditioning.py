@@ -199,7 +199,7 @@ def test_a_jittered_or_short_log_is_refused_and_a_hole_is_found() -> None:
     with pytest.raises(BadInput) as e:
         force_times(_raw(np.zeros((200, 6)), time_ns=t))
     assert e.value.path == "force.csv" and e.value.where == "sample 100"
-    assert "not uniformly sampled: a step of 1.200 ms where the period is 1.000 ms" \
+    assert "not evenly spaced: a step of 1.200 ms where the period is 1.000 ms" \
         in e.value.what
     t[100:] -= 50_000                                   # 0.15 ms: 15 %, still refused
     with pytest.raises(BadInput):

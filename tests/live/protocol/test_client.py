@@ -5,19 +5,31 @@ anything else. The client's dialogue and its failures: tests/live/session/test_l
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import time
+
 import numpy as np
 import pytest
 
-from live.protocol.client import decode_frame
+from core.errors import BadInput
+from live.protocol.client import connect, decode_frame
+from live.protocol.commands import GREETING
 from live.protocol.packets import (
     AnalogBlock,
+    Event,
     ForceBlock,
+    PacketReader,
     ProtocolError,
     encode_3d,
     encode_analog,
+    encode_command,
     encode_data,
+    encode_event,
     encode_force,
+    text_of,
 )
+from live.protocol.parameters import AnalogDevice
 
 
 def _payload(number: int, markers: np.ndarray, boards: list[AnalogBlock],
@@ -83,3 +95,62 @@ def test_corrupted_bytes_decode_or_are_a_protocol_error() -> None:
         decoded += 1
         assert frame.markers.size * 4 <= len(data)
     assert 0 < decoded < 3000
+
+
+def _scripted(handler) -> tuple[asyncio.AbstractServer, int]:
+    """A server on a free port whose connections ``handler(reader, writer)`` serves."""
+    async def start() -> tuple[asyncio.AbstractServer, int]:
+        server = await asyncio.start_server(handler, "127.0.0.1", 0)
+        return server, server.sockets[0].getsockname()[1]
+    return start()
+
+
+def test_events_do_not_keep_a_silent_server_waiting() -> None:
+    """A server that greets, then only sends events every 0.2 s and never answers the version:
+    refused once the step's 1 s has passed, not kept waiting by each event."""
+    async def handler(reader, writer) -> None:
+        writer.write(encode_command(GREETING))
+        with contextlib.suppress(ConnectionError):
+            for _ in range(40):
+                writer.write(encode_event(Event.CAPTURE_STARTED))
+                await writer.drain()
+                await asyncio.sleep(0.2)
+        writer.close()
+
+    async def run() -> float:
+        server, port = await _scripted(handler)
+        tic = time.perf_counter()
+        with pytest.raises(BadInput, match="did not answer"):
+            await connect("127.0.0.1", port, 1.0)
+        server.close()
+        return time.perf_counter() - tic
+
+    assert asyncio.run(run()) < 3.0
+
+
+def test_a_recording_that_ends_before_its_first_frame_says_so_at_once() -> None:
+    """QTM stops playing the file before a frame is sent: the stream start is refused in its
+    words, without waiting out the timeout."""
+    async def handler(reader, writer) -> None:
+        writer.write(encode_command(GREETING))
+        packets = PacketReader()
+        while data := await reader.read(1024):
+            for p in packets.feed(data):
+                text = text_of(p.payload)
+                if text.startswith("Version"):
+                    writer.write(encode_command("Version set to 1.25"))
+                elif text.startswith("StreamFrames"):
+                    writer.write(encode_event(Event.RT_FROM_FILE_STOPPED))
+        writer.close()
+
+    async def run() -> float:
+        server, port = await _scripted(handler)
+        connection = await connect("127.0.0.1", port, 5.0)
+        tic = time.perf_counter()
+        with pytest.raises(BadInput, match="QTM stopped playing the file"):
+            await connection.start(AnalogDevice(1, "board", 1000.0, ["a"], ["V"]))
+        await connection.close()
+        server.close()
+        return time.perf_counter() - tic
+
+    assert asyncio.run(run()) < 2.0
