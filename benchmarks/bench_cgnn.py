@@ -45,7 +45,7 @@ from torch import nn
 from train.inference.predictor import DEFAULT_REGION, Predictor
 from train.inference.si_model import ENTRIES, SIModel, to_onnx
 from train.model.cgnn import CGNN
-from train.model.config import CGNNConfig
+from train.model.config import CGNNConfig, Offsets
 from train.model.normalise import Envelope, Normaliser
 from train.model.si_units import deformed, newtons
 from train.training.loop import adam
@@ -148,8 +148,8 @@ class PeerPredictor:
 
 # The networks timed: the tip's offsets nowhere, in the heads, in the first layer
 NETWORKS = {"the paper's network": CGNNConfig(),
-            "head offsets": CGNNConfig(offsets="heads"),
-            "tip offsets": CGNNConfig(offsets="graph")}
+            "head offsets": CGNNConfig(offsets=Offsets.HEADS),
+            "tip offsets": CGNNConfig(offsets=Offsets.GRAPH)}
 
 
 READS = {True: "its graph layers read the press: every press runs them",

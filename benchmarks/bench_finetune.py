@@ -3,14 +3,16 @@ settings, from the demo's own per-fold pre-trained model (docs/results.md, "Fine
 longer"), so the trade of minutes against pooled L_d can be re-measured.
 
     python benchmarks/bench_finetune.py DEMO_OUT [DEMO_OUT ...] [--settings tl:80 tl:160 \
-        tl:240 tl:160:cosine scratch:160] [--jobs 2] [--out DIR]
+        tl:240 tl:160:cosine scratch:160] [--init GENERIC.pt] [--jobs 2] [--out DIR]
 
 A setting is ``tl`` (from the fold's ``runs/msm_foldK/best.pt``) or ``scratch`` (random
 weights), the epochs, and optionally the schedule and ``preN``: pre-train the fold's MSM run
 again for N epochs (``preN-cosine``: with that schedule; its own options otherwise; beside the
 fine-tuning run, its minutes counted in the setting's) and fine-tune from that
 (``tl:80:pre40``); everything else is the demo's own TL run's options
-(``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). Each run trains on one thread,
+(``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). ``--init`` starts every ``tl``
+setting from that checkpoint instead (one pre-training for every fold and lab: the generic
+model, docs/model.md). Each run trains on one thread,
 ``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK`` (a run
 already there is scored again, not retrained). Printed: per demo and setting the pooled mean
 L_d over the folds' test examples (weighted by their count), each fold's, and the mean minutes
@@ -32,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 FOLDS = 5
 
 
-def fine_tune(job: tuple[Path, int, str, Path]) -> dict:
+def fine_tune(job: tuple[Path, int, str, Path, Path | None]) -> dict:
     """One fold's run of one setting (trained unless its best.pt exists), scored on the fold's
     test examples."""
     import torch
@@ -40,10 +42,10 @@ def fine_tune(job: tuple[Path, int, str, Path]) -> dict:
     torch.set_num_threads(1)
     from train.evaluation.evaluate import metrics, test_errors
 
-    demo, fold, setting, run = job
+    demo, fold, setting, run, generic = job
     start, tune, pre = parse(setting)
     tic = time.perf_counter()
-    init = demo / "runs" / f"msm_fold{fold}" / "best.pt"
+    init = generic or demo / "runs" / f"msm_fold{fold}" / "best.pt"
     if pre:
         init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"), pre)
     trained(demo / "runs" / f"exp_tl_fold{fold}", run, tune, init if start == "tl" else None)
@@ -60,12 +62,14 @@ def parse(setting: str) -> tuple[str, dict, dict | None]:
     start, *parts = setting.split(":")
     epochs, rest = (parts[0] if parts else ""), parts[1:]
     pre = [r[3:] for r in rest if r.startswith("pre")]
-    schedule = [r for r in rest if not r.startswith("pre")]
+    lr = [float(r[2:]) for r in rest if r.startswith("lr")]
+    schedule = [r for r in rest if not r.startswith(("pre", "lr"))]
     if start not in ("tl", "scratch") or len(pre) > 1 or len(schedule) > 1 \
             or (pre and start == "scratch"):
-        raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:preN[-SCHEDULE]]"
-                         " (preN only with tl)")
-    return start, changes(epochs, *schedule), changes(*pre[0].split("-", 1)) if pre else None
+        raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:lrRATE]"
+                         "[:preN[-SCHEDULE]] (preN only with tl)")
+    tune = {**changes(epochs, *schedule), **({"lr": lr[0]} if lr else {})}
+    return start, tune, changes(*pre[0].split("-", 1)) if pre else None
 
 
 def changes(epochs: str, schedule: str | None = None) -> dict:
@@ -126,6 +130,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("demos", nargs="+", type=Path)
     ap.add_argument("--settings", nargs="+", default=["tl:160", "tl:240", "scratch:160"])
+    ap.add_argument("--init", type=Path, default=None,
+                    help="tl settings start from this checkpoint (a generic model)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_finetune"))
     a = ap.parse_args()
@@ -136,10 +142,12 @@ def main() -> None:
         ap.error(str(e))
     from train.evaluation.evaluate import metrics, test_errors
 
-    jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}")
+    if a.init is not None and any(parse(s)[2] for s in a.settings):
+        ap.error("--init and preN exclude each other: preN pre-trains the fold's own model")
+    jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}", a.init)
             for d in a.demos for s in a.settings for f in range(FOLDS)]
     with ProcessPoolExecutor(a.jobs) as pool:
-        done = {(d, s, f): row for (d, f, s, _), row in
+        done = {(d, s, f): row for (d, f, s, _, _), row in
                 zip(jobs, pool.map(fine_tune, jobs), strict=True)}
     print("| demo, setting | pooled mean L_d | per fold | minutes a fold run |")
     print("|---|---|---|---|")

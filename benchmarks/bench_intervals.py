@@ -49,7 +49,7 @@ from train.training.train_stage import run_train  # noqa: E402
 def members(run_dir: Path, out: Path, count: int) -> list[LoadedRun]:
     """The run and ``count - 1`` more trained like it with seeds 1.., loaded."""
     meta = load_checkpoint(run_dir / "best.pt")["meta"]
-    opts, config = TrainOptions(**meta["options"]), CGNNConfig.from_dict(meta["config"])
+    opts, config = TrainOptions.from_dict(meta["options"]), CGNNConfig.from_dict(meta["config"])
     inputs = TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]),
                          Path(meta["init"]) if meta["init"] else None)
     dirs = [run_dir]

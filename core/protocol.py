@@ -7,6 +7,8 @@
   ``step * step_n`` from the file, never from this constant.
 - :data:`FOOTPRINT_M`: the phantom's footprint in the phantom frame by default, 100 x 100 mm
   (the paper's phantom, the MSM's grid): extract centres the marker grid on it.
+- :data:`FOOTPRINT_SIDE`: a footprint side's bounds: no phantom pressed by hand is larger than
+  2 m (the states file's limit of plausible metres is 5 m).
 - :data:`THICKNESS_M`: the phantom's thickness, 32 mm (the twin's block): a surface pressed
   deeper than this went through the phantom (simulate counts the MSM's states beyond it).
 
@@ -19,8 +21,11 @@ stage.
 
 import math
 
+from core.bounds import Bound
+
 STEP_N = 0.5                     # N between force levels
 FOOTPRINT_M = (0.1, 0.1)         # m, width and length of the phantom's footprint
+FOOTPRINT_SIDE = Bound(0, 2.0, min_open=True, unit="m")   # each side of a footprint
 THICKNESS_M = 0.032              # m, the phantom block's thickness
 
 

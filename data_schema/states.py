@@ -1,4 +1,4 @@
-"""``states.h5`` (``phantom.states`` 2.1): static states and the examples built from them.
+"""``states.h5`` (``phantom.states`` 2.2): static states and the examples built from them.
 
 One layout serves extracted lab states and MSM simulations, so our trainer and anybody else's
 read both alike. Everything is in the *phantom frame*: the rest surface at z = 0, +z out of the
@@ -20,16 +20,22 @@ means the same place in MSM and lab data.
   ``states/location`` is a global place id (two sessions share one only when the user says
   so); ``states/session`` indexes the root attribute ``session_names`` (JSON list).
 - MSM only: ``states/mass`` the loaded mass, ``states/force_vector`` the applied force (phantom
-  frame). Lab only: ``states/speed`` the surface speed at the state (m/s), and
-  ``sessions/transform`` (P, 4, 4), each session's source (lab) frame -> phantom frame.
+  frame); MSM drawn from a prior only (2.2, ``simulate --prior``): ``states/phantom`` each
+  state's block, and per block its drawn phantom ``phantoms/*`` (springs, contact radius,
+  footprint, marker count and pitch, scattered or a grid, occluded share, largest force angle);
+  the blocks' marker counts differ, so ``points`` holds the largest count then the tip, the
+  slots a block lacks ``valid`` False. Lab only: ``states/speed`` the surface speed at the
+  state (m/s), and ``sessions/transform`` (P, 4, 4), each session's source (lab) frame ->
+  phantom frame.
 - Examples are index pairs: ``single/*`` (t, t + 1) and ``multi/*`` (t, t + d, d >= 2), both in
   one sequence. An example's input is ``points[start]``, its target ``points[end]``, its
   condition ``C = [tip[start], tip[end]]``, its change of force ``force[end] - force[start]``.
 
 Version 2.0 added the frame, ``valid``, ``session``, ``mass``, ``speed``, the transforms and a
 validator of meaning (:func:`validate_states`); 2.1 the optional root attributes
-``point_names`` and ``footprint_m`` (a 2.0 file is the paper's 100 mm square). 1.0 files are
-refused: regenerate them.
+``point_names`` and ``footprint_m`` (a 2.0 file is the paper's 100 mm square); 2.2 the
+optional ``states/phantom`` and ``phantoms/*`` of a prior's MSM. 1.0 files are refused:
+regenerate them.
 """
 
 from __future__ import annotations
@@ -57,7 +63,7 @@ PLAUSIBLE_LAB_M = 50.0     # no lab frame's origin lies this far from the phanto
 
 STATES = H5Schema(
     name="phantom.states",
-    version="2.1",
+    version="2.2",
     root_attrs=("provenance", "source", "units_length", "units_force", "step_n", "frame",
                 "session_names"),
     doc=__doc__ or "",
@@ -78,6 +84,18 @@ STATES = H5Schema(
         Dataset("states/mass", "i4", ("S",), required=False, doc="MSM: the loaded mass"),
         Dataset("states/force_vector", "f4", ("S", 3), "N", required=False, finite=True,
                 limit=PLAUSIBLE_N, doc="MSM: applied force, phantom frame"),
+        Dataset("states/phantom", "i4", ("S",), required=False,
+                doc="MSM drawn from a prior: each state's block (row of phantoms/*)"),
+        Dataset("phantoms/k_between", "f8", ("B",), "N/m", required=False, finite=True),
+        Dataset("phantoms/k_fixed", "f8", ("B",), "N/m", required=False, finite=True),
+        Dataset("phantoms/contact_radius", "f8", ("B",), "m", required=False, finite=True),
+        Dataset("phantoms/footprint", "f8", ("B", 2), "m", required=False, finite=True,
+                limit=PLAUSIBLE_M),
+        Dataset("phantoms/markers", "i4", ("B",), required=False),
+        Dataset("phantoms/pitch", "f8", ("B",), "m", required=False, finite=True),
+        Dataset("phantoms/scattered", "b1", ("B",), required=False),
+        Dataset("phantoms/missing", "f8", ("B",), required=False, finite=True),
+        Dataset("phantoms/max_angle_deg", "f8", ("B",), "deg", required=False, finite=True),
         Dataset("states/speed", "f4", ("S",), "m/s", required=False, limit=PLAUSIBLE_M_S,
                 doc="lab: mean surface-marker speed at the state (NaN: no marker seen)"),
         Dataset("sessions/transform", "f8", ("P", 4, 4), "m", required=False, finite=True,

@@ -37,9 +37,9 @@ from data_schema.raw_mcap import (
     read_index,
     reading,
 )
+from ingest.ingest_params import COMPRESSIONS
 
 CHUNK_BYTES = 1 << 20   # 1 MiB chunks
-COMPRESSION = ("none", "zstd")
 
 
 @dataclass
@@ -56,7 +56,7 @@ class _Stream:
 
 
 def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, Any],
-                   compression: str = "none") -> None:
+                   compression: str = COMPRESSIONS[0]) -> None:
     """Write ``session`` to ``path`` (atomically) as one MCAP file of raw streams.
 
     ``metadata`` holds extra metadata records by name, each a dict of JSON-able values; its
@@ -65,8 +65,8 @@ def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, An
     """
     from mcap.writer import CompressionType, Writer
 
-    if compression not in COMPRESSION:
-        raise ValueError(f"compression must be one of {COMPRESSION}, got {compression!r}")
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression must be one of {COMPRESSIONS}, got {compression!r}")
     streams = _streams(session)
     records = {"session": _session_record(session)}
     if session.calibration is not None:

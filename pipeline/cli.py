@@ -69,7 +69,14 @@ class PipelineGroup(click.Group):
 def cli(quiet: bool) -> None:
     """Soft-tissue phantom experiments to a trained, evaluated cGNN.
 
-    Stages: synth -> ingest -> sync -> extract -> split -> simulate -> train -> eval.
+    \b
+    A lab session: synth (or your lab's files) -> ingest -> sync -> extract -> split
+      -> train -> eval -> export.
+    The MSM the network is pre-trained on: simulate, fit-msm.
+    Sessions as they happen: live (from QTM's real-time stream), replay (a recorded
+      session served as QTM's real-time server).
+    Any file: inspect. Every stage on a synthetic session: demo.
+
     Each command's --help says what it reads and writes.
     """
     set_quiet(quiet)

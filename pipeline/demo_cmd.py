@@ -20,16 +20,30 @@ from pathlib import Path
 
 import click
 
-from pipeline.demo_plan import NETWORKS, PAPER, QUICK, RECIPE, SMOKE, Lab, Step, demo_steps
-from pipeline.demo_pool import Pool, StepResult, ready
+from pipeline.demo_plan import (
+    GENERIC,
+    NETWORKS,
+    OUT,
+    PAPER,
+    PRETRAINING,
+    QUICK,
+    RECIPE,
+    SMOKE,
+    Lab,
+    Step,
+    demo_steps,
+)
+from pipeline.demo_pool import WORKERS, Pool, StepResult, ready
 from pipeline.demo_times import TIMES, HostFigure, Times, measure_host
-from pipeline.options import seed_option
+from pipeline.options import OneOf, ranged, seed_option
 from pipeline.stage_cache import is_fresh, write_doc, write_stamp
 from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
+from sim.twin.synth_params import SynthParams
+from train.training.train_params import DEVICES, TrainParams
 
 
 @click.command()
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=OUT,
               show_default=True, help="Folder for everything the demo writes.")
 @click.option("--quick", is_flag=True,
               help="Small MSM sets, short training: minutes on 2 CPU cores (target: 85 x the "
@@ -38,19 +52,25 @@ from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
               help="Only check the wiring: 2 folds, 2 epochs, a tiny MSM set (seconds).")
 @click.option("--force", is_flag=True, help="Run every step, even unchanged ones.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when a target is missed.")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto",
+@click.option("--device", type=OneOf(DEVICES), default=TrainParams.device,
               show_default=True, help="Where the cGNN trains.")
-@click.option("--jobs", type=click.IntRange(min=1), default=None,
+@click.option("--jobs", type=ranged(WORKERS), default=None,
               help="Worker processes for the independent steps, the cores shared out between "
                    "them [default: the CPU cores; 1 on a GPU: every step in this process].")
 @click.option("--host-speed/--no-host-speed", default=None,
               help="First measure the host's figure (core/host_speed.py, about 4 runs of a "
                    "fixed mix of work; not counted in the demo's time) and state the demo's "
                    "time as a multiple of it [default: measured, except with --smoke].")
-@click.option("--network", type=click.Choice(list(NETWORKS)), default=None,
+@click.option("--network", type=OneOf(NETWORKS), default=None,
               help="Train this network with the rest of the recipe [default: the recipe's]: "
                    "the tip's offsets in the heads or in the first layer, or the paper's "
                    "(docs/results.md compares them; docs/model.md, Latency).")
+@click.option("--pretraining", type=OneOf(PRETRAINING), default=GENERIC,
+              show_default=True,
+              help="generic: one model for every lab, pre-trained once on MSM data drawn from "
+                   "the prior (the same whatever the lab or --seed); per-fold: per fold the "
+                   "MSM fitted on its training presses, simulated at the lab's markers and "
+                   "pre-trained on (five times the work).")
 @click.option("--markers", type=MARKERS, default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
 @click.option("--marker-pitch", type=MARKER_PITCH_MM,
@@ -59,20 +79,23 @@ from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
               help="The twin lab's phantom footprint LxW (mm).")
 @click.option("--mocap-rate", type=MOCAP_RATE,
               default=Lab.mocap_rate_hz, show_default=True, help="The twin lab's mocap rate.")
-@seed_option
+@seed_option(SynthParams.seed)
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
          device: str, jobs: int | None, host_speed: bool | None, network: str | None,
-         markers: str, marker_pitch: float, size: str, mocap_rate: float, seed: int) -> None:
+         pretraining: str, markers: str, marker_pitch: float, size: str, mocap_rate: float,
+         seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
     --markers, --size and --mocap-rate make it another lab's phantom), session.mcap,
     session_synced.h5, session_states.h5 and splits.json (ingest, sync, extract, split);
-    per fold msm/foldK/ (params.json: fit-msm on that fold's training presses only; msm.h5
-    and splits.json: that MSM, sized to the footprint, sampled at the markers' layout) and
-    runs/msm_foldK (pre-training on it); runs/exp_tl_* and runs/exp_notl_* (fine-tuning per
-    fold with transfer learning and the same from scratch);
+    the pre-training: msm/prior.h5 and prior_splits.json (MSM data drawn from the prior) and
+    runs/generic (the generic model), or with --pretraining per-fold, per fold msm/foldK/
+    (params.json: fit-msm on that fold's training presses only; msm.h5 and splits.json: that
+    MSM, sized to the footprint, sampled at the markers' layout) and runs/msm_foldK;
+    runs/exp_tl_* and runs/exp_notl_* (fine-tuning per fold with transfer learning from the
+    pre-trained model and the same from scratch);
     metrics.json/.md (eval, beside the no-learning references), scarcity/ (the data-scarcity
     study), a rerun recording beside each, demo_times.json (each stage's and step's wall
     time, beside the host's figure) and a summary against the targets. Without
@@ -87,7 +110,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     started = time.perf_counter()
     lab = Lab(markers, marker_pitch, size, mocap_rate)
     steps = demo_steps(out, seed, settings, device,
-                       NETWORKS[network] if network else RECIPE, lab)
+                       NETWORKS[network] if network else RECIPE, lab, pretraining)
     times = Times()
     with Pool(jobs, threads) as pool:
         for batch in _batches(steps):

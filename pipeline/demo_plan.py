@@ -4,18 +4,26 @@ The protocol, as a lab with only its presses would run it:
 
 1. the session: synth -> ingest -> sync -> extract -> split (5 folds of 20 presses); the twin's
    lab knobs (:class:`Lab`: markers, footprint, mocap rate) make it another lab's phantom;
-2. per fold, ``fit-msm --splits --fold``: the MSM's constants fitted to this phantom on that
-   fold's training presses only (no test press is ever fitted);
-3. per fold, ``simulate --params --layout``: that fitted MSM, sized to the lab's footprint,
-   sampled at its markers (the tip the last point), loads inside the markers' footprint;
-4. per fold, pre-training on it; then fine-tuning with transfer learning (``--init``) from
-   that fold's pre-trained model, and the same training from scratch (the baseline);
-5. eval: Table 2 with the no-learning references, and the data-scarcity study (1..4 training
+2. the pre-training, one of :data:`PRETRAINING`:
+
+   - ``generic`` (the default): one model for every lab, pre-trained once on MSM data drawn
+     from the prior (``simulate --prior``: springs, footprint, markers and press drawn per
+     phantom, :mod:`sim.msm.msm_prior`), with the same seed whatever the lab or the demo's
+     seed, so every fold of every lab starts from the same model (:func:`generic_steps`);
+   - ``per-fold``: per fold, ``fit-msm --splits --fold`` (the MSM's constants fitted to this
+     phantom on that fold's training presses only), ``simulate --params --layout`` (that MSM
+     sized to the lab's footprint, sampled at its markers) and a pre-training on it;
+3. per fold, fine-tuning with transfer learning (``--init``) from the pre-trained model, and
+   the same training from scratch (the baseline);
+4. eval: Table 2 with the no-learning references, and the data-scarcity study (1..4 training
    presses, with and without transfer learning, beside the references) on a few folds.
 
 Steps marked ``parallel`` with the same ``batch`` may run side by side (``demo --jobs``), each
-as soon as the steps of its batch that write its inputs are done: every fold's fit, MSM,
-pre-training and fine-tuning (:data:`FOLDS`), the scarcity runs' folds.
+as soon as the steps of its batch that write its inputs are done. Per fold, that batch
+(:data:`FOLDS`) holds every fold's fit, MSM, pre-training and fine-tuning, then the scarcity
+runs' folds have theirs; with the generic model it holds everything but eval: the session's
+stages and the runs from scratch go on while the prior's data are simulated and the generic
+model pre-trains.
 
 Settings: ``quick`` (minutes on 2 CPU cores), the paper's (the full MSM set, 250 epochs,
 batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
@@ -23,10 +31,14 @@ batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from sim.msm import paper
+from sim.twin.synth_params import SynthParams
+from train import paper as cgnn_paper
+from train.model.config import Offsets
+from train.training.recipes import OURS
 
 
 @dataclass(frozen=True)
@@ -39,6 +51,7 @@ class Step:
     clean: tuple[Path, ...] = ()     # removed before a stale step runs again (a run folder)
     parallel: bool = False           # independent of the parallel steps of its batch
     batch: str = ""                  # the parallel steps that may run side by side
+    stage: str = ""                  # the stage its time counts to (default: its command)
 
 
 @dataclass(frozen=True)
@@ -53,45 +66,55 @@ class Settings:
     folds: int = 5
     scarcity_folds: int = 2          # folds of the data-scarcity study
     scarcity_groups: int = 4         # training presses 1..this in the study
-    batch: int = 32
+    batch: int = cgnn_paper.BATCH
     fit_sequences: int | None = None  # training presses fitted per fold; None: all of them
+    prior_phantoms: int = 1           # the generic model's data: phantoms drawn from the prior
+    prior_locations: int = 1          # ... places pressed on each
+    prior_directions: int = 1         # ... directions at each place
+    generic_epochs: int = 1           # the generic model's pre-training
 
 
 # The recipe the measurements support (docs/model.md, "Training that learns";
 # train/training/recipes.py): the tip's offsets in the heads, the balanced loss, rotation
 # augmentation, the weights' average; its step size is the settings' (--lr below overrides the
 # recipe's).
-RECIPE = ("--recipe", "ours")
+RECIPE = ("--recipe", OURS.name)
 # The networks the demo can train, each with the rest of the recipe (docs/results.md compares
 # them): the tip's offsets in the heads (the recipe's: graph layers that do not read the
 # press, so a mesh pressed again runs the heads alone), in the first layer (every layer reads
 # the press), or nowhere (the paper's network: as fast as the first, less accurate).
 NETWORKS = {
-    "head-offsets": (*RECIPE, "--offsets", "heads"),
-    "tip-offsets": (*RECIPE, "--offsets", "graph"),
-    "paper": (*RECIPE, "--offsets", "none"),
+    "head-offsets": (*RECIPE, "--offsets", Offsets.HEADS.value),
+    "tip-offsets": (*RECIPE, "--offsets", Offsets.GRAPH.value),
+    "paper": (*RECIPE, "--offsets", Offsets.NONE.value),
 }
-# quick: per fold a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on
-# 3 training presses: five folds' fits, MSM sets and pre-training cost about twice what the
-# former single calibration fit did (measured: docs/results.md, "Learning")
+# quick: the generic model pre-trained on 24 phantoms of the prior x 4 places x 2 directions
+# (3,072 states) for 20 epochs; per fold (--pretraining per-fold) a small MSM set (16 places x
+# 3 directions) seen for 80 epochs, and the fit on 3 training presses (what each costs and
+# buys: docs/results.md, "One pre-training for every lab")
 QUICK = Settings(msm_locations=16, msm_directions=3, pretrain_epochs=80, finetune_epochs=80,
-                 lr=2e-3, fit_sequences=3)
+                 lr=2e-3, fit_sequences=3, prior_phantoms=24, prior_locations=4,
+                 prior_directions=2, generic_epochs=20)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
-                 pretrain_epochs=250, finetune_epochs=250, lr=1e-4, scarcity_folds=5,
-                 scarcity_groups=12, fit_sequences=10)
+                 pretrain_epochs=cgnn_paper.EPOCHS, finetune_epochs=cgnn_paper.EPOCHS,
+                 lr=cgnn_paper.LR, scarcity_folds=5,
+                 scarcity_groups=12, fit_sequences=10, prior_phantoms=100, prior_locations=10,
+                 prior_directions=paper.DIRECTIONS, generic_epochs=cgnn_paper.EPOCHS)
 # Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
-                 lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2)
+                 lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2,
+                 prior_phantoms=2, prior_locations=3, prior_directions=1, generic_epochs=1)
 
 
 @dataclass(frozen=True)
 class Lab:
-    """The twin's lab knobs (``pipeline synth`` options): whose phantom the demo runs on."""
+    """The twin's lab knobs (``pipeline synth`` options, the twin's own by default): whose
+    phantom the demo runs on."""
 
-    markers: str = "5x5"             # RxC grid, or scattered:N
-    marker_pitch_mm: float = 20.0    # of a grid
-    size_mm: str = "100x100"         # the footprint LxW
-    mocap_rate_hz: float = 500.0
+    markers: str = SynthParams.markers                   # RxC grid, or scattered:N
+    marker_pitch_mm: float = SynthParams.marker_pitch_mm  # of a grid
+    size_mm: str = SynthParams.size                      # the footprint LxW
+    mocap_rate_hz: float = SynthParams.rate_hz
 
     def synth_args(self) -> tuple[str, ...]:
         """The synth options that make this lab (none for the default one)."""
@@ -103,6 +126,7 @@ class Lab:
         return tuple(a for opt, v, d in pairs if v != d for a in (opt, v))
 
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
+OUT = Path("out/demo")   # where the demo writes unless told
 PLACES, REPEATS = 5, 4   # the demo's session: presses at 5 places, 4 at each
 
 # Fine-tuning variants on the twin's states: transfer learning from the MSM run, and the
@@ -136,48 +160,99 @@ def pretrain_dir(out: Path, fold: int) -> Path:
     return out / "runs" / f"msm_fold{fold}"
 
 
+GENERIC, PER_FOLD = "generic", "per-fold"
+PRETRAINING = (GENERIC, PER_FOLD)     # how the demo pre-trains: once for every lab, or per fold
+GENERIC_SEED = 0                      # the generic model's seed, whatever the lab's
+
+
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
-               recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab()) -> list[Step]:
+               recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab(),
+               pretraining: str = GENERIC) -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping).
-    ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``)."""
+    ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``);
+    ``pretraining``: one of :data:`PRETRAINING`."""
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
-    steps = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [
+    session = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
-    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe, *sd)
-    folds = range(s.folds)
-    steps += [_fit_step(out, fold, states, splits, s, sd) for fold in folds]
-    steps += [_simulate_step(out, fold, states, s, sd) for fold in folds]
-    steps += [_msm_split_step(out, fold, sd) for fold in folds]
-    steps += [_pretrain_step(out, fold, s, train) for fold in folds]
-    runs = []
-    for fold in folds:
-        for tag in VARIANTS:
-            run = out / "runs" / f"exp_{tag}_fold{fold}"
-            runs.append(run)
-            pre = pretrain_dir(out, fold) / "best.pt"
-            init = ("--init", str(pre)) if tag == "tl" else ()
-            inputs = (states, splits) + ((pre,) if init else ())
-            steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
-                               "--fold", str(fold), "--out", str(run), "--epochs",
-                               str(s.finetune_epochs), *init, *train), inputs,
-                              (run / "best.pt",), (run,), parallel=True, batch=FOLDS))
+    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
+    if pretraining == GENERIC:
+        pre = generic_steps(out, s, train)
+        inits = [pre[-1].outputs[0]] * s.folds
+        steps = pre + [replace(step, parallel=True, batch=FOLDS) for step in session]
+    else:
+        pre = per_fold_steps(out, s, states, splits, train, sd)
+        inits = [pretrain_dir(out, fold) / "best.pt" for fold in range(s.folds)]
+        steps = session + pre
+    runs = [out / "runs" / f"exp_{tag}_fold{fold}" for fold in range(s.folds)
+            for tag in VARIANTS]
+    order = runs if pretraining == PER_FOLD else \
+        sorted(runs, key=lambda r: not r.name.startswith("exp_notl"))   # scratch: no wait
+    for run in order:
+        fold, tl = int(run.name[-1]), run.name.startswith("exp_tl")
+        init = ("--init", str(inits[fold])) if tl else ()
+        steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
+                           "--fold", str(fold), "--out", str(run), "--epochs",
+                           str(s.finetune_epochs), *init, *train, *sd),
+                          (states, splits) + ((inits[fold],) if init else ()),
+                          (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
+                          stage="train (fine-tuning)"))
+    scarcity = [_scarcity_step(out, fold, s, device) for fold in range(s.scarcity_folds)]
+    if pretraining == GENERIC:                        # the study goes on beside the last runs
+        steps += [replace(step, batch=FOLDS) for step in scarcity]
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
-    pres = [pretrain_dir(out, fold) for fold in folds]
+    pres = sorted(set(inits))[:1] if pretraining == GENERIC else \
+        [pretrain_dir(out, fold) for fold in range(s.folds)]
+    pres = [p.parent if p.name == "best.pt" else p for p in pres]
     steps.append(Step(("eval", *map(str, runs), *map(str, pres), "--out",
                        str(out / "metrics.json")),
                       tuple(r / "best.pt" for r in runs + pres), (out / "metrics.json",)))
-    for fold in range(s.scarcity_folds):
-        run = out / "runs" / f"exp_tl_fold{fold}"
-        result = out / "scarcity" / f"fold{fold}.json"
-        steps.append(Step(("eval", str(run), "--out", str(result), "--scarcity",
-                           "--scarcity-groups", str(s.scarcity_groups), "--no-rrd",
-                           "--device", "cuda" if device == "cuda" else "cpu"),
-                          (run / "best.pt",), (result,), (result.parent / f"fold{fold}"
-                                                          ".scarcity_runs",),
-                          parallel=True, batch="scarcity"))
-    return steps
+    return steps + (scarcity if pretraining == PER_FOLD else [])
+
+
+def generic_steps(out: Path, s: Settings, train: tuple[str, ...]) -> list[Step]:
+    """The generic model: the prior's MSM data (``msm/prior.h5``), one fold of it, and the
+    pre-training (``runs/generic``), all with :data:`GENERIC_SEED`; the last step's output is
+    the model every fold fine-tunes from."""
+    sd = ("--seed", str(GENERIC_SEED))
+    prior, splits, run = out / "msm" / "prior.h5", out / "msm" / "prior_splits.json", \
+        out / "runs" / "generic"
+    return [
+        Step(("simulate", "--prior", str(s.prior_phantoms), "--locations",
+              str(s.prior_locations), "--directions", str(s.prior_directions), "--workers",
+              "1", "--out", str(prior), *sd), (), (prior,), parallel=True, batch=FOLDS,
+             stage="simulate --prior"),
+        Step(("split", str(prior), "--out", str(splits), "--folds", "1", *sd), (prior,),
+             (splits,), parallel=True, batch=FOLDS),
+        Step(("train", "--data", str(prior), "--splits", str(splits), "--out", str(run),
+              "--epochs", str(s.generic_epochs), *train, *sd), (prior, splits),
+             (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
+             stage="train (pre-training)"),
+    ]
+
+
+def per_fold_steps(out: Path, s: Settings, states: Path, splits: Path,
+                   train: tuple[str, ...], sd: tuple[str, ...]) -> list[Step]:
+    """Per fold: the MSM fitted on its training presses, simulated at the lab's markers, and
+    pre-trained on (``runs/msm_foldK``), with the demo's seed ``sd``."""
+    folds = range(s.folds)
+    return ([_fit_step(out, fold, states, splits, s, sd) for fold in folds]
+            + [_simulate_step(out, fold, states, s, sd) for fold in folds]
+            + [_msm_split_step(out, fold, sd) for fold in folds]
+            + [_pretrain_step(out, fold, s, (*train, *sd)) for fold in folds])
+
+
+def _scarcity_step(out: Path, fold: int, s: Settings, device: str) -> Step:
+    """The data-scarcity study on fold ``fold``'s TL run: its runs retrained on 1..groups
+    training presses, with and without its pre-trained model."""
+    run = out / "runs" / f"exp_tl_fold{fold}"
+    result = out / "scarcity" / f"fold{fold}.json"
+    return Step(("eval", str(run), "--out", str(result), "--scarcity", "--scarcity-groups",
+                 str(s.scarcity_groups), "--no-rrd", "--device",
+                 "cuda" if device == "cuda" else "cpu"),
+                (run / "best.pt",), (result,), (result.parent / f"fold{fold}.scarcity_runs",),
+                parallel=True, batch="scarcity")
 
 
 def _fit_step(out: Path, fold: int, states: Path, splits: Path, s: Settings,
@@ -211,4 +286,4 @@ def _pretrain_step(out: Path, fold: int, s: Settings, train: tuple[str, ...]) ->
     return Step(("train", "--data", str(d / "msm.h5"), "--splits", str(d / "splits.json"),
                  "--out", str(run), "--epochs", str(s.pretrain_epochs), *train),
                 (d / "msm.h5", d / "splits.json"), (run / "best.pt",), (run,), parallel=True,
-                batch=FOLDS)
+                batch=FOLDS, stage="train (pre-training)")

@@ -31,8 +31,10 @@ from typing import IO
 
 import click
 
+from core.bounds import Bound
 from pipeline.demo_plan import Step
 
+WORKERS = Bound(1, whole=True)   # a pool's processes
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 # what ``python -m pipeline`` has as sys.argv[0]: the provenance records the command line
 MAIN = str(Path(__file__).with_name("__main__.py"))
@@ -143,6 +145,7 @@ class Pool:
     and kept for the next batch; close it (``with Pool(...)``) to stop them."""
 
     def __init__(self, workers: int, threads: int) -> None:
+        WORKERS.check("workers", workers)
         self.size, self.threads = workers, threads
         self._workers: list[_Worker] = []
         self._started = 0                 # workers started so far: the next one's number

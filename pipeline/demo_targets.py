@@ -4,14 +4,15 @@ Targets (the references are the predictors that learn nothing, scored on the sam
 examples, :mod:`train.evaluation.references`):
 
 - sync against the twin's truth (:data:`sync.sync_accuracy.TARGETS`);
-- the MSM fitted per fold at most half as far from that fold's training presses as a still
-  surface;
-- the MSM-trained model on its own test set: mean L_d at most half of "nothing moves", force
-  error below the linear reference;
+- with the per-fold pre-training, the MSM fitted per fold at most half as far from that
+  fold's training presses as a still surface;
+- the MSM-trained model (the generic one, or each fold's) on its own test set: mean L_d at most
+  half of "nothing moves", force error below the linear reference;
 - fine-tuned with transfer learning (TL) and from scratch: mean L_d at least 30 % below the
   best reference in every fold; force error at most half the linear reference's;
-- TL: pooled mean L_d at least 20 % below scratch, better in all folds but one; in the
-  data-scarcity study, at least 30 % below scratch at every number of training presses shown;
+- TL: pooled mean L_d at least 10 % below scratch trained as many epochs (the paper reports
+  23 %, against a scratch model of its own), better in all folds but one; in the data-scarcity
+  study, at least 30 % below scratch at every number of training presses shown;
 - intervals (calibrated on each fold's validation presses), TL and scratch, on each fold's
   test presses: points inside their 80, 90 and 95 % radii within 3 points of the level, the
   force inside its 90 % interval for 85-95 % of examples, the mean 90 % radius at most 3x
@@ -34,7 +35,7 @@ from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, va
 from pipeline.demo_plan import msm_dir
 
 FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
-TL_CUT = 0.20           # pooled: TL this far below scratch
+TL_CUT = 0.10           # pooled: TL this far below scratch at equal epochs
 SCARCITY_CUT = 0.30     # scarcity study: TL this far below scratch at each size
 FORCE_VS_LINEAR = 0.5   # force error at most this fraction of the linear reference's
 MSM_VS_STILL = 0.5      # MSM model (and the fit) at most this fraction of a still surface's
@@ -94,9 +95,13 @@ def _sync(out: Path) -> list[tuple[str, bool, str]]:
 
 
 def _fit(out: Path) -> list[tuple[str, bool, str]]:
-    """The MSM fitted per fold, each beside a still surface on the same training presses."""
+    """The MSM fitted per fold, each beside a still surface on the same training presses
+    (none with the generic pre-training)."""
     folds = len(json.loads((out / "splits.json").read_text())["folds"])   # this run's, no other
-    fits = [json.loads((msm_dir(out, k) / "params.json").read_text()) for k in range(folds)]
+    files = [msm_dir(out, k) / "params.json" for k in range(folds)]
+    if not all(f.is_file() for f in files):
+        return []
+    fits = [json.loads(f.read_text()) for f in files]
     ratios = [f["mean_distance_m"] / f["still_distance_m"] for f in fits]
     text = "; ".join(
         f"fold {k}: k_between {f['k_between']:.4g}, k_fixed {f['k_fixed']:.4g} N/m, "
@@ -161,8 +166,9 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
         better = sum(a < b for a, b in zip(tl, scratch, strict=True))
         checks.append(("transfer learning, pooled over folds",
                        pooled >= TL_CUT and better >= len(tl) - 1,
-                       f"mean L_d {pooled:.0%} below scratch (target {TL_CUT:.0%}; paper "
-                       f"23%), better in {better} of {len(tl)} folds"))
+                       f"mean L_d {pooled:.0%} below scratch trained as long (target "
+                       f"{TL_CUT:.0%}; the paper's 23 %), better in {better} of {len(tl)} "
+                       "folds"))
     return checks
 
 

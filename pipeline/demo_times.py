@@ -58,8 +58,9 @@ def measure_host(timeout_s: float = 600.0) -> HostFigure:
 
 
 def stage_of(step: Step) -> str:
-    """The stage a step's time counts to: its command (the scarcity study apart)."""
-    return step.args[0] + (" --scarcity" if "--scarcity" in step.args else "")
+    """The stage a step's time counts to: the plan's name for it, else its command (the
+    scarcity study apart)."""
+    return step.stage or step.args[0] + (" --scarcity" if "--scarcity" in step.args else "")
 
 
 @dataclass

@@ -6,7 +6,10 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import bounded_int, resolve_rrd, rrd_option
+from pipeline.options import OneOf, ranged, resolve_rrd, rrd_option
+from train.evaluation.eval_params import DEVICES, EvalParams
+
+D = EvalParams              # the option defaults are its fields', the bounds its BOUNDS
 
 
 @click.command(name="eval")
@@ -18,11 +21,13 @@ from pipeline.options import bounded_int, resolve_rrd, rrd_option
               help="Also retrain each run's fold on 1..n training groups, with and without "
                    "its transfer learning, and write the curve (.scarcity.json/.csv/.png; "
                    "each retrained model with its 90 % intervals' coverage).")
-@click.option("--scarcity-epochs", type=bounded_int(1), default=None,
+@click.option("--scarcity-epochs", type=ranged(D.BOUNDS["scarcity_epochs"]),
+              default=D.scarcity_epochs,
               help="Epochs of each scarcity run [default: the run's own].")
-@click.option("--scarcity-groups", type=bounded_int(1), default=None,
+@click.option("--scarcity-groups", type=ranged(D.BOUNDS["scarcity_groups"]),
+              default=D.scarcity_groups,
               help="Retrain on 1..N training groups only [default: all of the fold's].")
-@click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
+@click.option("--device", type=OneOf(DEVICES), default=D.device, show_default=True)
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 when a variant's mean L_d or force error does not beat "
                    "the best no-learning reference on the same test examples.")
@@ -47,7 +52,6 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     recording colours the points by error over their 90 % radius; a run without them is said
     in one line.
     """
-    from train.evaluation.eval_params import EvalParams
     from train.evaluation.eval_stage import run_eval
     from train.evaluation.evaluate import not_beating
 

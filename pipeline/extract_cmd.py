@@ -9,9 +9,9 @@ import click
 
 from core.text import count
 from extract.extract_params import ExtractParams
-from pipeline.options import SIZE_MM, finite_float, resolve_rrd, rrd_option, seed_option
+from pipeline.options import SIZE_MM, ranged, resolve_rrd, rrd_option, seed_option
 
-D = ExtractParams           # the option defaults are its fields'
+D = ExtractParams           # the option defaults are its fields', the bounds its BOUNDS
 
 if TYPE_CHECKING:
     from extract.extract import Extracted
@@ -21,26 +21,26 @@ if TYPE_CHECKING:
 @click.argument("synced", nargs=-1, required=True,
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="States file to write (schema phantom.states 2.1).")
-@click.option("--step", type=finite_float(min=0, min_open=True, unit="N"), default=D.step_n,
+              help="States file to write (schema phantom.states 2.2).")
+@click.option("--step", "step_n", type=ranged(D.BOUNDS["step_n"]), default=D.step_n,
               show_default=True,
               help="Force level spacing, N: at least 3 x the force noise sync measured (and "
                    "1/320 N, a Nano17's resolution), at most the largest peak force.")
-@click.option("--max-speed", type=finite_float(0, min_open=True, unit="m/s"),
+@click.option("--max-speed", type=ranged(D.BOUNDS["max_speed"]),
               default=D.max_speed,
               help="Drop states whose surface moved faster than this (m/s): not quasi-static.")
-@click.option("--half-window-ms", type=finite_float(0, min_open=True, unit="ms"),
+@click.option("--half-window-ms", type=ranged(D.BOUNDS["half_window_s"], 1e3, "ms"),
               default=D.half_window_s * 1e3, show_default=True,
               help="Frames within this of a level's instant are fitted.")
-@click.option("--phantom-size", type=SIZE_MM, default=D.size_m,
+@click.option("--phantom-size", "size_m", type=SIZE_MM, default=D.size_m,
               help="Phantom footprint LxW in mm, overriding session.toml's [phantom] size_mm "
                    "(which sync keeps in the synced file; default 100x100).")
 @click.option("--shared-locations", is_flag=True, default=D.shared_locations,
               help="The synced files' location ids name the same places in every session.")
-@seed_option
+@seed_option(D.seed)
 @rrd_option
-def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float | None,
-            half_window_ms: float, phantom_size: tuple[float, float] | None,
+def extract(synced: tuple[Path, ...], out: Path, step_n: float, max_speed: float | None,
+            half_window_ms: float, size_m: tuple[float, float] | None,
             shared_locations: bool, seed: int,
             rrd: Path | None, no_rrd: bool) -> None:
     """Extract static states every --step N from synced presses, with training examples.
@@ -60,8 +60,9 @@ def extract(synced: tuple[Path, ...], out: Path, step: float, max_speed: float |
     """
     from extract.extract_stage import run_extract
 
-    params = ExtractParams(step_n=step, half_window_s=half_window_ms * 1e-3, max_speed=max_speed,
-                           seed=seed, size_m=phantom_size, shared_locations=shared_locations)
+    params = ExtractParams(step_n=step_n, half_window_s=half_window_ms * 1e-3,
+                           max_speed=max_speed, seed=seed, size_m=size_m,
+                           shared_locations=shared_locations)
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     ex = run_extract(synced, out, params, rrd_path)
     a = ex.arrays

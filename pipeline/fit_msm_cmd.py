@@ -6,19 +6,11 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import (
-    SPACING_MM,
-    bounded_int,
-    finite_float,
-    resolve_rrd,
-    rrd_option,
-    seed_option,
-)
-from pipeline.simulate_cmd import CONTACT_RADIUS
+from pipeline.options import ranged, resolve_rrd, rrd_option, seed_option
 from sim.msm.fit_msm_params import FitMsmParams
-from sim.msm.msm_fit import K_MAX, K_MIN
 
-D = FitMsmParams            # the option defaults are its fields'
+D = FitMsmParams            # the option defaults are its fields', the bounds its BOUNDS
+B = D.BOUNDS
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 
@@ -26,28 +18,29 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 @click.command("fit-msm")
 @click.argument("states", type=IN)
 @click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
-@click.option("--max-sequences", type=bounded_int(1), default=D.max_sequences, show_default=True,
+@click.option("--max-sequences", type=ranged(B["max_sequences"]), default=D.max_sequences,
+              show_default=True,
               help="Sequences used (drawn with --seed when the file or fold has more).")
 @click.option("--splits", type=IN, default=None,
               help="Fold manifest of STATES: fit on the training presses of --fold only, so "
                    "the fit never sees that fold's test presses.")
-@click.option("--fold", type=bounded_int(0), default=D.fold, show_default=True)
-@click.option("--start", nargs=2, type=finite_float(K_MIN, K_MAX, unit="N/m"),
+@click.option("--fold", type=ranged(B["fold"]), default=D.fold, show_default=True)
+@click.option("--start", nargs=2, type=ranged(B["start"]),
               default=D.start,
               show_default=True,
               help="Starting k_between k_fixed (N/m; the paper's constants).")
-@click.option("--contact-radius", type=CONTACT_RADIUS,
+@click.option("--contact-radius", type=ranged(B["contact_radius"]),
               default=D.contact_radius,
               help="Share the load among the masses within this radius (m) of the tip "
                    "[default: 0 for lab states (one mass, the paper's n_n = 1); an MSM file's "
                    "own].")
-@click.option("--spacing-mm", "spacing_mm", type=SPACING_MM, default=None,
+@click.option("--spacing-mm", type=ranged(B["spacing"], 1e3, "mm"), default=D.spacing,
               help="Lab states: the masses' spacing in mm, rounded per axis so the grid covers "
                    "the states' footprint_m exactly [default: the paper's 100/31 = 3.226 mm]. "
                    "An MSM file brings its own grid.")
-@click.option("--workers", type=bounded_int(0), default=D.workers,
+@click.option("--workers", type=ranged(B["workers"]), default=D.workers,
               help="Processes sharing the sequences (default: the cores this process may use).")
-@seed_option
+@seed_option(D.seed)
 @rrd_option
 def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
             fold: int, start: tuple[float, float], contact_radius: float | None,

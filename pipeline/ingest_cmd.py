@@ -8,17 +8,17 @@ import click
 import numpy as np
 
 from core.text import count
-from ingest.ingest_params import IngestParams
+from ingest.ingest_params import COMPRESSIONS, IngestParams
 from pipeline.options import resolve_rrd, rrd_option
 
-D = IngestParams            # the option defaults are its fields'
+NONE, ZSTD = COMPRESSIONS
 
 
 @click.command()
 @click.argument("session_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="MCAP file to write (raw streams, each on its own clock).")
-@click.option("--zstd", is_flag=True, default=D.compression == "zstd",
+@click.option("--zstd", is_flag=True,
               help="zstd-compress the MCAP chunks: about half the size, ingest ~2x slower.")
 @rrd_option
 def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: bool) -> None:
@@ -35,8 +35,7 @@ def ingest(session_dir: Path, out: Path, zstd: bool, rrd: Path | None, no_rrd: b
     from ingest.ingest_stage import run_ingest
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
-    s = run_ingest(session_dir, out, IngestParams(compression="zstd" if zstd else "none"),
-                   rrd_path)
+    s = run_ingest(session_dir, out, IngestParams(compression=ZSTD if zstd else NONE), rrd_path)
     m, f = s.markers, s.force
     click.echo(f"{out}: {m.frames} mocap frames ({len(m.labels)} markers, {m.rate_hz:g} Hz, "
                f"{m.missing_samples()} missing samples{_holes(m.time_ns)}), {f.frames} force "

@@ -9,10 +9,10 @@ import numpy as np
 
 from core.text import count
 from live.protocol.address import parse_address
-from live.session.live_params import MAX_RECONNECT_S, MAX_TIMEOUT_S, LiveParams
-from pipeline.options import Parsed, finite_float
+from live.session.live_params import LiveParams
+from pipeline.options import Parsed, ranged
 
-D = LiveParams
+D = LiveParams              # the option defaults are its fields', the bounds its BOUNDS
 
 
 @click.command()
@@ -24,11 +24,11 @@ D = LiveParams
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="A new folder: session.mcap (the session as `pipeline ingest` writes it), "
                    "session.rrd (the live recording) and states.h5 (the states taken live).")
-@click.option("--duration", "duration_s", type=finite_float(0, min_open=True, unit="s"),
-              default=None, help="Stop after this many seconds [default: until QTM stops, "
+@click.option("--duration", "duration_s", type=ranged(D.BOUNDS["duration_s"]),
+              default=D.duration_s, help="Stop after this many seconds [default: until QTM stops, "
                                  "Ctrl-C, or the connection ends].")
 @click.option("--timeout", "timeout_s",
-              type=finite_float(0, MAX_TIMEOUT_S, min_open=True, unit="s"),
+              type=ranged(D.BOUNDS["timeout_s"]),
               default=D.timeout_s, show_default=True,
               help="Seconds to wait for QTM to answer, and for the next frame.")
 @click.option("--calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -46,7 +46,7 @@ D = LiveParams
 @click.option("--recover", is_flag=True,
               help="Connect to nothing: finish the journal a killed session left in --out "
                    "(session.mcap.part, every complete block) as --out/session.mcap.")
-@click.option("--reconnect", "reconnect_s", type=finite_float(0, MAX_RECONNECT_S, unit="s"),
+@click.option("--reconnect", "reconnect_s", type=ranged(D.BOUNDS["reconnect_s"]),
               default=D.reconnect_s, show_default=True,
               help="After a lost connection, keep trying to reconnect this long and go on "
                    "into the same session.mcap (frames the server sends again are recorded "

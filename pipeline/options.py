@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
 import click
 
 from core.atomic import same_path
+from core.bounds import Bound, one_of
 from core.errors import BadInput
+from core.protocol import FOOTPRINT_SIDE
 from core.recording import default_rrd_path
 
 
@@ -54,46 +57,30 @@ def _declared_folder(out: Path) -> bool:
                for p in ctx.command.params)
 
 
-def seed_option(f: Callable[..., Any]) -> Callable[..., Any]:
-    """``--seed N``: every random choice of the command derives from it."""
-    return click.option("--seed", type=int, default=0, show_default=True,
-                        help="Random seed; same seed, same bytes of data.")(f)
+def seed_option(default: int) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``--seed N``: every random choice of the command derives from it; ``default`` is the
+    seed field of the command's settings."""
+    return click.option("--seed", type=int, default=default, show_default=True,
+                        help="Random seed; same seed, same bytes of data.")
 
 
 class _OneLineRange:
-    """What a bounded click type shares: the range check and its one-line refusal."""
+    """What a bounded click type shares: its :class:`~core.bounds.Bound`, the range check and
+    its one-line refusal."""
 
-    min: float | None
-    max: float | None
-    min_open: bool
-    max_open: bool
-    unit: str = ""
-    why: str = ""
+    bound: Bound
 
     def _check(self, x: float, value: Any, param: click.Parameter | None) -> None:
         """Refuse ``x`` (typed as ``value``) outside the range: BadInput naming the option."""
-        lo_ok = self.min is None or (x > self.min if self.min_open else x >= self.min)
-        hi_ok = self.max is None or (x < self.max if self.max_open else x <= self.max)
-        if not (lo_ok and hi_ok):
-            shown = f"{value}" + (f" {self.unit}" if self.unit else "")
-            raise BadInput(None, f"{_option_name(param)} {shown}: must be {self.describe()}"
-                           + (f" ({self.why})" if self.why else ""))
+        self.bound.check(_option_name(param), x, f"{value}")
 
     def describe(self) -> str:
         """The accepted range in words, e.g. ``in (0, 1]`` or ``> 0``."""
-        unit = f" {self.unit}" if self.unit else ""
-        if self.min is not None and self.max is not None:
-            return (f"in {'(' if self.min_open else '['}{self.min:g}, {self.max:g}"
-                    f"{')' if self.max_open else ']'}{unit}")
-        if self.min is not None:
-            return f"{'>' if self.min_open else '>='} {self.min:g}{unit}"
-        if self.max is not None:
-            return f"{'<' if self.max_open else '<='} {self.max:g}{unit}"
-        return "finite"
+        return self.bound.describe()
 
     def _describe_range(self) -> str:
         """The range in --help (click's form), nothing when there is none."""
-        if self.min is None and self.max is None:
+        if self.min is None and self.max is None:  # type: ignore[attr-defined]
             return ""
         return super()._describe_range()  # type: ignore[misc]
 
@@ -112,7 +99,7 @@ class FiniteFloat(_OneLineRange, click.FloatRange):
                  min_open: bool = False, max_open: bool = False, unit: str = "",
                  why: str = "") -> None:
         click.FloatRange.__init__(self, min, max, min_open, max_open)
-        self.unit, self.why = unit, why
+        self.bound = Bound(min, max, min_open, max_open, unit, why)
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> float:
@@ -137,7 +124,7 @@ class BoundedInt(_OneLineRange, click.IntRange):
     def __init__(self, min: int | None = None, max: int | None = None,  # noqa: A002
                  unit: str = "", why: str = "") -> None:
         click.IntRange.__init__(self, min, max)
-        self.unit, self.why = unit, why
+        self.bound = Bound(min, max, unit=unit, why=why, whole=True)
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> int:
@@ -154,21 +141,40 @@ class BoundedInt(_OneLineRange, click.IntRange):
         return "INTEGER"
 
 
-def finite_float(min: float | None = None, max: float | None = None,  # noqa: A002
-                 min_open: bool = False, max_open: bool = False, unit: str = "",
-                 why: str = "") -> FiniteFloat:
-    """A click type: a finite float in [min, max] (open ends with ``min_open``/``max_open``).
+def ranged(bound: Bound, factor: float = 1.0, unit: str | None = None
+           ) -> FiniteFloat | BoundedInt:
+    """The click type of a setting's :class:`~core.bounds.Bound` (a whole number's, or a
+    float's); an option in another unit than the setting's gives the ``factor`` of it to
+    one of the setting's and its ``unit`` (ms for s: 1e3, "ms")."""
+    if factor != 1.0:
+        bound = bound.scaled(factor, bound.unit if unit is None else unit)
+    if bound.whole:
+        lo = None if bound.min is None else math.floor(bound.min) + 1 if bound.min_open \
+            else math.ceil(bound.min)
+        hi = None if bound.max is None else math.ceil(bound.max) - 1 if bound.max_open \
+            else math.floor(bound.max)
+        return BoundedInt(lo, hi, bound.unit, bound.why)
+    return FiniteFloat(bound.min, bound.max, bound.min_open, bound.max_open, bound.unit,
+                       bound.why)
 
-    ``finite_float()`` alone refuses only NaN and inf. ``unit`` is shown with the value in a
-    refusal; ``why`` says what the bound protects (e.g. "a step below the force noise").
-    """
-    return FiniteFloat(min, max, min_open, max_open, unit, why)
 
+class OneOf(click.Choice):
+    """One of fixed choices: an enum's values (the value is then its member) or the names the
+    code branches on; anything else is refused in one line naming the option."""
 
-def bounded_int(min: int | None = None, max: int | None = None,  # noqa: A002
-                unit: str = "", why: str = "") -> BoundedInt:
-    """A click type: a whole number in [min, max], refused in one line naming the option."""
-    return BoundedInt(min, max, unit, why)
+    def __init__(self, choices: type[Enum] | Iterable[str]) -> None:
+        self.kind = choices if isinstance(choices, type) and issubclass(choices, Enum) else None
+        super().__init__([str(m.value) for m in choices] if self.kind else list(choices))
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        """``value`` (its member, with an enum), or BadInput naming the option."""
+        if self.kind is not None:
+            return one_of(self.kind, value, _option_name(param))
+        if value not in self.choices:
+            raise BadInput(None, f"{_option_name(param)} {value!r}: must be one of "
+                                 f"{', '.join(dict.fromkeys(map(str, self.choices)))}")
+        return value
 
 
 class Parsed(click.ParamType):
@@ -192,12 +198,9 @@ class Parsed(click.ParamType):
         return self.name
 
 
-MAX_SIZE_MM = 2000.0     # no phantom pressed by hand is larger (and the states file's limit
-                         # of plausible metres is 5 m)
-
-
 class SizeMM(click.ParamType):
-    """A footprint ``LxW`` in mm (e.g. ``150x80``), as metres; anything else one line."""
+    """A footprint ``LxW`` in mm (e.g. ``150x80``), as metres, each side within
+    :data:`core.protocol.FOOTPRINT_SIDE`; anything else one line."""
 
     name = "LxW"
 
@@ -208,17 +211,18 @@ class SizeMM(click.ParamType):
             return value
         parts = str(value).lower().split("x")
         try:
-            sizes = [float(v) for v in parts]
+            sizes = [float(v) * 1e-3 for v in parts]
         except ValueError:
             sizes = []
-        if len(sizes) != 2 or not all(math.isfinite(v) and 0 < v <= MAX_SIZE_MM for v in sizes):
+        side = FOOTPRINT_SIDE
+        if len(sizes) != 2 or not all(math.isfinite(v) and side.holds(v) for v in sizes):
+            mm = side.scaled(1e3, "")
             raise BadInput(None, f"{_option_name(param)} {value!r}: expected LxW, two lengths "
-                                 f"in mm (0, {MAX_SIZE_MM:g}], e.g. 150x80")
-        return sizes[0] * 1e-3, sizes[1] * 1e-3
+                                 f"in mm {mm.describe().removeprefix('in ')}, e.g. 150x80")
+        return sizes[0], sizes[1]
 
 
 SIZE_MM = SizeMM()
-SPACING_MM = FiniteFloat(0, 100, min_open=True, unit="mm")    # the MSM's masses' spacing
 
 
 def _option_name(param: click.Parameter | None) -> str:

@@ -7,24 +7,24 @@ from pathlib import Path
 import click
 
 from core.text import count
-from live.protocol.address import MAX_PORT
-from live.replay.replay_params import MAX_SPEED, ReplayParams
-from pipeline.options import bounded_int, finite_float
+from live.replay.replay_params import ReplayParams
+from pipeline.options import ranged
 
-D = ReplayParams              # the option defaults are its fields'
+D = ReplayParams              # the option defaults are its fields', the bounds its BOUNDS
 
 
 @click.command()
 @click.argument("session", type=click.Path(path_type=Path))
-@click.option("--port", type=bounded_int(0, MAX_PORT), default=D.port, show_default=True,
+@click.option("--port", type=ranged(D.BOUNDS["port"]), default=D.port, show_default=True,
               help="TCP port to serve on (QTM's little-endian port; 0: any free one, shown).")
 @click.option("--host", default=D.host, show_default=True,
               help="Address to listen on (0.0.0.0: every interface).")
-@click.option("--speed", type=finite_float(0, MAX_SPEED, min_open=True),
+@click.option("--speed", type=ranged(D.BOUNDS["speed"]),
               default=D.speed, show_default=True,
               help="Times real time: 1 plays the frames at their recorded rate, 50 fifty "
                    "times faster.")
-@click.option("--max-clients", type=bounded_int(0), default=D.max_clients, show_default=True,
+@click.option("--max-clients", type=ranged(D.BOUNDS["max_clients"]), default=D.max_clients,
+              show_default=True,
               help="Stop once this many clients have come and gone (0: serve until Ctrl-C).")
 def replay(session: Path, port: int, host: str, speed: float, max_clients: int) -> None:
     """Serve a recorded session as QTM's real-time server would, for live work without a QTM.

@@ -4,57 +4,58 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from pipeline.options import (
-    SIZE_MM,
-    SPACING_MM,
-    Parsed,
-    bounded_int,
-    finite_float,
-    resolve_rrd,
-    rrd_option,
-    seed_option,
-)
-from sim.msm.msm_protocol import CONTACT_RADIUS_LIMIT_M, MAX_ANGLE_RANGE_DEG, parse_shard
+from core.errors import BadInput
+from pipeline.options import SIZE_MM, Parsed, ranged, resolve_rrd, rrd_option, seed_option
+from sim.msm.msm_prior import PRIOR, PRIOR_DIRECTIONS, PRIOR_LOCATIONS
+from sim.msm.msm_protocol import Protocol, parse_shard
 from sim.msm.simulate_params import SimulateParams
 
-D = SimulateParams          # the option defaults are its fields'
+if TYPE_CHECKING:
+    from sim.msm.simulate_stage import Simulation
+
+D = SimulateParams          # the option defaults are its fields', the bounds its BOUNDS
+B = D.BOUNDS
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
-SPRING = finite_float(0, 1e6, min_open=True, unit="N/m")
-# the contact patch's radius, as the protocol takes it (fit-msm's too: its fit is simulated)
-CONTACT_RADIUS = finite_float(0, CONTACT_RADIUS_LIMIT_M, max_open=True, unit="m")
 
 
 @click.command()
 @click.option("--out", required=True, type=OUT, help="States file to write (HDF5).")
-@click.option("--locations", type=bounded_int(1), default=D.locations, show_default=True,
-              help="Random masses loaded, one per location.")
-@click.option("--directions", type=bounded_int(1), default=D.directions,
-              show_default=True,
-              help="Force directions per location: the normal + random ones within 45 deg.")
-@click.option("--steps", type=bounded_int(1), default=D.steps, show_default=True,
+@click.option("--locations", type=ranged(B["locations"]), default=D.locations,
+              help=f"Random masses loaded, one per location [default: the paper's "
+                   f"{Protocol.locations}; with --prior, {PRIOR_LOCATIONS} per phantom].")
+@click.option("--directions", type=ranged(B["directions"]), default=D.directions,
+              help=f"Force directions per location: the normal + random ones within "
+                   f"--max-angle [default: the paper's {Protocol.directions}; with --prior, "
+                   f"{PRIOR_DIRECTIONS}].")
+@click.option("--prior", type=ranged(B["prior"]), default=D.prior, show_default=True,
+              help="Draw this many phantoms from the prior (sim/msm/msm_prior.py: springs, "
+                   "contact patch, footprint 60-160 mm a side, 12-64 markers in a grid or "
+                   "scattered 8-25 mm apart, some occluded, the press's angle), one block of "
+                   "--locations x --directions sequences each, sampled at its markers: the "
+                   "data one pre-training for every lab learns from (0: one MSM).")
+@click.option("--steps", type=ranged(B["steps"]), default=D.steps, show_default=True,
               help="Equal force steps up to --fmax.")
-@click.option("--fmax", type=finite_float(0, 1e3, min_open=True, unit="N",
-                                          why="beyond any indentation"),
-              default=D.fmax,
+@click.option("--fmax", type=ranged(B["fmax"]), default=D.fmax,
               show_default=True,
               help="Largest force (N). Refused when it drives the MSM deeper than its surface "
                    "is wide (its narrower side); states deeper than --thickness are counted.")
-@click.option("--size", type=SIZE_MM, default=None,
+@click.option("--size", type=SIZE_MM, default=D.size,
               help="The surface's footprint LxW in mm (along x by y, e.g. 150x80) "
                    "[default: the --layout states' footprint_m, else the --params fit's grid, "
                    "else the paper's 100x100].")
-@click.option("--spacing-mm", "spacing_mm", type=SPACING_MM, default=None,
+@click.option("--spacing-mm", type=ranged(B["spacing"], 1e3, "mm"), default=D.spacing,
               help="The masses' spacing in mm, rounded per axis so the grid covers the "
                    "footprint exactly [default: the paper's 100/31 = 3.226 mm].")
-@click.option("--k-between", type=SPRING, default=D.k_between, show_default=True,
+@click.option("--k-between", type=ranged(B["k_between"]), default=D.k_between, show_default=True,
               help="Between-mass spring constant (N/m).")
-@click.option("--k-fixed", type=SPRING, default=D.k_fixed, show_default=True,
+@click.option("--k-fixed", type=ranged(B["k_fixed"]), default=D.k_fixed, show_default=True,
               help="Fixed-spring constant (N/m).")
-@click.option("--thickness", type=finite_float(0, 1, min_open=True, unit="m"),
+@click.option("--thickness", type=ranged(B["thickness"]),
               default=D.thickness, show_default=True,
               help="The phantom's thickness (m): states whose tip goes deeper are counted in "
                    "the closing line.")
@@ -63,7 +64,7 @@ CONTACT_RADIUS = finite_float(0, CONTACT_RADIUS_LIMIT_M, max_open=True, unit="m"
                    "(phantom.msm_params JSON): overrides --k-between, --k-fixed and "
                    "--contact-radius, and brings the grid they were fitted on (a --size, "
                    "--spacing-mm or --layout footprint asking for another is refused).")
-@click.option("--contact-radius", type=CONTACT_RADIUS,
+@click.option("--contact-radius", type=ranged(B["contact_radius"]),
               default=D.contact_radius, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
                    "one: the indenter's contact patch (0: one mass, the paper's n_n = 1).")
@@ -73,34 +74,33 @@ CONTACT_RADIUS = finite_float(0, CONTACT_RADIUS_LIMIT_M, max_open=True, unit="m"
                    "named by its point_names), with the loaded patch's centre as the tip (the "
                    "last point), and load only inside the markers' bounding box: the graph the "
                    "network is fine-tuned on.")
-@click.option("--max-angle", type=finite_float(*MAX_ANGLE_RANGE_DEG, unit="deg"),
+@click.option("--max-angle", "max_angle_deg", type=ranged(B["max_angle_deg"]),
               default=D.max_angle_deg,
               show_default=True,
               help="Largest angle of a force direction from the normal (degrees).")
-@click.option("--tol", type=finite_float(1e-9, 1e-2, unit="N",
-                                         why="below 1e-9 N float64 cannot settle; above "
-                                             "1e-2 N the states are not static"),
+@click.option("--tol", type=ranged(B["tol"]),
               default=D.tol, show_default=True,
               help="Static tolerance: largest force left on any mass (N) of the float64 "
                    "solution. Points are stored as float32 (~1e-8 m quantisation at 0.1 m), "
                    "which leaves a residual of ~1e-6 to 1e-5 N whatever --tol is; both are "
                    "stored (max_residual_N, stored_residual_N).")
-@click.option("--workers", type=bounded_int(0), default=D.workers,
+@click.option("--workers", type=ranged(B["workers"]), default=D.workers,
               help="Processes (default: the cores this process may use).")
 @click.option("--shard", type=Parsed("I/N", parse_shard, keep_text=True), default=D.shard,
               help="Simulate only block I (0-based) of N contiguous blocks of locations.")
 @click.option("--merge", is_flag=True,
               help="Join the SHARDS files of one sharded run into --out instead of simulating.")
-@click.option("--rrd-sequences", type=bounded_int(0), default=D.rrd_sequences,
+@click.option("--rrd-sequences", type=ranged(B["rrd_sequences"]), default=D.rrd_sequences,
               show_default=True,
               help="Sequences shown in the recording.")
 @click.argument("shards", nargs=-1, type=IN)
-@seed_option
+@seed_option(D.seed)
 @rrd_option
-def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float,
+def simulate(out: Path, locations: int | None, directions: int | None, prior: int,
+             steps: int, fmax: float,
              size: tuple[float, float] | None, spacing_mm: float | None,
              k_between: float, k_fixed: float, thickness: float, params_file: Path | None,
-             contact_radius: float, layout: Path | None, max_angle: float, tol: float,
+             contact_radius: float, layout: Path | None, max_angle_deg: float, tol: float,
              workers: int, shard: str | None, merge: bool, rrd_sequences: int,
              shards: tuple[Path, ...], seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Generate the paper's mass-spring-model (MSM) training states.
@@ -123,6 +123,11 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
     --fmax that drives the MSM deeper than its surface is wide is refused before simulating.
 
     \b
+    With --prior B: B phantoms drawn from the prior instead of one MSM (one pre-training
+    for every lab): states/points holds the largest marker count then the tip, the slots a
+    phantom lacks valid False; states/phantom and phantoms/* record each phantom's draw.
+
+    \b
     Sharded (cluster jobs), then merged into the same arrays as one run:
       pipeline simulate --shard 0/2 --out part0.h5   (same options in every shard)
       pipeline simulate --shard 1/2 --out part1.h5
@@ -134,30 +139,42 @@ def simulate(out: Path, locations: int, directions: int, steps: int, fmax: float
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     params = SimulateParams(
         locations=locations, directions=directions, steps=steps, fmax=fmax,
-        max_angle_deg=max_angle, seed=seed, contact_radius=contact_radius,
+        max_angle_deg=max_angle_deg, seed=seed, contact_radius=contact_radius,
         k_between=k_between, k_fixed=k_fixed, size=size,
         spacing=None if spacing_mm is None else spacing_mm * 1e-3, tol=tol, workers=workers,
-        shard=shard, thickness=thickness, rrd_sequences=rrd_sequences)
+        shard=shard, thickness=thickness, rrd_sequences=rrd_sequences, prior=prior)
     if merge:
         if shard is not None:
-            raise click.UsageError("--merge and --shard exclude each other")
+            raise BadInput(None, "--merge and --shard exclude each other")
         run = run_merge(shards, out, params, rrd_path)
         what = f"merged {len(shards)} shards"
     else:
         if shards:
-            raise click.UsageError("SHARDS are only read with --merge")
+            raise BadInput(None, "SHARDS are only read with --merge")
         run = run_simulate(SimulateInputs(layout=layout, params_file=params_file), out, params,
                            rrd_path)
         sim = run.sim
-        what = (f"simulated {len(sim.locations)} locations with {run.workers} workers "
+        unit = "phantoms of the prior" if prior else "locations"
+        what = (f"simulated {len(sim.locations)} {unit} with {run.workers} workers "
                 f"(max residual {sim.max_residual:.2g} N solved, "
                 f"{sim.stored_residual:.2g} N as stored in float32)")
     a = run.arrays
-    deep, deepest = run.beyond_thickness
     click.echo(f"{out}: {len(a['states/step'])} states, {len(a['single/start'])} single-step and "
                f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s; "
-               + (f"{deep} states deeper than the phantom's {thickness * 1e3:g} mm thickness "
-                  f"(deepest {deepest * 1e3:.1f} mm: lower --fmax or stiffen the springs to "
-                  "stay inside it)" if deep else
-                  f"deepest {deepest * 1e3:.1f} mm, within the phantom's {thickness * 1e3:g} mm")
+               + _depths(run, thickness, bool(prior))
                + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _depths(run: Simulation, thickness: float, prior: bool) -> str:
+    """The closing line's words on how deep the states go: against the phantom's thickness,
+    or, for a prior's phantoms, against the depth range their centre presses were drawn in."""
+    deep, deepest = run.beyond_thickness
+    if prior:
+        lo, hi = PRIOR.depth_m
+        return (f"deepest {deepest * 1e3:.1f} mm (each phantom's centre press at 7.5 N drawn "
+                f"{lo * 1e3:g}-{hi * 1e3:g} mm deep)")
+    if deep:
+        return (f"{deep} states deeper than the phantom's {thickness * 1e3:g} mm thickness "
+                f"(deepest {deepest * 1e3:.1f} mm: lower --fmax or stiffen the springs to "
+                "stay inside it)")
+    return f"deepest {deepest * 1e3:.1f} mm, within the phantom's {thickness * 1e3:g} mm"

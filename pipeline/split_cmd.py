@@ -6,9 +6,9 @@ from pathlib import Path
 
 import click
 
-from pipeline.options import Parsed, bounded_int, resolve_rrd, rrd_option, seed_option
+from pipeline.options import OneOf, Parsed, ranged, resolve_rrd, rrd_option, seed_option
 from split.split import parse_ratio
-from split.split_params import DEFAULTS, SplitParams
+from split.split_params import DEFAULTS, GROUPINGS, SplitParams
 
 D = SplitParams             # the option defaults are its fields', or the data's (DEFAULTS)
 LAB, MSM = DEFAULTS["lab"], DEFAULTS["msm"]
@@ -18,16 +18,16 @@ LAB, MSM = DEFAULTS["lab"], DEFAULTS["msm"]
 @click.argument("states", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Fold manifest to write (JSON, schema phantom.folds 2.0).")
-@click.option("--folds", type=bounded_int(1), default=D.folds, show_default=True,
+@click.option("--folds", type=ranged(D.BOUNDS["folds"]), default=D.folds, show_default=True,
               help="Number of folds.")
 @click.option("--ratio", type=Parsed("TRAIN:VAL:TEST", parse_ratio), default=D.ratio,
               help=f"TRAIN:VAL:TEST group counts ratio [default: {':'.join(map(str, LAB[1]))} "
                    f"lab, {':'.join(map(str, MSM[1]))} MSM].")
-@click.option("--group", "group_by", type=click.Choice(["sequence", "location"]),
+@click.option("--group", "group_by", type=OneOf(GROUPINGS),
               default=D.group_by,
               help="Keep whole presses (sequence) or whole places (location) in one role "
                    f"[default: {LAB[0]} for lab states, {MSM[0]} for MSM].")
-@seed_option
+@seed_option(D.seed)
 @rrd_option
 def split(states: Path, out: Path, folds: int, ratio: tuple[int, int, int] | None,
           group_by: str | None, seed: int, rrd: Path | None, no_rrd: bool) -> None:

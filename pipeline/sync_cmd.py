@@ -9,35 +9,31 @@ from typing import TYPE_CHECKING
 import click
 
 from core.text import count
-from pipeline.options import FiniteFloat, finite_float, resolve_rrd, rrd_option
-from sync.sync_params import CLOCKS, POSITIVE, SyncParams
+from pipeline.options import OneOf, ranged, resolve_rrd, rrd_option
+from sync.sync_params import CLOCKS, SyncParams
 
-D = SyncParams              # the option defaults are its fields'
+D = SyncParams              # the option defaults are its fields', the bounds its BOUNDS
 
 if TYPE_CHECKING:
     from sync.sync import SyncResult
-
-
-def _bounded(name: str, unit: str) -> FiniteFloat:
-    """The option of the setting ``name``: > 0 or >= 0, as :func:`sync.sync_params.check_params`
-    asks of it (scaled units keep zero where it is)."""
-    return finite_float(0, min_open=name in POSITIVE, unit=unit)
 
 
 @click.command()
 @click.argument("mcap", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Synced HDF5 file to write (schema phantom.synced).")
-@click.option("--clock", type=click.Choice(CLOCKS), default=D.clock,
+@click.option("--clock", type=OneOf(CLOCKS), default=D.clock,
               show_default=True,
               help="Clock alignment: trigger pulses, the tip motion against the force (data), "
                    "or trigger when recorded (auto).")
-@click.option("--max-gap-ms", type=_bounded("max_gap_s", "ms"), default=D.max_gap_s * 1e3,
+@click.option("--max-gap-ms", type=ranged(D.BOUNDS["max_gap_s"], 1e3, "ms"),
+              default=D.max_gap_s * 1e3,
               show_default=True,
               help="Fill marker gaps up to this long; longer ones stay NaN and flagged.")
-@click.option("--margin-s", type=_bounded("margin_s", "s"), default=D.margin_s, show_default=True,
+@click.option("--margin-s", type=ranged(D.BOUNDS["margin_s"]), default=D.margin_s,
+              show_default=True,
               help="Unloaded frames kept before contact onset and after release.")
-@click.option("--location-radius-mm", type=_bounded("location_radius_m", "mm"),
+@click.option("--location-radius-mm", type=ranged(D.BOUNDS["location_radius_m"], 1e3, "mm"),
               default=D.location_radius_m * 1e3, show_default=True,
               help="Presses whose contact points are closer share a location id.")
 @rrd_option

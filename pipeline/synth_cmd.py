@@ -8,15 +8,8 @@ from typing import Any
 
 import click
 
-from pipeline.options import (
-    Parsed,
-    bounded_int,
-    finite_float,
-    resolve_rrd,
-    rrd_option,
-    seed_option,
-)
-from sim.twin.marker_layout import MIN_PITCH_M, PITCH_SPACINGS, parse_layout, parse_size
+from pipeline.options import OneOf, Parsed, ranged, resolve_rrd, rrd_option, seed_option
+from sim.twin.marker_layout import parse_layout, parse_size
 from sim.twin.material_regions import (
     INCLUSION_FORM,
     LAYER_FORM,
@@ -26,30 +19,18 @@ from sim.twin.material_regions import (
     parse_layer,
 )
 from sim.twin.phantom import PhantomSpec
-from sim.twin.synth_params import SynthParams
-from sim.twin.twin_scene import (
-    FORCE_FILES,
-    MAX_DRIFT_PPM,
-    MAX_GRID_PLACES,
-    MAX_OFFSET_S,
-    PIVOT_SECONDS,
-    PRESS_SECONDS,
-    RATE_HZ,
-    parse_locations,
-)
+from sim.twin.synth_params import RANDOM_PLACES, SynthParams
+from sim.twin.twin_scene import FORCE_FILES, MAX_GRID_PLACES, parse_locations
 
-D = SynthParams             # the option defaults are its fields'
+D = SynthParams             # the option defaults are its fields', the bounds its BOUNDS
+B = D.BOUNDS
 # The twin lab's options, which `pipeline demo` passes on to synth and so takes alike; each
-# refused as it is parsed, with the bounds the twin checks (sim/twin/twin_scene.py,
-# sim/twin/marker_layout.py).
+# refused as it is parsed, with the bounds the twin checks (sim/twin/synth_params.py).
 MARKERS = Parsed("RxC|scattered:N", parse_layout, keep_text=True)
-MARKER_PITCH_MM = finite_float(MIN_PITCH_M * 1e3, unit="mm",
-                               why=f"the lattice would be finer than "
-                                   f"{MIN_PITCH_M / PITCH_SPACINGS * 1e3:g} mm")
+MARKER_PITCH_MM = ranged(B["marker_pitch_mm"])
 SIZE = Parsed("LxW", parse_size, keep_text=True)
-MOCAP_RATE = finite_float(*RATE_HZ, unit="Hz")
+MOCAP_RATE = ranged(B["rate_hz"])
 THICKNESS_MM = PhantomSpec.size[2] * 1e3
-RANDOM_PLACES = bounded_int(1, 10)   # places drawn 15 mm apart: more rarely fit
 INCLUSION = Parsed(INCLUSION_FORM, parse_inclusion, keep_text=True)
 LAYER = Parsed(LAYER_FORM, parse_layer, keep_text=True)
 
@@ -64,7 +45,7 @@ class Locations(click.ParamType):
                 ctx: click.Context | None) -> int | str:
         """``value`` as N or the grid's text, or BadInput naming the option."""
         if isinstance(value, int) or str(value).strip().isdigit():
-            return RANDOM_PLACES.convert(value, param, ctx)
+            return ranged(RANDOM_PLACES).convert(value, param, ctx)
         parse_locations(str(value))
         return str(value).strip()
 
@@ -72,30 +53,31 @@ class Locations(click.ParamType):
 @click.command()
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--locations", type=Locations(), default=D.locations, show_default=True,
-              help="Indentation places on the phantom: N (1 to 10) drawn at random, at least "
-                   f"15 mm apart, or RxC (at most {MAX_GRID_PLACES} places): R rows of C "
+              help=f"Indentation places on the phantom: N ({RANDOM_PLACES.min:g} to "
+                   f"{RANDOM_PLACES.max:g}) drawn at random, at least 15 mm apart, or RxC "
+                   f"(at most {MAX_GRID_PLACES} places): R rows of C "
                    "places (rows along +x, stacked along +y) spread evenly over the nodes a "
                    "press may target (two lattice spacings clear of every marker, 20 mm inside "
                    "the edges: 4x4 at most with the default markers), numbered row-major.")
-@click.option("--repeats", type=bounded_int(1, 50), default=D.repeats, show_default=True,
+@click.option("--repeats", type=ranged(B["repeats"]), default=D.repeats, show_default=True,
               help="Presses per location (in rounds over the locations).")
-@click.option("--press-seconds", type=finite_float(*PRESS_SECONDS, unit="s"),
+@click.option("--press-seconds", type=ranged(B["press_seconds"]),
               default=D.press_seconds,
               help="Mean duration of one press cycle in s (default about 6 s).")
-@click.option("--pivot-seconds", type=finite_float(*PIVOT_SECONDS, unit="s"),
+@click.option("--pivot-seconds", type=ranged(B["pivot_seconds"]),
               default=D.pivot_seconds,
               show_default=True, help="Length of the pivot-calibration recording (s).")
 @click.option("--trigger/--no-trigger", default=D.trigger, show_default=True,
               help="Record sync pulses (force-log column 'trigger', QTM EVENT 'Trigger').")
-@click.option("--offset", "offset_s", type=finite_float(-MAX_OFFSET_S, MAX_OFFSET_S, unit="s"),
+@click.option("--offset", "offset_s", type=ranged(B["offset_s"]),
               default=D.offset_s,
               help="Logger clock offset in s (default: drawn, 0.3-3 s, either sign; "
                    "giving it changes no other random choice).")
 @click.option("--drift", "drift_ppm",
-              type=finite_float(-MAX_DRIFT_PPM, MAX_DRIFT_PPM, unit="ppm"), default=D.drift_ppm,
+              type=ranged(B["drift_ppm"]), default=D.drift_ppm,
               help="Logger clock drift in ppm (default: drawn, 10-60 ppm, either sign; "
                    "giving it changes no other random choice).")
-@click.option("--force-via", type=click.Choice(list(FORCE_FILES)), default=D.force_via,
+@click.option("--force-via", type=OneOf(FORCE_FILES), default=D.force_via,
               show_default=True,
               help="logger: the Speedgoat log on its own clock (force.csv, force.mat); "
                    "analog: the Nano17 through the mocap's analog board, on the mocap clock "
@@ -103,7 +85,8 @@ class Locations(click.ParamType):
                    "plate: a force plate under the phantom, on the mocap clock (the QTM "
                    "force-plate export indentation_f_1.tsv: the true force and its moment "
                    "with the plate's noise, the centre of pressure; no Nano17).")
-@click.option("--force-file", type=click.Choice([f for fs in FORCE_FILES.values() for f in fs]),
+@click.option("--force-file", type=OneOf(dict.fromkeys(f for fs in FORCE_FILES.values()
+                                                      for f in fs)),
               default=D.force_file,
               help="The force file session.toml names: csv (default) or mat with --force-via "
                    "logger; tsv (default, the QTM analog export) or c3d (then also the mocap "
@@ -137,9 +120,10 @@ class Locations(click.ParamType):
 @click.option("--mocap-rate", "rate_hz", type=MOCAP_RATE, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
                    "analog or plate needs a rate that divides 1000).")
-@click.option("--view-press", type=bounded_int(0), default=D.view_press, show_default=True,
+@click.option("--view-press", type=ranged(B["view_press"]), default=D.view_press,
+              show_default=True,
               help="Press shown in the rerun recording.")
-@seed_option
+@seed_option(D.seed)
 @rrd_option
 def synth(out_dir: Path, locations: int | str, repeats: int, press_seconds: float | None,
           pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.errors import BadInput
-from split.split_params import SplitParams
+from split.split_params import SplitParams, check_ratio
 
 
 def parse_ratio(text: str) -> tuple[int, int, int]:
@@ -27,9 +27,7 @@ def parse_ratio(text: str) -> tuple[int, int, int]:
         parts = tuple(int(v) for v in text.split(":"))
     except ValueError:
         parts = ()
-    if len(parts) != 3 or min(parts) < 0 or parts[0] < 1 or parts[2] < 1:
-        raise BadInput(None, f"--ratio must be TRAIN:VAL:TEST with positive train and test "
-                             f"counts, got {text!r}")
+    check_ratio(parts, text)
     return parts  # type: ignore[return-value]
 
 

@@ -33,10 +33,13 @@ class StateTensors:
     tip: torch.Tensor        # (S, 3)
     force: torch.Tensor      # (S,)
     pairs: dict[str, torch.Tensor]   # set -> (E, 2) long: start, end
+    width: torch.Tensor | None = None   # (S,) long: the marker slots each state's phantom
+    #                                     uses (MSM drawn from a prior); None: all N - 1
 
     def to(self, device: torch.device) -> StateTensors:
         return StateTensors(self.points.to(device), self.valid.to(device), self.tip.to(device),
-                      self.force.to(device), {k: v.to(device) for k, v in self.pairs.items()})
+                            self.force.to(device), {k: v.to(device) for k, v in
+                                                    self.pairs.items()}, self.width)
 
 
 @dataclass
@@ -59,9 +62,12 @@ def load_states(path: str | Path) -> StateTensors:
         pairs = {s: torch.from_numpy(np.stack([f[f"{s}/start"][()], f[f"{s}/end"][()]], 1)
                                      .astype(np.int64)) for s in SETS}
         tip, force = f["states/tip"][()], f["states/force"][()]
+        width = f["phantoms/markers"][()][f["states/phantom"][()]] \
+            if "states/phantom" in f else None
     pts = np.where(valid[..., None], pts, 0.0).astype(np.float32)
     return StateTensors(torch.from_numpy(pts), torch.from_numpy(valid), torch.from_numpy(tip),
-                  torch.from_numpy(force.astype(np.float32)), pairs)
+                        torch.from_numpy(force.astype(np.float32)), pairs,
+                        None if width is None else torch.from_numpy(width.astype(np.int64)))
 
 
 def load_manifest(path: str | Path, data: str | Path) -> dict:
@@ -111,11 +117,17 @@ def fold_pairs(states: StateTensors, doc: dict, fold: int, role: str,
 
 
 def make_batch(states: StateTensors, pairs: torch.Tensor,
-               point_idx: torch.Tensor | None = None) -> Batch:
-    """Gather a batch for (B, 2) ``pairs``; ``point_idx`` (B, n) keeps those points only."""
+               point_idx: torch.Tensor | None = None, cols: torch.Tensor | None = None
+               ) -> Batch:
+    """Gather a batch for (B, 2) ``pairs``: of its points the columns ``cols`` (n,) only
+    (a prior's phantom without its padding, :mod:`train.training.batches`), and of those
+    ``point_idx`` (B, n') only."""
     s, e = pairs[:, 0], pairs[:, 1]
     x, y = states.points[s], states.points[e]
     m = states.valid[s] & states.valid[e]
+    if cols is not None:
+        cols = cols.to(x.device)
+        x, y, m = x[:, cols], y[:, cols], m[:, cols]
     if point_idx is not None:
         x = x.gather(1, point_idx.unsqueeze(-1).expand(-1, -1, 3))
         y = y.gather(1, point_idx.unsqueeze(-1).expand(-1, -1, 3))

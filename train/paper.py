@@ -7,7 +7,9 @@ The paper (section "Training Setup", "Hyperparameters"): 250 epochs, batches of 
 with an initial learning rate of 1e-4, the loss alpha L_d + MSE of the force change with
 alpha = 88, and k = 5 neighbours in the k-NN graph.
 
-Plain numbers: the command line reads its defaults here without loading torch.
+Plain numbers: the command line reads its defaults here without loading torch. The paper's
+loss and its constant learning rate are the first members of
+:class:`~train.training.train_params.Loss` and :class:`~train.training.train_params.Schedule`.
 """
 
 K = 5                # neighbours per point, itself included
@@ -15,5 +17,3 @@ LR = 1e-4            # Adam's step size
 BATCH = 32           # examples per batch
 EPOCHS = 250
 ALPHA = 88.0         # the loss's weight of the mean distance L_d (m) against the force MSE (N^2)
-LOSS = "paper"       # alpha L_d + MSE (not "balanced": each term in its training scale)
-SCHEDULE = "constant"   # the learning rate (not "cosine")

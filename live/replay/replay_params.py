@@ -7,10 +7,12 @@ both.
 
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import ClassVar
 
-from core.errors import BadInput
+from core.bounds import Bound, check_bounds
 from live.protocol.address import DEFAULT_HOST, MAX_PORT, QTM_PORT
 
 MAX_SPEED = 1000.0                # beyond this a 500 Hz stream outruns any client
@@ -23,13 +25,14 @@ class ReplayParams:
 
     port: int = QTM_PORT           # 0: any free port
     host: str = DEFAULT_HOST       # the address listened on (0.0.0.0: every interface)
-    speed: float = 1.0             # times real time: 0 < speed <= MAX_SPEED
+    speed: float = 1.0             # times real time
     max_clients: int = 0           # stop once this many clients have come and gone; 0: never
 
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "port": Bound(0, MAX_PORT, whole=True),
+        "speed": Bound(0, MAX_SPEED, min_open=True),
+        "max_clients": Bound(0, whole=True),
+    })
+
     def __post_init__(self) -> None:
-        if not 0 <= self.port <= MAX_PORT:
-            raise BadInput(None, f"port {self.port}: must be in [0, {MAX_PORT}]")
-        if not (math.isfinite(self.speed) and 0 < self.speed <= MAX_SPEED):
-            raise BadInput(None, f"speed {self.speed}: must be in (0, {MAX_SPEED:g}]")
-        if self.max_clients < 0:
-            raise BadInput(None, f"max_clients {self.max_clients}: must be >= 0")
+        check_bounds(self, self.BOUNDS)

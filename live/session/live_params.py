@@ -6,11 +6,13 @@ The fields' defaults are the command line's, and its option types refuse what
 
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
+from typing import ClassVar
 
-from core.errors import BadInput
+from core.bounds import Bound, check_bounds
 from live.protocol.address import DEFAULT_HOST, MAX_PORT, QTM_PORT
 
 MAX_TIMEOUT_S = 600.0          # --timeout: in (0, this]; QTM answers in well under a second
@@ -34,15 +36,12 @@ class LiveParams:
     recover: bool = False                # finish a killed session's journal, stream nothing
     reconnect_s: float = 0.0             # after a lost connection, try again this long
 
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "port": Bound(1, MAX_PORT, whole=True),
+        "duration_s": Bound(0, min_open=True, unit="s"),
+        "timeout_s": Bound(0, MAX_TIMEOUT_S, min_open=True, unit="s"),
+        "reconnect_s": Bound(0, MAX_RECONNECT_S, unit="s"),
+    })
+
     def __post_init__(self) -> None:
-        if not 0 < self.port <= MAX_PORT:
-            raise BadInput(None, f"port {self.port}: must be in [1, {MAX_PORT}]")
-        if self.duration_s is not None and not (math.isfinite(self.duration_s)
-                                                and self.duration_s > 0):
-            raise BadInput(None, f"duration_s {self.duration_s}: must be > 0 s (or None)")
-        if not (math.isfinite(self.timeout_s) and 0 < self.timeout_s <= MAX_TIMEOUT_S):
-            raise BadInput(None, f"timeout_s {self.timeout_s}: must be in (0, "
-                                 f"{MAX_TIMEOUT_S:g}] s")
-        if not (math.isfinite(self.reconnect_s) and 0 <= self.reconnect_s <= MAX_RECONNECT_S):
-            raise BadInput(None, f"reconnect_s {self.reconnect_s}: must be in [0, "
-                                 f"{MAX_RECONNECT_S:g}] s")
+        check_bounds(self, self.BOUNDS)

@@ -2,7 +2,7 @@
 
 The MSM fast path factors a 3072 x 3072 banded matrix thousands of times; BLAS threads do not
 speed up one such factorization, and with one worker process per core they fight for the cores
-(measured: 8 ms single-threaded against 18 ms threaded on a loaded 2-core machine). The BLAS
+(the figures: docs/results.md, "The MSM's factorizations and BLAS threads"). The BLAS
 reads its thread count when loaded, so once numpy/scipy are imported the handle is its
 ``set_num_threads`` function, which threadpoolctl finds for every BLAS loaded (OpenBLAS, MKL,
 BLIS) on every platform.

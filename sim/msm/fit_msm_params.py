@@ -5,10 +5,17 @@ The fields' defaults are the command line's: ``pipeline/fit_msm_cmd.py`` reads t
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
+from typing import ClassVar
 
+from core.bounds import Bound, check_bounds
 from sim.msm import paper
+from sim.msm.msm_fit import K_MAX, K_MIN
+from sim.msm.msm_grid import SPACING
+from sim.msm.msm_protocol import CONTACT_RADIUS
 
 
 @dataclass(frozen=True)
@@ -22,7 +29,8 @@ class FitMsmInputs:
 
 @dataclass(frozen=True)
 class FitMsmParams:
-    """Every setting of ``pipeline fit-msm``."""
+    """Every setting of ``pipeline fit-msm``; bad input, in one line naming the setting, where
+    one is out of its bounds."""
 
     max_sequences: int = 10             # sequences used (drawn with the seed when more)
     fold: int = 0                       # the fold of ``splits`` whose training presses fit
@@ -31,3 +39,15 @@ class FitMsmParams:
     spacing: float | None = None        # m between masses (lab states); None: the paper's
     workers: int = 0                    # processes; 0: the cores this process may use
     seed: int = 0
+
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "max_sequences": Bound(1, whole=True),
+        "fold": Bound(0, whole=True),
+        "start": Bound(K_MIN, K_MAX, unit="N/m"),      # each of the two
+        "contact_radius": CONTACT_RADIUS,
+        "spacing": SPACING,
+        "workers": Bound(0, whole=True),
+    })
+
+    def __post_init__(self) -> None:
+        check_bounds(self, self.BOUNDS)

@@ -69,9 +69,11 @@ def states_arrays(plan: Plan, sim: Simulated) -> dict[str, np.ndarray]:
 
 
 def write_states(path: str | Path, arrays: dict[str, np.ndarray], attrs: dict) -> None:
-    """Write an MSM states file atomically, validated against ``phantom.states``."""
+    """Write an MSM states file atomically, validated against ``phantom.states``: every value
+    finite (a point where it is valid: a prior's padding is not)."""
     for name, data in arrays.items():
-        if data.dtype.kind == "f" and not np.isfinite(data).all():
+        seen = arrays.get("states/valid", np.True_) if name == "states/points" else np.True_
+        if data.dtype.kind == "f" and not np.isfinite(data[seen]).all():
             raise MSMError(f"refusing to write non-finite values in {name}")
     write_h5(path, STATES, arrays, attrs)
     validate_states(path)

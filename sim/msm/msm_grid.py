@@ -15,6 +15,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from core.bounds import Bound
 from core.errors import BadInput
 from sim.msm import paper
 from sim.msm.msm import MSMError, MSMParams
@@ -22,6 +23,7 @@ from sim.msm.msm import MSMError, MSMParams
 PAPER_SPACING_M = paper.SIZE_M / (paper.GRID_N - 1)     # 100/31 mm
 MAX_MASSES = 100_000      # ~316 x 316: a static solve of that many masses takes seconds
 SAME_SIZE_M = 1e-6        # m: footprints this close are one (float32 attributes, mm options)
+SPACING = Bound(0, 0.1, min_open=True, unit="m")   # the masses' spacing, when one is asked
 GRID_KEYS = ("n", "size", "n_y", "size_y")
 
 

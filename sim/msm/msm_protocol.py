@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.bounds import Bound
 from core.errors import BadInput
 from sim.cone import cone_directions
 from sim.msm import paper
@@ -24,6 +25,8 @@ from sim.msm import paper
 MULTI_PER_SEQUENCE = 15
 MAX_ANGLE_RANGE_DEG = (0.0, 90.0)   # a force direction's angle from the normal: into the surface
 CONTACT_RADIUS_LIMIT_M = 0.05       # m, excluded: a patch this wide covers the paper's surface
+MAX_ANGLE = Bound(*MAX_ANGLE_RANGE_DEG, unit="deg")
+CONTACT_RADIUS = Bound(0, CONTACT_RADIUS_LIMIT_M, max_open=True, unit="m")
 
 
 @dataclass(frozen=True)
@@ -47,14 +50,8 @@ class Protocol:
             raise BadInput(None, f"--locations {self.locations} exceeds the {n_masses} masses")
         if not (math.isfinite(self.fmax) and self.fmax > 0):
             raise BadInput(None, f"--fmax must be a finite positive force, got {self.fmax}")
-        lo, hi = MAX_ANGLE_RANGE_DEG
-        if not lo <= self.max_angle_deg <= hi:
-            raise BadInput(None, f"max angle must be within {lo:g}..{hi:g} degrees, got "
-                                 f"{self.max_angle_deg}")
-        if not (math.isfinite(self.contact_radius)
-                and 0 <= self.contact_radius < CONTACT_RADIUS_LIMIT_M):
-            raise BadInput(None, f"--contact-radius must be within [0, "
-                                 f"{CONTACT_RADIUS_LIMIT_M:g}) m, got {self.contact_radius}")
+        MAX_ANGLE.check("max_angle_deg", self.max_angle_deg)
+        CONTACT_RADIUS.check("contact_radius", self.contact_radius)
 
     @property
     def step_n(self) -> float:

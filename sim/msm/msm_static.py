@@ -58,7 +58,7 @@ class BandedTangent:
     def factor(self, x: np.ndarray, convex: bool = False) -> np.ndarray:
         """Cholesky factor (band storage) of the tangent at ``x``, for use as a preconditioner.
 
-        Single precision (a quarter faster to factor and apply, and the iterations it guides
+        Single precision (quicker to factor and apply, and the iterations it guides
         are evaluated in double precision, so the equilibrium is as exact); double precision
         where single precision cannot factor it. The exact Hessian where it is positive
         definite (Newton-like convergence); where compressed springs make it indefinite, or

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from core.atomic import atomic_outputs
-from core.protocol import THICKNESS_M
+from core.errors import BadInput
+from core.protocol import STEP_N, THICKNESS_M
 from core.provenance import make_provenance
 from data_schema.json_docs import MSM_PARAMS, validate_json_doc
 from data_schema.states import STATES
@@ -26,6 +27,8 @@ from sim.msm.msm_dataset import simulate_data, write_states
 from sim.msm.msm_depth import beyond
 from sim.msm.msm_grid import GRID_KEYS, check_same_grid, grid_params, recorded_grid
 from sim.msm.msm_layout import LabLayout, check_inside, read_layout
+from sim.msm.msm_prior import PRIOR
+from sim.msm.msm_prior_data import PriorRun, simulate_prior
 from sim.msm.msm_protocol import Protocol, parse_shard
 from sim.msm.msm_shards import merge_shards
 from sim.msm.msm_simulate import Simulated
@@ -67,6 +70,8 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     ``params`` with the spring constants and contact radius the run used (the fit's).
     """
     inputs, p = inputs or SimulateInputs(), params or SimulateParams()
+    if p.prior:
+        return _run_prior(inputs, out, p, rrd)
     layout, params_file = inputs.layout, inputs.params_file
     protocol, msm = p.protocol(), MSMParams(k_between=p.k_between, k_fixed=p.k_fixed)
     lab = read_layout(layout) if layout is not None else None
@@ -77,7 +82,8 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     if lab is not None:
         check_inside(lab.points, msm, layout, lab.names)
     used = replace(p, k_between=msm.k_between, k_fixed=msm.k_fixed,
-                   contact_radius=protocol.contact_radius)
+                   contact_radius=protocol.contact_radius, locations=protocol.locations,
+                   directions=protocol.directions)
     shard = parse_shard(p.shard) if p.shard else None
     workers = p.workers or default_workers()
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
@@ -115,6 +121,30 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
     return data.sim, data.arrays
 
 
+def _run_prior(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
+               rrd: str | Path | None) -> Simulation:
+    """``simulate --prior``: blocks of phantoms drawn from the prior
+    (:mod:`sim.msm.msm_prior_data`), or one shard of them."""
+    if inputs.layout is not None or inputs.params_file is not None:
+        raise BadInput(inputs.layout or inputs.params_file,
+                       "--prior draws the phantoms: no --layout or --params with it")
+    locations, directions = p.places
+    run = PriorRun(PRIOR, p.prior, locations, directions, p.seed)
+    shard = parse_shard(p.shard) if p.shard else None
+    workers = p.workers or default_workers()
+    used = replace(p, locations=locations, directions=directions)
+    with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
+        started = time.perf_counter()
+        data = simulate_prior(run, tol=p.tol, workers=workers, shard=shard)
+        prov = make_provenance("simulate", asdict(used), inputs=[], schema=STATES.name,
+                               schema_version=STATES.version)
+        write_states(tmp_out, data.arrays, {"provenance": json.dumps(prov), **data.attrs})
+        seconds = time.perf_counter() - started
+        _record(tmp_rrd, data.arrays, None, STEP_N, p.rrd_sequences,
+                (PRIOR.side[1], PRIOR.side[1]))
+    return Simulation(data.arrays, seconds, data.sim, p.thickness, workers)
+
+
 def run_merge(inputs: Sequence[str | Path], out: str | Path,
               params: SimulateParams | None = None, rrd: str | Path | None = None
               ) -> Simulation:
@@ -126,15 +156,23 @@ def run_merge(inputs: Sequence[str | Path], out: str | Path,
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
         merged = merge_shards(inputs)
-        msm = MSMParams(**json.loads(merged.attrs["msm_params"]))
-        used = replace(p, **merged.protocol, k_between=msm.k_between, k_fixed=msm.k_fixed,
-                       tol=json.loads(merged.attrs["solver"])["tol_N"], shard=None)
+        tol = json.loads(merged.attrs["solver"])["tol_N"]
+        msm = MSMParams(**json.loads(merged.attrs["msm_params"])) if \
+            "blocks" not in merged.protocol else None
+        if msm is None:                                  # shards of a prior run
+            run = merged.protocol
+            used = replace(p, prior=run["blocks"], locations=run["locations"],
+                           directions=run["directions"], seed=run["seed"], tol=tol, shard=None)
+        else:
+            used = replace(p, **merged.protocol, k_between=msm.k_between, k_fixed=msm.k_fixed,
+                           tol=tol, shard=None)
         prov = make_provenance("simulate --merge", asdict(used), inputs=merged.shards,
                                schema=STATES.name, schema_version=STATES.version)
         attrs = {**merged.attrs, "provenance": json.dumps(prov)}
         write_states(tmp_out, merged.arrays, attrs)
         seconds = time.perf_counter() - started
-        _record(tmp_rrd, merged.arrays, msm, float(attrs["step_n"]), p.rrd_sequences)
+        _record(tmp_rrd, merged.arrays, msm, float(attrs["step_n"]), p.rrd_sequences,
+                tuple(attrs["footprint_m"]))
     return Simulation(merged.arrays, seconds, thickness=p.thickness)
 
 
@@ -176,11 +214,15 @@ def _fitted(path: str | Path, params: MSMParams, protocol: Protocol
             grid is not None)
 
 
-def _record(path: Path | None, arrays: dict[str, np.ndarray], params: MSMParams,
-            step_n: float, sequences: int) -> None:
-    """The recording: the surface as triangles when the states are every mass."""
+def _record(path: Path | None, arrays: dict[str, np.ndarray], params: MSMParams | None,
+            step_n: float, sequences: int, footprint: tuple[float, float] | None = None
+            ) -> None:
+    """The recording: the surface as triangles when the states are every mass of one MSM
+    (``params``; None: phantoms drawn from the prior, each on its ``footprint``'s largest)."""
     if path is None:
         return
-    model = MSM(params)
-    triangles = model.triangles() if arrays["states/points"].shape[1] == model.N else None
-    write_simulate_recording(path, arrays, step_n, triangles, params.footprint, sequences)
+    model = None if params is None else MSM(params)
+    triangles = model.triangles() if model is not None and \
+        arrays["states/points"].shape[1] == model.N else None
+    write_simulate_recording(path, arrays, step_n, triangles,
+                             footprint if params is None else params.footprint, sequences)

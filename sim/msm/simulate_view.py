@@ -72,9 +72,11 @@ def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], st
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
     rows = {s: _rows(arrays, s) for s in chosen}
-    largest = max((_displacement(arrays, r).max() for r in rows.values()), default=0.0)
+    largest = max((np.nanmax(_displacement(arrays, r), initial=0.0) for r in rows.values()),
+                  default=0.0)
     empty = len(arrays["states/step"]) == 0
     first = np.array([[0.0, 0.0], footprint]) if empty else arrays["states/points"][0, :, :2]
+    first = first[np.isfinite(first).all(axis=1)]          # a prior's padding: no point
     size = float(np.ptp(first, axis=0).max())
     middle = (first.min(axis=0) + first.max(axis=0)) / 2
     bp = blueprint(chosen, largest * 1e3, step_n, size, middle)
@@ -108,11 +110,11 @@ def log_sequence(rec: rr.RecordingStream, s: int, arrays: dict[str, np.ndarray],
     times = [rr.TimeColumn(TIMELINE, sequence=arrays["states/step"][rows].astype(np.int64))]
     colors = colormap(np.sqrt(_displacement(arrays, rows) / max(largest, 1e-12)))
     root, n, t = f"msm/seq_{s:04d}", points.shape[1], len(rows)
-    if triangles is None:             # sampled at a lab's markers: points, not a mesh
+    if triangles is None:             # sampled at markers: points (those present), not a mesh
+        seen = np.isfinite(points).all(axis=2)
         rec.log(f"{root}/surface", rr.Points3D.from_fields(radii=[0.002]), static=True)
         rec.send_columns(f"{root}/surface", indexes=times, columns=rr.Points3D.columns(
-            positions=points.reshape(-1, 3), colors=colors.reshape(-1, 3))
-            .partition(np.full(t, n)))
+            positions=points[seen], colors=colors[seen]).partition(seen.sum(axis=1)))
     else:
         rec.log(f"{root}/surface", rr.Mesh3D.from_fields(triangle_indices=triangles),
                 static=True)

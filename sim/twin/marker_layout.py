@@ -79,7 +79,19 @@ def marker_names(n: int) -> tuple[str, ...]:
     return tuple(f"P{k:02d}" for k in range(n))
 
 
-def parse_layout(text: str, pitch_mm: float = 20.0, seed: int = 0) -> MarkerLayout:
+def layout_text(layout: MarkerLayout) -> str:
+    """``layout`` as ``--markers`` writes it: ``RxC`` or ``scattered:N``."""
+    return f"scattered:{layout.scattered}" if layout.scattered else \
+        f"{layout.rows}x{layout.cols}"
+
+
+def size_text(size: tuple[float, ...]) -> str:
+    """A footprint (L, W, ...) in m as ``--size`` writes it: ``LxW`` in mm."""
+    return f"{size[0] * 1e3:g}x{size[1] * 1e3:g}"
+
+
+def parse_layout(text: str, pitch_mm: float = MarkerLayout.pitch * 1e3,
+                 seed: int = 0) -> MarkerLayout:
     """``--markers`` (``RxC`` or ``scattered:N``) and ``--marker-pitch`` as a layout."""
     grid = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     scattered = re.fullmatch(r"\s*scattered\s*:\s*(\d+)\s*", text)

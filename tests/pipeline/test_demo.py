@@ -18,10 +18,12 @@ from data_schema.states import validate_states
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.demo_plan import NETWORKS, RECIPE, SMOKE, demo_steps
+from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, SMOKE, Lab, demo_steps
 
 
 def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
+    """The generic pre-training: one model, pre-trained once on the prior's MSM data, is where
+    every fold's TL run starts."""
     out = tmp_path / "demo"
     res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
     assert res.exit_code == 0, res.output
@@ -30,36 +32,26 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     assert len(raw.phantom_markers) == 25 and len(raw.indenter_markers) == 4
     validate_h5(out / "session_synced.h5", SYNCED)
     validate_states(out / "session_states.h5")
-    folds = validate_folds(out / "splits.json")["folds"]
-    assert len(folds) == 2
-    for k, fold in enumerate(folds):                      # the MSM fitted per fold ...
-        d = out / "msm" / f"fold{k}"
-        fit = json.loads((d / "params.json").read_text())
-        assert fit["mean_distance_m"] < fit["still_distance_m"]
-        fitted = {s["sequence"] for s in fit["per_sequence"]}   # ... on its training presses
-        assert fitted and fitted <= set(fold["train"]["groups"])
-        assert not fitted & set(fold["test"]["groups"])
-        validate_states(d / "msm.h5")
-        with h5py.File(d / "msm.h5") as f:                 # the lab's 25 markers + the tip
-            assert f["states/points"].shape[1] == 26 and "layout" in f.attrs
+    assert len(validate_folds(out / "splits.json")["folds"]) == 2
+    validate_states(out / "msm" / "prior.h5")
+    with h5py.File(out / "msm" / "prior.h5") as f:          # phantoms drawn from the prior
+        assert "phantoms/k_between" in f and f["states/points"].shape[1] == 65
+    assert not (out / "msm" / "fold0").exists()              # no fit, no MSM per fold
     metrics = json.loads((out / "metrics.json").read_text())
     assert {Path(r["run"]).name for r in metrics["runs"]} == {
-        "msm_fold0", "msm_fold1", "exp_tl_fold0", "exp_tl_fold1", "exp_notl_fold0",
-        "exp_notl_fold1"}
-    for k in range(2):                                    # TL starts from its own fold's MSM
+        "generic", "exp_tl_fold0", "exp_tl_fold1", "exp_notl_fold0", "exp_notl_fold1"}
+    for k in range(2):                                    # TL starts from the one generic model
         meta = torch.load(out / "runs" / f"exp_tl_fold{k}" / "best.pt", weights_only=False)
-        assert Path(meta["meta"]["init"]).parent.name == f"msm_fold{k}"
+        assert Path(meta["meta"]["init"]).parent.name == "generic"
     assert all(set(r["references"]) == {"nothing moves", "nearest press", "force, linear"}
                for r in metrics["runs"])
     md = (out / "metrics.md").read_text()
     assert "*reference: nearest press*" in md
-    per_fold = md[md.index("Mean L_d per fold on Exp"):].splitlines()   # the lab's folds ...
-    assert "cGNN/rot MSM" not in per_fold[2] and "cGNN/MSM (TL)" in per_fold[2]   # ... only
     scarcity = json.loads((out / "scarcity" / "fold0.json").read_text())["scarcity"]
     assert {r["predictor"] for r in scarcity} >= {"TL", "no TL", "nearest press"}
     for rrd in ("session/recording.rrd", "session.rrd", "session_synced.rrd",
-                "session_states.rrd", "splits.rrd", "msm/fold0/params.rrd", "msm/fold1/msm.rrd",
-                "runs/msm_fold0/train.rrd", "metrics.rrd"):
+                "session_states.rrd", "splits.rrd", "msm/prior.rrd", "runs/generic/train.rrd",
+                "metrics.rrd"):
         assert rrd_entities(out / rrd), rrd
     for line in res.output.splitlines():                  # sync met its targets
         if line.strip().startswith("MISSED"):
@@ -69,25 +61,56 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     times = json.loads((out / "demo_times.json").read_text())     # every step timed, once
     assert sorted(tuple(s["args"]) for s in times["steps"]) == sorted(s.args for s in steps)
     assert not any(s["skipped"] for s in times["steps"])
-    trains = [s for s in times["steps"] if s["stage"] == "train"]
-    assert len(trains) == 3 * SMOKE.folds and all(s["seconds"] > 0 for s in trains)
-    assert times["stages"]["train"]["ran"] == len(trains)
+    assert times["stages"]["train (pre-training)"]["ran"] == 1
+    assert times["stages"]["simulate --prior"]["ran"] == 1
+    tunes = [s for s in times["steps"] if s["stage"] == "train (fine-tuning)"]
+    assert len(tunes) == 2 * SMOKE.folds and all(s["seconds"] > 0 for s in tunes)
     assert times["host_speed_s"] is None and times["host_speed"].startswith("absent")
     again = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
     assert again.exit_code == 0, again.output
     assert again.output.count("(unchanged since its last run: skipped)") == len(steps)
     times = json.loads((out / "demo_times.json").read_text())
     assert all(s["skipped"] and s["seconds"] == 0 for s in times["steps"])
-    (out / "msm" / "fold0" / "params.json").unlink()    # one fold's fit gone: what reads it,
-    third = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])   # and on
+    (out / "msm" / "prior_splits.json").unlink()   # the prior's split gone: what reads it, and
+    third = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])   # on
     assert third.exit_code == 0, third.output
     lines = third.output.splitlines()
     rerun = [line for line, after in zip(lines, lines[1:] + [""], strict=True)
              if "$ pipeline" in line and "skipped" not in after]
-    for name in ("fold0/params.json", "fold0/msm.h5", "fold0/splits.json", "msm_fold0 ",
-                 "exp_tl_fold0 ", "metrics.json"):
+    for name in ("prior_splits.json", "runs/generic ", "exp_tl_fold0 ", "exp_tl_fold1 ",
+                 "metrics.json"):
         assert any(name in line for line in rerun), name
-    assert not any("fold1" in line for line in rerun if "pipeline eval" not in line), rerun
+    assert not any("exp_notl" in line or "synth" in line for line in rerun
+                   if "pipeline eval" not in line), rerun
+
+
+def test_the_per_fold_pretraining_fits_each_fold_on_its_training_presses(tmp_path):
+    out = tmp_path / "demo"
+    res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--pretraining", "per-fold",
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    for k, fold in enumerate(validate_folds(out / "splits.json")["folds"]):
+        d = out / "msm" / f"fold{k}"                      # the MSM fitted per fold ...
+        fit = json.loads((d / "params.json").read_text())
+        assert fit["mean_distance_m"] < fit["still_distance_m"]
+        fitted = {s["sequence"] for s in fit["per_sequence"]}   # ... on its training presses
+        assert fitted and fitted <= set(fold["train"]["groups"])
+        assert not fitted & set(fold["test"]["groups"])
+        validate_states(d / "msm.h5")
+        with h5py.File(d / "msm.h5") as f:                 # the lab's 25 markers + the tip
+            assert f["states/points"].shape[1] == 26 and "layout" in f.attrs
+        meta = torch.load(out / "runs" / f"exp_tl_fold{k}" / "best.pt", weights_only=False)
+        assert Path(meta["meta"]["init"]).parent.name == f"msm_fold{k}"   # its own MSM's
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert {Path(r["run"]).name for r in metrics["runs"]} == {
+        "msm_fold0", "msm_fold1", "exp_tl_fold0", "exp_tl_fold1", "exp_notl_fold0",
+        "exp_notl_fold1"}
+    md = (out / "metrics.md").read_text()
+    per_fold = md[md.index("Mean L_d per fold on Exp"):].splitlines()   # the lab's folds ...
+    assert "cGNN/rot MSM" not in per_fold[2] and "cGNN/MSM (TL)" in per_fold[2]   # ... only
+    assert "MSM fitted per fold on its training presses" in res.output
+    times = json.loads((out / "demo_times.json").read_text())
+    assert times["stages"]["train (pre-training)"]["ran"] == SMOKE.folds
 
 
 @pytest.mark.parametrize("network", list(NETWORKS))
@@ -97,7 +120,7 @@ def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, 
     ours = demo_steps(tmp_path, 0, SMOKE)
     other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network])
     trains = [(a.args, b.args) for a, b in zip(ours, other, strict=True) if a.args[0] == "train"]
-    assert len(trains) == 3 * SMOKE.folds                  # pre-training and two fine-tunings
+    assert len(trains) == 1 + 2 * SMOKE.folds              # pre-training and two fine-tunings
     extra = NETWORKS[network][len(RECIPE):]
     for plain, changed in trains:
         at = plain.index(RECIPE[-1]) + 1
@@ -115,12 +138,25 @@ def test_demo_runs_on_another_labs_phantom(tmp_path):
     assert res.exit_code == 0, res.output
     raw = read_raw_mcap(out / "session.mcap")
     assert len(raw.phantom_markers) == 12 and raw.markers.rate_hz == 250
-    names = [*raw.phantom_markers, "tip"]
-    for states in (out / "session_states.h5", out / "msm" / "fold1" / "msm.h5"):
-        with h5py.File(states) as f:
-            assert f["states/points"].shape[1] == 13
-            assert json.loads(f.attrs["point_names"]) == names
-            assert tuple(f.attrs["footprint_m"]) == pytest.approx((0.12, 0.08))
-    fit = json.loads((out / "msm" / "fold0" / "params.json").read_text())["msm_params"]
-    assert (fit["size"], fit["size_y"]) == pytest.approx((0.12, 0.08))
-    assert len(json.loads((out / "metrics.json").read_text())["runs"]) == 6
+    with h5py.File(out / "session_states.h5") as f:
+        assert f["states/points"].shape[1] == 13
+        assert json.loads(f.attrs["point_names"]) == [*raw.phantom_markers, "tip"]
+        assert tuple(f.attrs["footprint_m"]) == pytest.approx((0.12, 0.08))
+    assert len(json.loads((out / "metrics.json").read_text())["runs"]) == 5
+
+
+def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
+    """The generic model's steps (the prior's data, its split, the pre-training) are the same
+    commands whatever the lab's markers, footprint or rate and the demo's seed; a fine-tuning
+    starts from it."""
+    def generic(seed: int, lab: Lab) -> list[tuple[str, ...]]:
+        return [s.args for s in demo_steps(tmp_path, seed, QUICK, lab=lab)
+                if s.stage in ("simulate --prior", "train (pre-training)")
+                or s.args[:2] == ("split", str(tmp_path / "msm" / "prior.h5"))]
+
+    mine = generic(0, Lab())
+    assert len(mine) == 3
+    assert generic(2, Lab(markers="6x6", marker_pitch_mm=12, mocap_rate_hz=300)) == mine
+    assert generic(1, Lab(markers="scattered:20", size_mm="150x80")) == mine
+    tl = [s for s in demo_steps(tmp_path, 1, QUICK) if "exp_tl_fold3" in str(s.outputs[0])]
+    assert tl[0].inputs[-1] == tmp_path / "runs" / "generic" / "best.pt"

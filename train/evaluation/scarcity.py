@@ -48,7 +48,7 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
     """Retrain ``run_dir``'s fold on 1..n groups (at most ``most``), with and without its
     --init, and score each beside the references fitted on the same groups."""
     meta = load_checkpoint(run_dir / "best.pt")["meta"]
-    opts = TrainOptions(**meta["options"])
+    opts = TrainOptions.from_dict(meta["options"])
     opts = dataclasses.replace(opts, epochs=epochs or opts.epochs)
     config = CGNNConfig.from_dict(meta["config"])
     data, splits = Path(meta["data"]["file"]), Path(meta["splits"])

@@ -1,16 +1,20 @@
 """The network's settings: its widths and its variant, with where it reads the press.
 
-Plain data without torch: the command line reads the defaults and the choices here.
+Plain data without torch: the command line reads the defaults, the choices and the bounds here.
 ``offsets`` is the one concept of where the network reads each point's offsets from the tip
 (C = [tip start, tip end]); every module asks :class:`Offsets`, never the field's spelling.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from enum import StrEnum
-from typing import Any
+from types import MappingProxyType
+from typing import Any, ClassVar
 
+from core.bounds import Bound, check_bounds, one_of
+from core.errors import BadInput
 from train.paper import K as PAPER_K
 
 OFFSET_WIDTH = 32     # the heads' offset encoding e: numbers per point (ours, measured)
@@ -50,18 +54,23 @@ class CGNNConfig:
     offsets: Offsets = Offsets.NONE
     offset_width: int = OFFSET_WIDTH
 
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "k": Bound(2, whole=True, why="neighbours per point, itself included"),
+        "offset_width": Bound(1, whole=True),
+    })
+
     def __post_init__(self) -> None:
-        """The one check of the offsets: a known place, only with C, a positive width."""
-        try:
-            object.__setattr__(self, "offsets", Offsets(self.offsets))
-        except ValueError:
-            raise ValueError(f"offsets must be one of {', '.join(Offsets)}, got "
-                             f"{self.offsets!r}") from None
+        """The one check of the network (bad input, in one line): a known place for the
+        offsets (given by its value, as a checkpoint keeps it: its member), only with C, and
+        the bounds; the widths as tuples (lists, as a checkpoint keeps them, compare alike)."""
+        object.__setattr__(self, "edge_widths", tuple(tuple(w) for w in self.edge_widths))
+        object.__setattr__(self, "disp_widths", tuple(self.disp_widths))
+        object.__setattr__(self, "force_widths", tuple(self.force_widths))
+        object.__setattr__(self, "offsets", one_of(Offsets, self.offsets, "offsets"))
         if self.offsets is not Offsets.NONE and not self.use_condition:
-            raise ValueError(f"offsets {self.offsets}: the tip's offsets are the condition C, "
-                             "which noCond removes")
-        if self.offset_width < 1:
-            raise ValueError(f"the offsets' width must be >= 1, got {self.offset_width}")
+            raise BadInput(None, f"offsets {self.offsets}: the tip's offsets are the condition "
+                                 "C, which noCond removes")
+        check_bounds(self, self.BOUNDS)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for a checkpoint loaded with ``weights_only``."""

@@ -73,8 +73,6 @@ def check_checkpoint(path: str | Path, state: Any) -> None:
     if missing:
         raise BadInput(path, f"not a checkpoint of `pipeline train`: lacks {missing}")
     config = _parsed(path, "config", CGNNConfig.from_dict, state["config"])
-    if config.k < 2:
-        raise BadInput(path, f"checkpoint config.k is {config.k}: a graph needs k >= 2")
     norm = _parsed(path, "norm", Normaliser.from_dict, state["norm"])
     _check_norm(path, norm)
     _check_weights(path, state["model"], config)
@@ -88,6 +86,8 @@ def check_checkpoint(path: str | Path, state: Any) -> None:
 def _parsed(path: str | Path, key: str, parse: Any, value: Any) -> Any:
     try:
         return parse(value)
+    except BadInput as e:                 # the settings' own check: a value out of bounds
+        raise BadInput(path, f"checkpoint {key}: {e.what}") from None
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise BadInput(path, f"checkpoint key {key!r} is not usable "
                              f"({type(e).__name__}: {_first_line(e)})") from None

@@ -28,7 +28,7 @@ import copy
 import math
 import time
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,14 +47,14 @@ from train.model.config import CGNNConfig
 from train.model.normalise import Normaliser
 from train.model.si_units import loss_sum, mean_distance, predict
 from train.training.augment import about_normal, move_batch
+from train.training.batches import epoch_batches, fixed_batches
 from train.training.checkpoint import load_checkpoint
 from train.training.distributed import DistContext, from_env
 from train.training.fold_data import fit_normaliser, fold_examples
 from train.training.run_files import RunFiles, RunWriter, Save
-from train.training.train_params import TrainOptions
+from train.training.train_params import Loss, Schedule, TrainOptions
 from train.training.variant import make_variant
 
-LOSSES = ("paper", "balanced")
 EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
 # A loss that does not move: the loss of a fixed probe of training examples (all points, no
 # augmentation: no sampling noise) changed by less than STALL_REL of itself from before
@@ -67,7 +67,7 @@ STALL_PROBE = 64       # training examples in the probe
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
     """The step size of an epoch: constant, or cosine from ``lr`` to 1 % of it."""
-    if opts.schedule == "constant" or opts.epochs <= 1:
+    if opts.schedule is Schedule.CONSTANT or opts.epochs <= 1:
         return opts.lr
     t = epoch / (opts.epochs - 1)
     return opts.lr * (0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * t)))
@@ -77,18 +77,6 @@ def seeded(seed: int, epoch: int) -> torch.Generator:
     """The generator of one epoch's draws (shuffle, points), the same on every resume and
     every device: it draws on the CPU, and the draws are moved to the run's device."""
     return torch.Generator(device="cpu").manual_seed(seed * 1_000_003 + epoch)
-
-
-def check_options(opts: TrainOptions) -> None:
-    """Refuse a non-finite or non-positive rate or weight (the CLI bounds them further), so
-    that a caller's NaN never reaches the optimizer or shows as a diverged loss."""
-    for name in ("lr", "alpha", "ema", "point_fraction"):
-        value = getattr(opts, name)
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise BadInput(None, f"--{name.replace('_', '-')} {value}: must be a finite "
-                                 "positive number")
-    if opts.loss not in LOSSES:
-        raise BadInput(None, f"--loss must be one of {', '.join(LOSSES)}, got {opts.loss!r}")
 
 
 def probe_loss(run: Run, opts: TrainOptions) -> float:
@@ -149,7 +137,6 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
             config: CGNNConfig, init: Path | None, device: torch.device) -> Run:
     """Load data and fold, build the model (from ``init``'s weights for transfer learning)
     and its optimizer, and resume a killed run from ``files.last``."""
-    check_options(opts)
     states, train, val, sha = fold_examples(data, splits, opts)
     init_state = load_checkpoint(init) if init is not None else None
     meta = run_meta(data, splits, init, opts, config, sha, init_state)
@@ -166,9 +153,9 @@ def prepare(data: Path, splits: Path, files: RunFiles, opts: TrainOptions,
 
 def adam(params: Iterable[torch.Tensor], lr: float) -> torch.optim.Adam:
     """The trainer's Adam, fused: one call over all parameters instead of some thirty
-    operators each (the same update, rounded differently; 5-8 % of a training step at 26
-    points). A run resumed from a checkpoint of an unfused Adam goes on unfused: the
-    optimizer's settings are the checkpoint's, so it reaches the weights it would have."""
+    operators each (the same update, rounded differently). A run resumed from a checkpoint of
+    an unfused Adam goes on unfused: the optimizer's settings are the checkpoint's, so it
+    reaches the weights it would have."""
     return torch.optim.Adam(params, lr=lr, fused=True)
 
 
@@ -176,13 +163,13 @@ def run_meta(data: Path, splits: Path, init: Path | None, opts: TrainOptions,
              config: CGNNConfig, sha256: str, init_state: dict | None) -> dict:
     """What a run's checkpoints record of it: its options, network, data, manifest, the
     checkpoint it started from, and its variant."""
-    return {"options": asdict(opts), "config": config.to_dict(),
+    return {"options": opts.to_dict(), "config": config.to_dict(),
             "data": {"file": str(Path(data).resolve()), "sha256": sha256,
                      "point_names": point_names(data)},
             "splits": str(Path(splits).resolve()),
             "init": str(Path(init).resolve()) if init else None,
-            "variant": make_variant(config.to_dict(), asdict(opts), data,
-                                    init_state and init_state["meta"])}
+            "variant": make_variant(config, opts, data,
+                                    init_state and init_state["meta"]).to_dict()}
 
 
 def initial_model(states: StateTensors, train: torch.Tensor, opts: TrainOptions,
@@ -195,7 +182,7 @@ def initial_model(states: StateTensors, train: torch.Tensor, opts: TrainOptions,
     norm = fit_normaliser(states, train, opts.seed)
     if init_state is None:
         return model, norm
-    if CGNNConfig.from_dict(init_state["config"]).to_dict() != config.to_dict():
+    if CGNNConfig.from_dict(init_state["config"]) != config:
         raise BadInput(init, "its network (widths, k, conditioning or offsets) differs from "
                              "this run's: transfer learning needs the same network")
     model.load_state_dict(init_state["model"])
@@ -228,9 +215,8 @@ def update_average(run: Run, decay: float) -> None:
 
 
 def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
-    """The normaliser that puts the loss terms in their scales ("balanced"), or None
-    (the loss's name was checked once, :func:`check_options`)."""
-    return run.norm if opts.loss == "balanced" else None
+    """The normaliser that puts the loss terms in their scales (the balanced loss), or None."""
+    return run.norm if opts.loss is Loss.BALANCED else None
 
 
 def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
@@ -250,23 +236,26 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
     """One pass over the training examples; the mean loss."""
     device = run.train.device
     g = seeded(opts.seed, epoch)
-    perm = torch.randperm(len(run.train), generator=g).to(device)
     n_points = run.states.points.shape[1]
-    keep = max(run.model.config.k + 1, math.ceil(opts.point_fraction * n_points)) \
-        if opts.point_fraction else None
     net.train()
     for group in run.optimizer.param_groups:
         group["lr"] = learning_rate(opts, epoch)
     total = torch.zeros(2, device=device)
-    for b, rows in enumerate(perm.split(opts.batch)):
+    batches = epoch_batches(run.train, run.states.width, n_points, opts.batch, g)
+    for b, chosen in enumerate(batches):
+        rows = chosen.rows.to(device)
         pairs = run.train[rows]
+        width = n_points if chosen.cols is None else len(chosen.cols)
+        keep = max(run.model.config.k + 1, math.ceil(opts.point_fraction * width)) \
+            if opts.point_fraction else None
         idx = None
         if keep is not None:
-            idx = torch.rand(len(rows), n_points, generator=g).argsort(1)[:, :keep].to(device)
+            idx = torch.rand(len(rows), width, generator=g).argsort(1)[:, :keep].to(device)
         turns = about_normal(torch.rand(len(rows), generator=g) * 2 * math.pi) \
             if opts.rotate else None
         mine = ctx.my_slice(torch.arange(len(rows), device=device))
-        batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine])
+        batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine],
+                           chosen.cols)
         if turns is not None:
             batch = move_batch(batch, turns[mine.cpu()], torch.tensor(run.norm.centre))
         loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha, balance(run, opts))
@@ -292,8 +281,10 @@ def evaluate_pairs(model: torch.nn.Module, norm: Normaliser, states: StateTensor
     """Mean loss, L_d (mm) and force error (N) over ``pairs`` (all points)."""
     model.eval()
     sums = torch.zeros(4, device=pairs.device)
-    for rows in torch.arange(len(pairs), device=pairs.device).split(batch):
-        b = make_batch(states, pairs[rows])
+    for chosen in fixed_batches(len(pairs), states.width, pairs, states.points.shape[1],
+                                batch):
+        rows = chosen.rows.to(pairs.device)
+        b = make_batch(states, pairs[rows], cols=chosen.cols)
         p = predict(model, norm, b)
         sums += torch.stack([loss_sum(p, b, alpha, norm if balanced else None),
                              mean_distance(p, b).sum(),

@@ -27,14 +27,13 @@ used without them (:class:`train.Predictor` refuses a ``level`` for it in one li
 from __future__ import annotations
 
 import warnings
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from core.errors import BadInput
-from train.model.config import OFFSET_WIDTH
+from train.model.config import OFFSET_WIDTH, CGNNConfig
 from train.training.train_params import TrainOptions
 from train.training.variant import make_variant
 
@@ -88,13 +87,14 @@ def _meta(meta: dict) -> dict:
     """Cases 4 to 6: the run's options, config and variant."""
     meta = {**meta, "config": _config(meta["config"])}
     if isinstance(meta.get("options"), dict):
-        meta["options"] = {**asdict(TrainOptions()), **meta["options"]}
+        meta["options"] = {**TrainOptions().to_dict(), **meta["options"]}
     own = meta["config"]["offsets"]
     if isinstance(meta.get("variant"), dict):
         meta["variant"] = _variant(meta["variant"], own)
     elif isinstance(meta.get("options"), dict) and isinstance(meta.get("data"), dict):
-        meta["variant"] = make_variant(meta["config"], meta["options"],
-                                       meta["data"].get("file", ""), _init_meta(meta))
+        meta["variant"] = make_variant(
+            CGNNConfig.from_dict(meta["config"]), TrainOptions.from_dict(meta["options"]),
+            meta["data"].get("file", ""), _init_meta(meta)).to_dict()
     return meta
 
 

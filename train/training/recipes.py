@@ -21,8 +21,8 @@ from types import MappingProxyType
 from typing import Any
 
 from core.errors import BadInput
-from train.model.config import CGNNConfig
-from train.training.train_params import TrainOptions
+from train.model.config import CGNNConfig, Offsets
+from train.training.train_params import Loss, TrainOptions
 
 
 def _frozen(**values: Any) -> Mapping[str, Any]:
@@ -42,8 +42,8 @@ class Recipe:
     def settings(self, **given: Any) -> tuple[TrainOptions, CGNNConfig]:
         """The options and network of this recipe, the ``given`` fields (of either) in place
         of the recipe's; a name that is neither's field is a programming error (TypeError),
-        a network that cannot be (offsets without the condition) a ValueError
-        (:class:`CGNNConfig`)."""
+        a setting out of its bounds or a network that cannot be (offsets without the
+        condition) bad input (:class:`TrainOptions`, :class:`CGNNConfig`)."""
         opt_names = {f.name for f in fields(TrainOptions)}
         net_names = {f.name for f in fields(CGNNConfig)}
         strange = set(given) - opt_names - net_names
@@ -64,8 +64,8 @@ class Recipe:
 
 
 PAPER = Recipe("paper")
-OURS = Recipe("ours", options=_frozen(loss="balanced", rotate=True, ema=0.99, lr=2e-3),
-              network=_frozen(offsets="heads"))
+OURS = Recipe("ours", options=_frozen(loss=Loss.BALANCED, rotate=True, ema=0.99, lr=2e-3),
+              network=_frozen(offsets=Offsets.HEADS))
 RECIPES: Mapping[str, Recipe] = MappingProxyType({r.name: r for r in (PAPER, OURS)})
 
 

@@ -1,15 +1,13 @@
 """A training run's files and when they are written: ``best.pt``, ``last.pt`` and ``log.csv``,
 every ``WRITE_EVERY`` seconds and at the run's end, not after every epoch.
 
-A small run's epoch takes less time than writing its checkpoints: in the scarcity study's
-runs (one training press) an epoch is a few tens of milliseconds and each checkpoint ~15 ms,
-so writing two every epoch was a third of such a run. Between writes the log's rows wait in
-memory, and so does the best epoch's state (a copy: training goes on); they are written
-together, in the order the epochs wrote them before: best.pt, last.pt, the log. A run killed
-between writes resumes from the last one: it loses the epochs since (up to ``WRITE_EVERY``
-seconds and the epoch under way; before, the epoch under way), and trains them again to the
-same weights (each epoch draws from a generator seeded by the epoch,
-:mod:`train.training.loop`).
+A small run's epoch can take less time than writing its checkpoints (the figures:
+docs/results.md, "Where a quicker demo could come from"). Between writes the log's rows wait
+in memory, and so does the best epoch's state (a copy: training goes on); they are written
+together, in this order: best.pt, last.pt, the log. A run killed between writes resumes from
+the last one: it loses the epochs since (up to ``WRITE_EVERY`` seconds and the epoch under
+way), and trains them again to the same weights (each epoch draws from a generator seeded by
+the epoch, :mod:`train.training.loop`).
 """
 
 from __future__ import annotations

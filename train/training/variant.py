@@ -22,7 +22,8 @@ from pathlib import Path
 import h5py
 
 from data_schema.hdf5 import attr_text
-from train.model.config import Offsets
+from train.model.config import CGNNConfig, Offsets
+from train.training.train_params import TrainOptions
 
 OFFSET_NAMES = {Offsets.GRAPH: "tip offsets", Offsets.HEADS: "head offsets"}
 
@@ -88,16 +89,13 @@ def source_name(data: str | Path) -> str:
     return SOURCE_NAMES.get(source, source)
 
 
-def make_variant(config: dict, options: dict, data: str | Path, init_meta: dict | None
-                 ) -> dict:
-    """The variant of a run with this network ``config``
-    (:meth:`train.model.config.CGNNConfig.to_dict`), training ``options`` and data, fine-tuned
-    from the run whose checkpoint meta is ``init_meta`` (or trained from scratch), in the
-    plain form its checkpoint keeps."""
-    return Variant("cGNN" if config["use_condition"] else "noCond", source_name(data),
-                   bool(options.get("rotate")), bool(options.get("point_fraction")),
-                   None if init_meta is None else recorded_variant(init_meta),
-                   Offsets(config["offsets"])).to_dict()
+def make_variant(config: CGNNConfig, opts: TrainOptions, data: str | Path,
+                 init_meta: dict | None) -> Variant:
+    """The variant of a run with this network, training options and data, fine-tuned from the
+    run whose checkpoint meta is ``init_meta`` (or trained from scratch)."""
+    return Variant("cGNN" if config.use_condition else "noCond", source_name(data),
+                   opts.rotate, bool(opts.point_fraction),
+                   None if init_meta is None else recorded_variant(init_meta), config.offsets)
 
 
 def recorded_variant(meta: dict) -> Variant:

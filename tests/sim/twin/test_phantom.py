@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers.phantom_springs import nodal_forces
 
 from sim.twin.marker_layout import MarkerLayout
 from sim.twin.phantom import Phantom, PhantomSpec
@@ -21,25 +22,6 @@ def centre_path(phantom: Phantom):
     return phantom.load_path((10, 10), np.array([0.0, 0.0, -1.0]), LEVELS)
 
 
-def _nodal_forces(ph: Phantom, u: np.ndarray) -> np.ndarray:
-    """Spring forces on every node, summed spring by spring (independent of the solver's
-    sparse matrices): tension ``kappa * L * (e + beta e^3)`` along the rest direction."""
-    s = ph.spec
-    disp = np.zeros_like(ph.rest)
-    free = ph.dof[:, 0] >= 0
-    disp[free] = u.reshape(-1, 3)
-    i, j = ph.springs[:, 0], ph.springs[:, 1]
-    delta = ph.rest[j] - ph.rest[i]
-    length = np.linalg.norm(delta, axis=1)
-    n = delta / length[:, None]
-    e = ((disp[j] - disp[i]) * n).sum(axis=1) / length
-    tension = ph.kappa * length * (e + s.stiffening * e**3)
-    out = np.zeros_like(ph.rest)
-    np.add.at(out, i, tension[:, None] * n)
-    np.add.at(out, j, -tension[:, None] * n)
-    return out
-
-
 def test_equilibrium_balances_the_load(phantom: Phantom) -> None:
     d = np.array([0.3, -0.2, -1.0])
     d /= np.linalg.norm(d)
@@ -47,7 +29,7 @@ def test_equilibrium_balances_the_load(phantom: Phantom) -> None:
     node = phantom.top(8, 12)
     load[phantom.dof[node]] = 5.0 * d
     u = phantom.solve(load)
-    forces = _nodal_forces(phantom, u)
+    forces = nodal_forces(phantom, u)
     free = phantom.dof[:, 0] >= 0
     applied = np.zeros_like(phantom.rest)
     applied[node] = 5.0 * d

@@ -9,7 +9,6 @@ hand-built dicts, each named for the key it reads.
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -36,7 +35,7 @@ def _state(config: CGNNConfig = TINY, seed: int = 0) -> dict:
     return {"model": model.state_dict(), "optimizer": {"state": {}, "param_groups": []},
             "epoch": 3, "best_val": 0.25, "best_epoch": 2, "config": config.to_dict(),
             "norm": NORM.to_dict(),
-            "meta": {"options": asdict(TrainOptions(epochs=4)), "config": config.to_dict(),
+            "meta": {"options": TrainOptions(epochs=4).to_dict(), "config": config.to_dict(),
                      "data": {"file": "/data/states.h5", "sha256": "ab" * 32,
                               "point_names": ["P0", "P1"]},
                      "splits": "/data/splits.json", "init": None,

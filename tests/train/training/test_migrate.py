@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import warnings
-from dataclasses import asdict
 from pathlib import Path
 
 import h5py
@@ -113,7 +112,7 @@ def test_options_added_later_get_the_default_they_trained_with() -> None:
     recorded = {"fold": 1, "epochs": 40, "lr": 3e-3, "seed": 9}
     out = migrate({"meta": {"config": _old_config(), "options": dict(recorded)}})
     options = out["meta"]["options"]
-    defaults = asdict(TrainOptions())
+    defaults = TrainOptions().to_dict()
     assert set(options) == set(defaults)
     for name, value in defaults.items():
         assert options[name] == recorded.get(name, value), name
@@ -218,7 +217,7 @@ NETWORKS = {"paper": ({}, {"tip_offsets": False}),
 def _checkpoint(config: CGNNConfig) -> dict:
     """Today's checkpoint of a seeded small network (as the train runner writes one)."""
     torch.manual_seed(0)
-    options = asdict(TrainOptions(epochs=2))
+    options = TrainOptions(epochs=2).to_dict()
     return {"model": CGNN(config).state_dict(), "epoch": 1, "best_val": 0.5,
             "config": config.to_dict(), "norm": NORM.to_dict(),
             "meta": {"options": options, "config": config.to_dict(),

@@ -104,7 +104,7 @@ def test_tip_offsets_without_the_condition_is_refused(resolved, tmp_path) -> Non
 @pytest.mark.parametrize(("flags", "words"), [
     (("--offsets", "heads", "--no-cond"), "which noCond removes"),
     (("--offsets", "graph", "--no-cond"), "which noCond removes"),
-    (("--offsets", "tip"), "Invalid value for '--offsets'"),
+    (("--offsets", "tip"), "--offsets 'tip': must be one of none, graph, heads"),
     (("--offsets", "heads", "--offset-width", "0"), "--offset-width 0: must be >= 1"),
     (("--ema", "0.9", "--no-ema"), "--ema and --no-ema"),
 ])

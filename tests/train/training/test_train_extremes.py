@@ -77,9 +77,10 @@ def test_train_refuses_extreme_options_in_one_line(dent, tmp_path, args, option)
 
 @pytest.mark.parametrize("field", ["lr", "alpha", "ema", "point_fraction"])
 def test_a_caller_s_nan_options_are_refused_before_training(dent, tmp_path, field):
-    """The same guard for code calling the loop (benchmarks, eval's scarcity retraining)."""
-    opts = TrainOptions(epochs=1, **{field: math.nan})
-    with pytest.raises(BadInput, match=f"--{field.replace('_', '-')} nan"):
+    """The same guard for code calling the loop (benchmarks, eval's scarcity retraining): the
+    options refuse it as they are made."""
+    with pytest.raises(BadInput, match=f"{field} nan: not a finite number"):
+        opts = TrainOptions(epochs=1, **{field: math.nan})
         run_train(TrainInputs(*dent), tmp_path / "run", TrainParams(opts, device="cpu"))
     assert not (tmp_path / "run").exists()
 

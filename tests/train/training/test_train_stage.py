@@ -141,8 +141,9 @@ def test_a_manifest_of_other_data_is_refused(dent, tmp_path) -> None:
 
 
 def test_a_diverging_loss_names_epoch_and_batch(dent, tmp_path) -> None:
+    """The largest step size the options take (1) diverges on the dent data at once."""
     with pytest.raises(BadInput, match=r"diverged at epoch 0, batch \d+"):
-        _train(dent, tmp_path / "run", epochs=1, lr=1e9)
+        _train(dent, tmp_path / "run", epochs=1, lr=TrainOptions.BOUNDS["lr"].max)
 
 
 def test_aug_trains_on_a_fraction_of_the_points(dent, tmp_path) -> None:
@@ -341,7 +342,7 @@ def test_tip_offsets_feed_the_first_layer_and_need_the_condition(dent, tmp_path)
     config = CGNNConfig(offsets="graph")
     assert CGNNConfig.from_dict(config.to_dict()) == config
     assert CGNN(config).convs[0].mlp[0].in_features == 2 * 9
-    with pytest.raises(ValueError, match="noCond"):
+    with pytest.raises(BadInput, match="noCond"):
         CGNNConfig(offsets="graph", use_condition=False)
     res = CliRunner().invoke(cli, ["train", "--data", str(dent[0]), "--splits", str(dent[1]),
                                    "--out", str(tmp_path / "r"), "--offsets", "graph",

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from train.model.config import CGNNConfig
+from train.model.config import CGNNConfig, Offsets
 from train.training.migrate import migrate
+from train.training.train_params import TrainOptions
 from train.training.variant import Variant, make_variant, recorded_variant
 
 
@@ -16,13 +17,14 @@ from train.training.variant import Variant, make_variant, recorded_variant
     (CGNNConfig(offsets="heads"), "heads", False),
 ])
 def test_the_variant_says_where_the_offsets_enter(tmp_path, config, offsets, reads) -> None:
-    recorded = make_variant(config.to_dict(), {"rotate": True}, tmp_path / "gone.h5", None)
-    variant = Variant.from_dict(recorded)
-    assert recorded["offsets"] == offsets
+    variant = make_variant(config, TrainOptions(rotate=True), tmp_path / "gone.h5", None)
+    recorded = variant.to_dict()
+    assert recorded["offsets"] == offsets and type(recorded["offsets"]) is str
+    assert variant.offsets is Offsets(offsets)
     assert variant.offsets.press_independent is not reads
-    tuned = Variant.from_dict(make_variant(config.to_dict(), {}, tmp_path / "gone.h5",
-                                           {"variant": recorded, "config": config.to_dict()}))
-    assert tuned.pretrained == variant and tuned.offsets == offsets
+    tuned = make_variant(config, TrainOptions(), tmp_path / "gone.h5",
+                         {"variant": recorded, "config": config.to_dict()})
+    assert tuned.pretrained == variant and tuned.offsets is Offsets(offsets)
 
 
 def test_a_record_from_before_the_field_reads_its_network() -> None:
