@@ -32,7 +32,7 @@ from live.session.live_view import LiveView
 from live.session.model import LiveModel, ModelRefusal
 from live.session.presses import PressTracker
 from live.session.states import Conditioning, History, LivePress, OnlineStates, Surface
-from sync.force_conditioning import RAIL_TOLERANCE, noise_level, rails
+from sync.force_conditioning import RAIL_TOLERANCE, contact_level, noise_level, rails
 from sync.sync_params import SyncParams
 
 
@@ -152,7 +152,7 @@ class Monitor:
         w = wrench(values, self.tare, self.layout)
         noise = noise_level(w, self.tare)
         p = self.params
-        contact = max(p.contact_n, 5 * noise)
+        contact = contact_level(p, noise)
         self.presses = PressTracker(self.layout.device.rate_hz, p.detect_n, contact)
         surface = self._surface()
         self.states = OnlineStates(self.cfg, self.layout, self.tip, self.history, surface,

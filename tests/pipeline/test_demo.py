@@ -84,11 +84,22 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
                    if "pipeline eval" not in line), rerun
 
 
-def test_the_per_fold_pretraining_fits_each_fold_on_its_training_presses(tmp_path):
+def test_the_per_fold_pretraining_fits_each_fold_on_another_labs_phantom(tmp_path):
+    """A 120 x 80 mm block with 12 scattered markers at 250 Hz: every stage takes its points,
+    footprint and rate, from synth to eval, and each fold's MSM is fitted on that fold's
+    training presses only and sampled at the lab's markers (the wiring; --smoke learns
+    nothing)."""
     out = tmp_path / "demo"
     res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--pretraining", "per-fold",
-                                   "--out", str(out)])
+                                   "--out", str(out), "--markers", "scattered:12", "--size",
+                                   "120x80", "--mocap-rate", "250"])
     assert res.exit_code == 0, res.output
+    raw = read_raw_mcap(out / "session.mcap")
+    assert len(raw.phantom_markers) == 12 and raw.markers.rate_hz == 250
+    with h5py.File(out / "session_states.h5") as f:
+        assert f["states/points"].shape[1] == 13
+        assert json.loads(f.attrs["point_names"]) == [*raw.phantom_markers, "tip"]
+        assert tuple(f.attrs["footprint_m"]) == pytest.approx((0.12, 0.08))
     for k, fold in enumerate(validate_folds(out / "splits.json")["folds"]):
         d = out / "msm" / f"fold{k}"                      # the MSM fitted per fold ...
         fit = json.loads((d / "params.json").read_text())
@@ -97,8 +108,9 @@ def test_the_per_fold_pretraining_fits_each_fold_on_its_training_presses(tmp_pat
         assert fitted and fitted <= set(fold["train"]["groups"])
         assert not fitted & set(fold["test"]["groups"])
         validate_states(d / "msm.h5")
-        with h5py.File(d / "msm.h5") as f:                 # the lab's 25 markers + the tip
-            assert f["states/points"].shape[1] == 26 and "layout" in f.attrs
+        with h5py.File(d / "msm.h5") as f:                 # the lab's 12 markers + the tip
+            assert f["states/points"].shape[1] == 13 and "layout" in f.attrs
+            assert tuple(f.attrs["footprint_m"]) == pytest.approx((0.12, 0.08))
         meta = torch.load(out / "runs" / f"exp_tl_fold{k}" / "best.pt", weights_only=False)
         assert Path(meta["meta"]["init"]).parent.name == f"msm_fold{k}"   # its own MSM's
     metrics = json.loads((out / "metrics.json").read_text())
@@ -127,22 +139,6 @@ def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, 
         assert changed == (*plain[:at], *extra, *plain[at:])
     assert [a.args for a in ours if a.args[0] != "train"] == \
         [b.args for b in other if b.args[0] != "train"]
-
-
-def test_demo_runs_on_another_labs_phantom(tmp_path):
-    """A 120 x 80 mm block with 12 scattered markers at 250 Hz: every stage takes its points,
-    footprint and rate, from synth to eval (the wiring; --smoke learns nothing)."""
-    out = tmp_path / "lab"
-    res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out), "--markers",
-                                   "scattered:12", "--size", "120x80", "--mocap-rate", "250"])
-    assert res.exit_code == 0, res.output
-    raw = read_raw_mcap(out / "session.mcap")
-    assert len(raw.phantom_markers) == 12 and raw.markers.rate_hz == 250
-    with h5py.File(out / "session_states.h5") as f:
-        assert f["states/points"].shape[1] == 13
-        assert json.loads(f.attrs["point_names"]) == [*raw.phantom_markers, "tip"]
-        assert tuple(f.attrs["footprint_m"]) == pytest.approx((0.12, 0.08))
-    assert len(json.loads((out / "metrics.json").read_text())["runs"]) == 5
 
 
 def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):

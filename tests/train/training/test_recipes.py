@@ -84,12 +84,17 @@ def test_the_demo_trains_with_recipe_ours(resolved, tmp_path) -> None:
     networks = {"head-offsets": {"offsets": "heads"}, "tip-offsets": {"offsets": "graph"},
                 "paper": {"offsets": "none"}}
     for flags, network in ((RECIPE, {}), *((NETWORKS[n], networks[n]) for n in NETWORKS)):
-        train = next(s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags)
-                     if s.args[0] == "train")
-        got = resolved(*train.args[train.args.index("--epochs"):])
-        want = OURS.settings(epochs=QUICK.pretrain_epochs, lr=QUICK.lr, batch=QUICK.batch,
-                             **network)
-        assert (got.options, got.config, got.device) == (*want, "cpu")
+        trains = [s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags)
+                  if s.args[0] == "train"]
+        assert {s.stage for s in trains} == {"train (pre-training)", "train (fine-tuning)"}
+        for train in trains:
+            epochs = QUICK.generic_epochs if train.stage == "train (pre-training)" \
+                else QUICK.finetune_epochs
+            args = [a for a in train.args[train.args.index("--epochs"):] if a != "--init"]
+            got = resolved(*(a for a in args if not a.endswith(".pt")))
+            want = OURS.settings(epochs=epochs, lr=QUICK.lr, batch=QUICK.batch,
+                                 **network)
+            assert (got.options, got.config, got.device) == (*want, "cpu")
 
 
 def test_tip_offsets_without_the_condition_is_refused(resolved, tmp_path) -> None:
