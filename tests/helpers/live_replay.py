@@ -96,6 +96,17 @@ FAULTS = ("greeting refused", "version refused", "version silent", "parameters r
 CLIENT_CLOSE_S = 20.0         # the longest a client may take to close its side
 
 
+
+def threaded_server(handler) -> tuple[asyncio.AbstractEventLoop, asyncio.Server, int,
+                                      threading.Thread]:
+    """A TCP server on a free local port whose event loop runs in a daemon thread: (its loop,
+    the server, the port, the thread)."""
+    loop = asyncio.new_event_loop()
+    server = loop.run_until_complete(asyncio.start_server(handler, "127.0.0.1", 0))
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    return loop, server, server.sockets[0].getsockname()[1], thread
+
 class FaultyQtm:
     """A QTM real-time server (on a free port, in a thread of its own) that follows one fault
     of :data:`FAULTS` per connection, in order (``faults``); once the last is taken, it
@@ -109,12 +120,7 @@ class FaultyQtm:
         self.source, self.faults, self.frames = read_replay_source(session), faults, frames
         self.accepted = self.closed_by_client = 0
         self._handlers: list[asyncio.Task] = []
-        self._loop = asyncio.new_event_loop()
-        self._server = self._loop.run_until_complete(
-            asyncio.start_server(self._client, "127.0.0.1", 0))
-        self.port = self._server.sockets[0].getsockname()[1]
-        self._thread = threading.Thread(target=self._loop.run_forever, daemon=True)
-        self._thread.start()
+        self._loop, self._server, self.port, self._thread = threaded_server(self._client)
 
     def close(self) -> None:
         """Wait for every connection's handler (the client closing its side), then stop."""

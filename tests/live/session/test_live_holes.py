@@ -8,13 +8,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import threading
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-from helpers.live_replay import assert_same_states, offline_states, replaying
+from helpers.live_replay import (
+    assert_same_states,
+    offline_states,
+    replaying,
+    threaded_server,
+)
 
 from ingest.ingest_params import IngestParams
 from ingest.ingest_stage import run_ingest
@@ -33,12 +37,7 @@ class OneTimeline:
 
     def __init__(self, upstream: int, gap: tuple[int, int]) -> None:
         self.upstream, self.gap, self.connections = upstream, gap, 0
-        self.loop = asyncio.new_event_loop()
-        self.server = self.loop.run_until_complete(
-            asyncio.start_server(self._client, "127.0.0.1", 0))
-        self.port = self.server.sockets[0].getsockname()[1]
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
+        self.loop, self.server, self.port, self.thread = threaded_server(self._client)
 
     def close(self) -> None:
         self.loop.call_soon_threadsafe(self.server.close)

@@ -87,10 +87,10 @@ def test_the_demo_trains_with_recipe_ours(resolved, tmp_path) -> None:
         trains = [s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags)
                   if s.args[0] == "train"]
         assert {s.stage for s in trains} == {"train (pre-training)", "train (fine-tuning)"}
-        for train in trains:
-            epochs = QUICK.generic_epochs if train.stage == "train (pre-training)" \
+        for step in trains:
+            epochs = QUICK.generic_epochs if step.stage == "train (pre-training)" \
                 else QUICK.finetune_epochs
-            args = [a for a in train.args[train.args.index("--epochs"):] if a != "--init"]
+            args = [a for a in step.args[step.args.index("--epochs"):] if a != "--init"]
             got = resolved(*(a for a in args if not a.endswith(".pt")))
             want = OURS.settings(epochs=epochs, lr=QUICK.lr, batch=QUICK.batch,
                                  **network)
