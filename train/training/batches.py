@@ -2,12 +2,13 @@
 
 A lab's states have one marker count: an epoch's batches are its shuffled examples cut into
 ``batch``-sized runs. MSM data drawn from a prior (``simulate --prior``) holds phantoms of
-different marker counts, padded to the largest with the tip last (the padding ``valid``
-False). The network masks what is not there, so padded batches would train the same model,
-but they cost the largest count's work on every phantom; instead a batch holds the examples of
-one marker count and gathers only its points (:class:`Batch` ``cols``): the phantom's markers
-and the tip. The batches of every count are cut from the one shuffle and then put in a random
-order, so an epoch still sees every example once, in an order drawn from its seed.
+different marker counts, padded to the largest with the tip last (the padding ``valid`` False).
+Batches of mixed counts would need the padding masked in the kNN and cost the largest count's
+work on every phantom; instead a batch holds the examples of one marker count and gathers only
+its points (:class:`Rows` ``cols``): the phantom's markers and the tip (a marker occluded in a
+state stays, masked by ``valid`` as in lab data). The batches of every count are cut from the
+one shuffle and then put in a random order, so an epoch still sees every example once, in an
+order drawn from its seed.
 """
 
 from __future__ import annotations
