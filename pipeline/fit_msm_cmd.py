@@ -16,6 +16,17 @@ OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
+class RegionsType(click.ParamType):
+    """``RxC`` read into (rows, columns); anything else one line naming ``--regions``."""
+
+    name = "RxC"
+
+    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - click's signature
+        from sim.msm.msm_regions import parse_regions
+
+        return value if isinstance(value, tuple) else parse_regions(value)
+
+
 @click.command("fit-msm")
 @click.argument("states", type=IN)
 @click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
@@ -47,14 +58,16 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
                    "choose, each with its uncertainty; written as msm_params.stiffness_map, "
                    "which `simulate --params` carries. Regions without a press within 5 mm "
                    "stay at 1, said in one line.")
-@click.option("--regions", default=f"{D.regions[0]}x{D.regions[1]}", show_default=True,
+@click.option("--regions", type=RegionsType(), default=D.regions,
+              show_default=f"{D.regions[0]}x{D.regions[1]}",
               help="With --map: RxC regions, R rows along y of C regions along x, over the "
                    "footprint.")
 @seed_option(D.seed)
 @rrd_option
 def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
             fold: int, start: tuple[float, float], contact_radius: float | None,
-            spacing_mm: float | None, workers: int, stiffness_map: bool, regions: str,
+            spacing_mm: float | None, workers: int, stiffness_map: bool,
+            regions: tuple[int, int],
             seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Fit the MSM spring constants to measured states (as the paper found 100 and 21 N/m).
 
@@ -71,9 +84,7 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | N
     """
     from sim.msm.fit_msm_params import FitMsmInputs
     from sim.msm.fit_msm_stage import run_fit_msm
-    from sim.msm.msm_regions import parse_regions
-
-    shape = parse_regions(regions)
+    shape = regions
     if shape != D.regions and not stiffness_map:
         raise BadInput("--regions", "is the stiffness map's: give it with --map")
     rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None

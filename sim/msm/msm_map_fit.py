@@ -7,7 +7,10 @@ minimising
     S(theta) = |r(theta)|^2 / |r(0)|^2 + w |theta|^2
 
 where ``r`` stacks every measured point's coordinate error (model minus measurement, every
-loaded state of every press) and ``w`` shrinks the map toward the uniform fit. The search is
+loaded state of every press), the tip's weighted to count as much as the press's markers
+together (how deep the tip sinks under the press's force is where a region's stiffness shows;
+the markers' errors are mostly the surface model's shape, the same for every factor), and ``w``
+shrinks the map toward the uniform fit. The search is
 Gauss-Newton on ``theta`` with the exact derivatives of the equilibria
 (:mod:`sim.msm.msm_sensitivity`), halving a step that does not lower ``S``.
 
@@ -192,6 +195,8 @@ def _press(job: tuple[MSMParams, tuple[int, int], np.ndarray, MeasuredSequence]
         - seq.rest                                                   # (T p, P, 3)
     dpoints = dpoints.reshape(t, p, *predicted.shape[1:]).transpose(0, 2, 3, 1)
     error = predicted - seq.points
+    weight = np.where(seq.is_tip, math.sqrt(max(int((~seq.is_tip).sum()), 1)), 1.0)
+    error, dpoints = error * weight[:, None], dpoints * weight[:, None, None]
     keep = np.isfinite(error)
     return error[keep], dpoints[keep], predicted
 
