@@ -123,7 +123,7 @@ def map_summary(found) -> str:  # noqa: ANN001 - MapResult, imported lazily
     held-out presses chose, the distance beside the uniform fit's, and the note if any."""
     rows = []
     for i in reversed(range(found.shape[0])):
-        rows.append("  " + "  ".join(f"{f:5.2f}" + (f" +- {sd:.2f}" if sd is not None
+        rows.append("  " + "  ".join(f"{f:5.2f}" + (f" +- {sd:.2g}" if sd is not None
                                                      else " (held)  ")
                                      for f, sd in zip(found.factors[i], found.sd[i],
                                                       strict=True)))

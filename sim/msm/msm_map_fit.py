@@ -15,7 +15,8 @@ Gauss-Newton on ``theta`` with the exact derivatives of the equilibria
 (:mod:`sim.msm.msm_sensitivity`), halving a step that does not lower ``S``.
 
 **The weight is chosen by held-out presses**, at every step: the presses are cut into
-:data:`VALIDATION_GROUPS` groups (seeded); for each weight of :data:`WEIGHTS` and each group,
+:data:`VALIDATION_GROUPS` groups, each holding out at most one press of a place in turn (a
+place pressed once is held out whole); for each weight of :data:`WEIGHTS` and each group,
 the step is taken on the other groups' presses alone and scored on the group's (through the
 fit's linearisation at the current map), and the weight whose held-out error is lowest is the
 step's. The last step's table is reported.
@@ -136,7 +137,7 @@ def _search(sequences: list[MeasuredSequence], params: MSMParams, shape: tuple[i
             free: np.ndarray, informed: list, places: int, uniform: float, seed: int,
             pool: multiprocessing.pool.Pool | None) -> MapResult:
     """Gauss-Newton with the weight chosen by held-out presses at each step."""
-    groups = _groups(len(sequences), seed)
+    groups = _groups(sequences, seed)
     theta = np.zeros(len(free))
     ev = _evaluate(params, shape, free, theta, sequences, pool)
     scale = float(ev.r @ ev.r)
@@ -201,10 +202,24 @@ def _press(job: tuple[MSMParams, tuple[int, int], np.ndarray, MeasuredSequence]
     return error[keep], dpoints[keep], predicted
 
 
-def _groups(count: int, seed: int) -> list[np.ndarray]:
-    """The presses (indices) of each held-out group, drawn with ``seed``."""
-    order = np.random.default_rng(seed).permutation(count)
-    return [g for g in np.array_split(order, min(VALIDATION_GROUPS, count)) if len(g)]
+def _groups(sequences: list[MeasuredSequence], seed: int) -> list[np.ndarray]:
+    """The presses (indices) of each held-out group: the presses of each place in a seeded
+    order, the k-th of every place in group k mod :data:`VALIDATION_GROUPS`, so a group
+    holds out presses at places the others still press (where a place has more than one)."""
+    places: list[np.ndarray] = []
+    group = np.empty(len(sequences), dtype=int)
+    seen: list[int] = []
+    for k in np.random.default_rng(seed).permutation(len(sequences)):
+        xy = tip_xy(sequences[k])
+        near = [i for i, p in enumerate(places) if np.linalg.norm(xy - p) <= PLACE_M]
+        if near:
+            seen[near[0]] += 1
+            group[k] = seen[near[0]] % VALIDATION_GROUPS
+        else:
+            places.append(xy)
+            seen.append(0)
+            group[k] = 0
+    return [np.flatnonzero(group == g) for g in range(VALIDATION_GROUPS) if (group == g).any()]
 
 
 def _step(jac: np.ndarray, r: np.ndarray, theta: np.ndarray, weight: float, scale: float
@@ -245,8 +260,12 @@ def _result(ev: _Evaluation, theta: np.ndarray, weight: float, scale: float, tab
     for k, region in enumerate(free):
         sd[region] = float(factors[region] * math.sqrt(max(cov[k, k], 0.0)))
     held = [f"r{k // shape[1]}c{k % shape[1]}" for k in range(len(factors)) if k not in free]
-    note = (f"region(s) {', '.join(held)} of {shape[0]}x{shape[1]} have no press within "
-            f"{REACH_M * 1e3:g} mm: held at the uniform fit (factor 1)") if held else ""
+    notes = [f"region(s) {', '.join(held)} of {shape[0]}x{shape[1]} have no press within "
+             f"{REACH_M * 1e3:g} mm: held at the uniform fit (factor 1)"] if held else []
+    if weight == WEIGHTS[-1]:
+        notes.append(f"the held-out presses chose the strongest shrinkage tried ({weight:g}): "
+                     "they are predicted no better by a map than by a flatter one")
+    note = "; ".join(notes)
     return MapResult(shape, factors.reshape(shape).tolist(),
                      [sd[i * shape[1]:(i + 1) * shape[1]] for i in range(shape[0])], informed,
                      places, weight, table, distances(ev.predicted, sequences).pooled,
