@@ -65,7 +65,8 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
         factors = np.asarray(found.factors)
         views.insert(0, rrb.Spatial2DView(
             name=f"stiffness map {found.shape[0]}x{found.shape[1]}: factor {factors.min():.2f}"
-                 f" .. {factors.max():.2f} (viridis), presses and the regions they inform [mm]",
+                 f" .. {factors.max():.2f} (viridis), presses and the regions they inform "
+                 "[mm, y down]",
             origin="/map"))
     bp = rrb.Blueprint(rrb.Horizontal(rrb.Grid(*views), bars, column_shares=[3, 2]),
                        collapse_panels=False)
@@ -118,7 +119,7 @@ def _log_map(rec: rr.RecordingStream, found: MapResult, footprint: tuple[float, 
     span = max(float(factors.max() - factors.min()), 1e-9)
     centres = region_centres(footprint, found.shape).reshape(-1, 2) * 1e3
     half = np.array([footprint[0] / cols, footprint[1] / rows]) * 1e3 / 2
-    labels = [f"{f:.2f} +- {sd:.2f}" if sd is not None else f"{f:.2f} (held)"
+    labels = [f"{f:.2f} +- {sd:.2g}" if sd is not None else f"{f:.2f} (held)"
               for f, sd in zip(factors, [v for row in found.sd for v in row], strict=True)]
     rec.log("map/regions", rr.Boxes2D(centers=centres, half_sizes=np.tile(half * 0.97,
                                                                             (len(centres), 1)),
