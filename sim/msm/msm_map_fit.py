@@ -21,9 +21,10 @@ the step is taken on the other groups' presses alone and scored on the group's (
 fit's linearisation at the current map), and the weight whose held-out error is lowest is the
 step's. The last step's table is reported.
 
-**The uncertainty** of each factor is the curvature's: ``cov(theta) = s^2 (J^T J + w |r(0)|^2
-I)^-1`` at the final map, ``s^2`` the residual variance per coordinate; it treats the points'
-errors as independent, so it is a lower bound where the errors of one press are alike.
+**The uncertainty** of each factor is the curvature's, with the presses as the independent
+draws: ``cov(theta) = H^-1 (sum_p g_p g_p^T) H^-1`` at the final map, ``H = J^T J + w |r(0)|^2
+I`` and ``g_p`` press p's gradient ``J_p^T r_p`` (the points of one press err alike, so
+counting them as independent would claim far more certainty than the presses give).
 
 **Regions the presses cannot tell.** A region is informed by the presses whose tip rests
 within :data:`REACH_M` of it; one with none is held at the uniform fit (factor 1, no
@@ -247,13 +248,22 @@ def _choose_weight(ev: _Evaluation, theta: np.ndarray, groups: list[np.ndarray],
     return best["weight"], table
 
 
+def _press_covariance(ev: _Evaluation, ridge: float) -> np.ndarray:
+    """``H^-1 (sum_p g_p g_p^T) H^-1 p / (p - 1)``: the curvature ``H = J^T J + ridge I``
+    around the spread of each press's gradient ``g_p = J_p^T r_p`` (a press's points err
+    alike, so the presses, not the points, are the independent draws)."""
+    inverse = np.linalg.pinv(ev.jac.T @ ev.jac + ridge * np.eye(ev.jac.shape[1]))
+    presses = np.unique(ev.press_rows)
+    grads = np.stack([ev.jac[ev.press_rows == p].T @ ev.r[ev.press_rows == p] for p in presses])
+    spread = grads.T @ grads * len(presses) / max(len(presses) - 1, 1)
+    return inverse @ spread @ inverse
+
+
 def _result(ev: _Evaluation, theta: np.ndarray, weight: float, scale: float, table: list,
             shape: tuple[int, int], free: np.ndarray, informed: list, places: int,
             uniform: float, steps: int, sequences: list[MeasuredSequence]) -> MapResult:
     """The map with each factor's curvature uncertainty, and the note on held regions."""
-    dof = max(len(ev.r) - len(theta), 1)
-    s2 = float(ev.r @ ev.r) / dof
-    cov = s2 * np.linalg.pinv(ev.jac.T @ ev.jac + weight * scale * np.eye(len(theta)))
+    cov = _press_covariance(ev, weight * scale)
     factors = np.ones(shape[0] * shape[1])
     sd: list[float | None] = [None] * len(factors)
     factors[free] = np.exp(theta)
