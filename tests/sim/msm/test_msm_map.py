@@ -169,3 +169,24 @@ def test_region_of_each_mass_is_its_factor_s():
     regions = mass_regions(model, (2, 2))
     factors = np.asarray(STIFF).ravel()[regions]
     np.testing.assert_allclose(model.k_fixed[:, 0], SMALL.k_fixed * factors)
+
+
+@pytest.mark.slow
+def test_the_uniform_twin_comes_out_flat(tmp_path):
+    """The twin without an inclusion, 9 places pressed twice: every region within +-20 % of
+    the map's mean (the target of issue 49)."""
+    folder = tmp_path / "uniform"
+    folder.mkdir()
+    for args in (("synth", folder / "s", "--seed", "31", "--locations", "3x3", "--repeats",
+                  "2", "--no-rrd"),
+                 ("ingest", folder / "s", "--out", folder / "s.mcap", "--no-rrd"),
+                 ("sync", folder / "s.mcap", "--out", folder / "synced.h5", "--no-rrd"),
+                 ("extract", folder / "synced.h5", "--out", folder / "states.h5", "--no-rrd")):
+        res = CliRunner().invoke(cli, ["-q", *map(str, args)])
+        assert res.exit_code == 0, res.output
+    params = folder / "params.json"
+    res = CliRunner().invoke(cli, ["fit-msm", str(folder / "states.h5"), "--map",
+                                   "--max-sequences", "18", "--out", str(params), "--no-rrd"])
+    assert res.exit_code == 0, res.output
+    factors = np.asarray(json.loads(params.read_text())["map"]["factors"])
+    assert np.abs(factors / factors.mean() - 1).max() <= 0.2, factors
