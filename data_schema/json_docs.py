@@ -1,9 +1,13 @@
 """JSON documents the pipeline writes: their required keys and types, and one validator.
 
-- ``phantom.msm_params`` 1.1: the spring constants ``pipeline fit-msm`` found (one object),
+- ``phantom.msm_params`` 1.2: the spring constants ``pipeline fit-msm`` found (one object),
   and in ``msm_params`` the full MSM parameters, the grid they were fitted on included: ``n``
   masses along x over ``size`` m, ``n_y`` along y over ``size_y`` m (1.1; a 1.0 record has
-  ``n`` and ``size`` alone: the square).
+  ``n`` and ``size`` alone: the square); 1.2: ``map``, the stiffness map of ``fit-msm --map``
+  (its regions' ``shape``, ``factors`` row by row along y, their ``sd``, the presses each is
+  ``informed_by``, the shrinkage ``weight`` and its ``validation`` table, the distances, a
+  ``note``) or null, and ``msm_params.stiffness_map`` the same factors (null or absent:
+  uniform, as every 1.0 and 1.1 document reads).
 - ``phantom.folds`` 2.0: k-fold split manifests (``pipeline split``) that other trainers read
   and users edit: the states file's name and sha256, the grouping (``sequence`` or
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
@@ -27,7 +31,11 @@
   their radius and the mean radius (mm), the share of test examples whose change of force lies
   in its interval and the mean half-width (N), the same at 90 % by distance from the tip's
   path, the mean 90 % radius over the mean L_d, and for a run the calibration's presses and
-  examples (1.0 and 1.1 documents have none and are read as they are). A document from before
+  examples (1.0 and 1.1 documents have none and are read as they are); ``lump`` (1.4, with
+  ``eval --lump`` or ``--truth``) the lump's centre and radius (mm) and reach, and ``over``
+  and ``away`` (the test examples whose press is within the radius plus the reach, and the
+  rest; null where none is): the model's ``all`` metrics, the references' on the same
+  examples, the gain and the intervals' coverage. A document from before
   1.0 (no ``schema``) is refused: re-run ``pipeline eval``.
 """
 
@@ -55,7 +63,7 @@ class JsonSchema:
     keys: dict[str, type | tuple[type, ...]]
 
 
-MSM_PARAMS = JsonSchema("phantom.msm_params", "1.1", {
+MSM_PARAMS = JsonSchema("phantom.msm_params", "1.2", {
     "schema": str, "schema_version": str, "k_between": float, "k_fixed": float,
     "mean_distance_m": float, "msm_params": dict, "provenance": dict,
 })
@@ -131,7 +139,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
-METRICS = JsonSchema("phantom.metrics", "1.3", {
+METRICS = JsonSchema("phantom.metrics", "1.4", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
@@ -149,7 +157,14 @@ METRIC_ROWS = {
                 "metrics": dict, "fold_ld_mean_sd_mm": _NUMBER, "references": dict,
                 "gain": dict, "folds_not_beating_references": list},
 }
-ROW_OPTIONAL = {"intervals": (dict, type(None))}    # 1.2: null where the run keeps none
+ROW_OPTIONAL = {"intervals": (dict, type(None)),   # 1.2: null where the run keeps none
+                "lump": dict}                      # 1.4: with eval --lump or --truth
+# 1.4: a row's lump (train/evaluation/lump.py): where it is, and per part (over it, away from
+# it; null where no test press is) the model's "all" metrics, the references' on the same
+# examples, the gain and the intervals' coverage (null where the run keeps none)
+LUMP = {"centre_mm": list, "radius_mm": _NUMBER, "reach_mm": _NUMBER, "over": (dict, type(None)),
+        "away": (dict, type(None))}
+LUMP_PART = {"metrics": dict, "references": dict, "gain": dict, "intervals": (dict, type(None))}
 # 1.2: a row's intervals (pipeline eval, train/evaluation/coverage.py): per reported level the
 # share of test points inside their radius and the mean radius, the same for the force; by
 # distance from the tip's path (the surface's points; the tip's own point, where the data have
@@ -220,6 +235,8 @@ def _check_row(path: str | Path, row: Any, keys: dict, where: str) -> None:
     _typed_keys(path, row, {**keys, **ROW_OPTIONAL}, where, optional=ROW_OPTIONAL)
     if row.get("intervals") is not None:
         _check_intervals(path, row["intervals"], f"{where}.intervals")
+    if "lump" in row:
+        _check_lump(path, row["lump"], set(row["references"]), f"{where}.lump")
     _check_metric_sets(path, row["metrics"], f"{where}.metrics")
     if not row["references"]:
         raise BadInput(path, f"{where}.references is empty")
@@ -263,6 +280,22 @@ def _check_shares(path: str | Path, item: dict, keys: Any, where: str) -> None:
     for key in keys:
         if item.get(key) is not None and not 0 <= item[key] <= 1:
             raise BadInput(path, f"{where}.{key} is {item[key]!r}: not in [0, 1]")
+
+
+def _check_lump(path: str | Path, lump: dict, references: set[str], where: str) -> None:
+    """A row's lump: its place, and each part's metrics, references, gain and intervals."""
+    _typed_keys(path, lump, LUMP, where)
+    for part in ("over", "away"):
+        got, at = lump[part], f"{where}.{part}"
+        if got is None:
+            continue
+        _typed_keys(path, got, LUMP_PART, at)
+        _check_metric_values(path, got["metrics"], f"{at}.metrics")
+        for name, values in got["references"].items():
+            _check_metric_values(path, values, f"{at}.references[{name!r}]", null_ld=True)
+        _check_gain(path, got["gain"], references, f"{at}.gain")
+        if got["intervals"] is not None:
+            _check_intervals(path, got["intervals"], f"{at}.intervals")
 
 
 def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) -> None:

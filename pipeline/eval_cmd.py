@@ -31,11 +31,18 @@ D = EvalParams              # the option defaults are its fields', the bounds it
 @click.option("--strict", is_flag=True,
               help="Exit with status 1 when a variant's mean L_d or force error does not beat "
                    "the best no-learning reference on the same test examples.")
+@click.option("--lump", default=D.lump, metavar="X,Y,R",
+              help="A lump on the footprint (mm, phantom frame: centre and radius): also "
+                   "report L_d, the force error and the intervals' coverage over it (test "
+                   "presses within R + 10 mm) and away from it, each beside the references.")
+@click.option("--truth", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=D.truth,
+              help="A twin's truth.h5: its first inclusion is the lump (instead of --lump).")
 @rrd_option
 @click.pass_context
 def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
           scarcity_epochs: int | None, scarcity_groups: int | None, device: str, strict: bool,
-          rrd: Path | None, no_rrd: bool) -> None:
+          lump: str | None, truth: Path | None, rrd: Path | None, no_rrd: bool) -> None:
     """Evaluate trained runs on their folds' test examples (the paper's Table 2).
 
     Reads RUNS (folders from `pipeline train`: best.pt, which names its data and manifest).
@@ -50,14 +57,16 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     fold's validation presses), also their coverage on the test presses at 80, 90 and 95 %
     (points inside their radius, the force inside its interval, mean widths), and the
     recording colours the points by error over their 90 % radius; a run without them is said
-    in one line.
+    in one line. The recording also shows each test place on the footprint by its mean L_d;
+    with --lump or --truth, the lump, and metrics.json (phantom.metrics 1.4) and the table
+    carry the rows over the lump and away from it.
     """
     from train.evaluation.eval_stage import run_eval
     from train.evaluation.evaluate import not_beating
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     result, table = run_eval(runs, out, EvalParams(device, scarcity, scarcity_epochs,
-                                                   scarcity_groups), rrd_path)
+                                                   scarcity_groups, lump, truth), rrd_path)
     click.echo(table + f"\nwrote {out}, {out.with_suffix('.md')}"
                + (f", {rrd_path}" if rrd_path else ""))
     worse = not_beating(result)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from core.errors import BadInput
 from pipeline.options import ranged, resolve_rrd, rrd_option, seed_option
 from sim.msm.fit_msm_params import FitMsmParams
 
@@ -13,6 +14,17 @@ D = FitMsmParams            # the option defaults are its fields', the bounds it
 B = D.BOUNDS
 OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+class RegionsType(click.ParamType):
+    """``RxC`` read into (rows, columns); anything else one line naming ``--regions``."""
+
+    name = "RxC"
+
+    def convert(self, value, param, ctx):  # noqa: ANN001, ANN201 - click's signature
+        from sim.msm.msm_regions import parse_regions
+
+        return value if isinstance(value, tuple) else parse_regions(value)
 
 
 @click.command("fit-msm")
@@ -40,12 +52,23 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
                    "An MSM file brings its own grid.")
 @click.option("--workers", type=ranged(B["workers"]), default=D.workers,
               help="Processes sharing the sequences (default: the cores this process may use).")
+@click.option("--map", "stiffness_map", is_flag=True, default=D.map,
+              help="Also fit a stiffness map: a factor per region of --regions on top of the "
+                   "uniform constants, shrunk toward 1 by a weight the held-out presses "
+                   "choose, each with its uncertainty; written as msm_params.stiffness_map, "
+                   "which `simulate --params` carries. Regions without a press within 5 mm "
+                   "stay at 1, said in one line.")
+@click.option("--regions", type=RegionsType(), default=D.regions,
+              show_default=f"{D.regions[0]}x{D.regions[1]}",
+              help="With --map: RxC regions, R rows along y of C regions along x, over the "
+                   "footprint.")
 @seed_option(D.seed)
 @rrd_option
 def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
             fold: int, start: tuple[float, float], contact_radius: float | None,
-            spacing_mm: float | None, workers: int, seed: int, rrd: Path | None,
-            no_rrd: bool) -> None:
+            spacing_mm: float | None, workers: int, stiffness_map: bool,
+            regions: tuple[int, int],
+            seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Fit the MSM spring constants to measured states (as the paper found 100 and 21 N/m).
 
     Reads STATES (a phantom.states file: extracted lab states or MSM states; with --splits, its
@@ -61,15 +84,19 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | N
     """
     from sim.msm.fit_msm_params import FitMsmInputs
     from sim.msm.fit_msm_stage import run_fit_msm
-
+    shape = regions
+    if shape != D.regions and not stiffness_map:
+        raise BadInput("--regions", "is the stiffness map's: give it with --map")
     rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None
     params = FitMsmParams(max_sequences=max_sequences, fold=fold, start=start,
                           contact_radius=contact_radius,
                           spacing=None if spacing_mm is None else spacing_mm * 1e-3,
-                          workers=workers, seed=seed)
-    result = run_fit_msm(FitMsmInputs(states, splits), out, params, rrd_path)
-    click.echo(fit_summary(result) + (f"\nwrote {out}" if out else "")
-               + (f", {rrd_path}" if rrd_path else ""))
+                          workers=workers, seed=seed, map=stiffness_map, regions=shape)
+    outcome = run_fit_msm(FitMsmInputs(states, splits), out, params, rrd_path)
+    text = fit_summary(outcome.fit)
+    if outcome.map is not None:
+        text += "\n" + map_summary(outcome.map)
+    click.echo(text + (f"\nwrote {out}" if out else "") + (f", {rrd_path}" if rrd_path else ""))
 
 
 def fit_summary(result) -> str:  # noqa: ANN001 - FitResult, imported lazily
@@ -88,4 +115,23 @@ def fit_summary(result) -> str:  # noqa: ANN001 - FitResult, imported lazily
                  f"{r['still_m'] * mm:.2f}" for r in result.per_sequence)]
     lines += [f"note: {b}: the fit wants a constant outside the physical range"
               for b in result.at_bound]
+    return "\n".join(lines)
+
+
+def map_summary(found) -> str:  # noqa: ANN001 - MapResult, imported lazily
+    """The map in a few lines: its factors row by row (y up the page), the weight the
+    held-out presses chose, the distance beside the uniform fit's, and the note if any."""
+    rows = []
+    for i in reversed(range(found.shape[0])):
+        rows.append("  " + "  ".join(f"{f:5.2f}" + (f" +- {sd:.2g}" if sd is not None
+                                                     else " (held)  ")
+                                     for f, sd in zip(found.factors[i], found.sd[i],
+                                                      strict=True)))
+    lines = [f"stiffness map {found.shape[0]}x{found.shape[1]} over {found.places} press "
+             f"places (rows top = largest y; factors on the uniform constants):", *rows,
+             f"shrinkage weight {found.weight:g} (held-out presses); mean distance "
+             f"{found.mean_distance_m * 1e3:.3f} mm (uniform {found.uniform_distance_m * 1e3:.3f}"
+             f" mm) after {found.steps} step(s)"]
+    if found.note:
+        lines.append(f"note: {found.note}")
     return "\n".join(lines)

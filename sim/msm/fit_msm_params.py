@@ -16,6 +16,7 @@ from sim.msm import paper
 from sim.msm.msm_fit import K_MAX, K_MIN
 from sim.msm.msm_grid import SPACING
 from sim.msm.msm_protocol import CONTACT_RADIUS
+from sim.msm.msm_regions import parse_regions
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,8 @@ class FitMsmParams:
     spacing: float | None = None        # m between masses (lab states); None: the paper's
     workers: int = 0                    # processes; 0: the cores this process may use
     seed: int = 0
+    map: bool = False                   # also fit a stiffness map (sim.msm.msm_map_fit)
+    regions: tuple[int, int] = (3, 3)   # the map's regions: rows (along y) x per row (x)
 
     BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
         "max_sequences": Bound(1, whole=True),
@@ -51,3 +54,4 @@ class FitMsmParams:
 
     def __post_init__(self) -> None:
         check_bounds(self, self.BOUNDS)
+        parse_regions(f"{self.regions[0]}x{self.regions[1]}")

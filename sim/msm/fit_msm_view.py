@@ -10,7 +10,13 @@ phantom did, and is it closer to every press than a still surface. One timeline,
 - ``fit/seq_<s>/model``: Points3D, the MSM at those points (blue), joined to the measured ones
   by red ``fit/seq_<s>/error`` segments;
 - ``distance/*``: bar charts (static), one bar per press in the fit's order: the mean distance
-  of the fitted MSM, of the start constants and of a still surface, in mm, side by side.
+  of the fitted MSM, of the start constants and of a still surface, in mm, side by side;
+- with a stiffness map (``fit-msm --map``), ``map/regions``: a 2D view of the footprint (x
+  right, y down as rerun draws 2D; mm), one box per region coloured by its factor (viridis
+  over the map's range, written in the view's name) and labelled ``factor +- sd`` (``held``
+  where no press informs it), and ``map/presses``: the presses' tips at rest, labelled by
+  their sequence ids, each joined by a line to the centre of every region it informs
+  (``map/informs``).
 """
 
 from __future__ import annotations
@@ -24,7 +30,9 @@ import rerun.blueprint as rrb
 from core.recording import colormap, declare_up, phantom_view, recording
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_fit import FitResult, at_points, grid_states
+from sim.msm.msm_map_fit import MapResult, tip_xy
 from sim.msm.msm_measured import MeasuredSequence
+from sim.msm.msm_regions import region_centres
 
 APP_ID = "phantom-fit-msm"
 MEASURED, MODEL, ERROR = (255, 127, 14), (31, 119, 180), (214, 39, 40)
@@ -34,8 +42,10 @@ SERIES = (("fitted_m", "fitted MSM", (31, 119, 180)), ("start_m", "start constan
 
 
 def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
-                        sequences: list[MeasuredSequence], count: int = 4) -> None:
-    """Save the recording of ``count`` sequences under the fitted constants."""
+                        sequences: list[MeasuredSequence], found: MapResult | None = None,
+                        count: int = 4) -> None:
+    """Save the recording of ``count`` sequences under the fitted constants (and the map
+    ``found`` where one was fitted)."""
     fitted = MSMParams(**{**params.as_dict(), "k_between": result.k_between,
                           "k_fixed": result.k_fixed})
     model = MSM(fitted)
@@ -51,6 +61,13 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
     bars = rrb.Vertical(*(rrb.BarChartView(name=f"{name}: mean distance per press [mm]",
                                            origin=f"/distance/{key[:-2]}")
                           for key, name, _ in SERIES))
+    if found is not None:
+        factors = np.asarray(found.factors)
+        views.insert(0, rrb.Spatial2DView(
+            name=f"stiffness map {found.shape[0]}x{found.shape[1]}: factor {factors.min():.2f}"
+                 f" .. {factors.max():.2f} (viridis), presses and the regions they inform "
+                 "[mm, y down]",
+            origin="/map"))
     bp = rrb.Blueprint(rrb.Horizontal(rrb.Grid(*views), bars, column_shares=[3, 2]),
                        collapse_panels=False)
     with recording(APP_ID, path, bp) as rec:
@@ -58,6 +75,8 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
         for seq, grid in zip(shown, states, strict=True):
             _log_press(rec, model, seq, grid, at_points(fitted, seq, grid), largest)
         _log_distances(rec, result)
+        if found is not None:
+            _log_map(rec, found, params.footprint, sequences)
 
 
 def _log_press(rec: rr.RecordingStream, model: MSM, seq: MeasuredSequence, grid: np.ndarray,
@@ -90,3 +109,27 @@ def _log_distances(rec: rr.RecordingStream, result: FitResult) -> None:
     for key, _, color in SERIES:
         values = [row[key] * 1e3 for row in result.per_sequence]
         rec.log(f"distance/{key[:-2]}", rr.BarChart(values, color=color), static=True)
+
+
+def _log_map(rec: rr.RecordingStream, found: MapResult, footprint: tuple[float, float],
+             sequences: list[MeasuredSequence]) -> None:
+    """The map over the footprint (mm): a box per region, the presses and what they inform."""
+    rows, cols = found.shape
+    factors = np.asarray(found.factors).ravel()
+    span = max(float(factors.max() - factors.min()), 1e-9)
+    centres = region_centres(footprint, found.shape).reshape(-1, 2) * 1e3
+    half = np.array([footprint[0] / cols, footprint[1] / rows]) * 1e3 / 2
+    labels = [f"{f:.2f} +- {sd:.2g}" if sd is not None else f"{f:.2f} (held)"
+              for f, sd in zip(factors, [v for row in found.sd for v in row], strict=True)]
+    rec.log("map/regions", rr.Boxes2D(centers=centres, half_sizes=np.tile(half * 0.97,
+                                                                            (len(centres), 1)),
+                                      colors=colormap((factors - factors.min()) / span),
+                                      labels=labels, show_labels=True), static=True)
+    tips = {s.sequence: tip_xy(s) * 1e3 for s in sequences}
+    rec.log("map/presses", rr.Points2D(list(tips.values()), radii=[1.2], colors=[MEASURED],
+                                       labels=[str(k) for k in tips]), static=True)
+    links = [[tips[s], centres[i * cols + j]] for i in range(rows) for j in range(cols)
+             for s in found.informed_by[i][j]]
+    if links:
+        rec.log("map/informs", rr.LineStrips2D(links, radii=[0.3], colors=[MODEL]),
+                static=True)

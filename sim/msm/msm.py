@@ -28,6 +28,7 @@ import scipy.sparse.linalg as spla
 
 from core.errors import BadInput
 from sim.msm import paper
+from sim.msm.msm_regions import check_map, mass_factors
 
 # Edge families as (row offset, column offset): rows, columns, the one diagonal.
 FAMILIES: tuple[tuple[int, int], ...] = ((0, 1), (1, 0), (1, 1))
@@ -51,7 +52,8 @@ class MSMParams:
     (None), the y ones are the x ones (a square: the paper's 32 x 32 over 100 mm, and what an
     older ``msm_params`` record of ``n`` and ``size`` alone means). Stored resolved, so a
     record always names both axes. :func:`sim.msm.msm_grid.grid_params` sizes a grid to a
-    footprint.
+    footprint. ``stiffness_map`` (rows of factors on the springs per region of the footprint,
+    :mod:`sim.msm.msm_regions`) makes it stiffer in places; left out, it is uniform.
     """
 
     n: int = paper.GRID_N               # masses along x (per side of the square)
@@ -65,6 +67,8 @@ class MSMParams:
     f_static: float = paper.F_STATIC    # N, stability criterion on every mass
     n_y: int | None = None              # masses along y (None: n)
     size_y: float | None = None         # m, the surface's width along y (None: size)
+    stiffness_map: tuple[tuple[float, ...], ...] | None = None   # factors per region
+    #                                     (sim.msm.msm_regions); None: uniform
 
     def __post_init__(self) -> None:
         if self.n_y is None:
@@ -81,6 +85,11 @@ class MSMParams:
             if not (isinstance(value, int | float | np.floating) and math.isfinite(value)
                     and value > 0):
                 raise MSMError(f"{name} must be a finite positive number, got {value!r}")
+        if self.stiffness_map is not None:
+            try:
+                object.__setattr__(self, "stiffness_map", check_map(self.stiffness_map))
+            except BadInput as e:
+                raise MSMError(e.what) from None
 
     @property
     def spacing_x(self) -> float:
@@ -113,6 +122,23 @@ class MSM:
         self.rest = np.stack([jj * hx, ii * hy, np.zeros_like(ii, float)], -1).reshape(-1, 3)
         # hx hypot(dj, di hy / hx): on a square exactly the h hypot(di, dj) it always was
         self.rest_length = {(di, dj): hx * math.hypot(dj, di * hy / hx) for di, dj in FAMILIES}
+        self._stiffness()
+
+    def _stiffness(self) -> None:
+        """The springs' constants: scalars on a uniform MSM; with a stiffness map, ``k_fixed``
+        per mass (N, 1) and ``k_between`` per spring of each family (the mean of its two
+        masses' factors)."""
+        p = self.params
+        self.k_fixed: float | np.ndarray = p.k_fixed
+        self.k_between: dict[tuple[int, int], float | np.ndarray] = {
+            fam: p.k_between for fam in FAMILIES}
+        if p.stiffness_map is None:
+            return
+        factor = mass_factors(self.rest[:, :2], p.footprint, p.stiffness_map)
+        self.k_fixed = p.k_fixed * factor[:, None]
+        g, r, c = factor.reshape(self.rows, self.cols), self.rows, self.cols
+        self.k_between = {(di, dj): p.k_between * 0.5 * (g[: r - di, : c - dj] + g[di:, dj:])
+                          for di, dj in FAMILIES}
 
     @cached_property
     def dt_limit(self) -> float:
@@ -140,7 +166,7 @@ class MSM:
                           np.c_[p.ravel(), d.ravel(), q.ravel()]]).astype(np.int32)
 
     # -- forces and energy --------------------------------------------------------------------
-    def _springs(self, g: np.ndarray):
+    def springs(self, g: np.ndarray):
         """Per family: ((di, dj), difference vectors, lengths) of the springs of grid ``g``."""
         r, c = self.rows, self.cols
         for di, dj in FAMILIES:
@@ -157,20 +183,20 @@ class MSM:
 
     def _forces(self, x: np.ndarray, f_ext: np.ndarray, with_energy: bool
                 ) -> tuple[float, np.ndarray]:
-        p = self.params
         r, c = self.rows, self.cols
         disp = x - self.rest
-        f = f_ext - p.k_fixed * disp
+        f = f_ext - self.k_fixed * disp
         fg = f.reshape(r, c, 3)
         energy = 0.0
         if with_energy:
-            energy = 0.5 * p.k_fixed * np.einsum("ij,ij->", disp, disp) - np.einsum(
+            energy = 0.5 * _weighted_square(self.k_fixed, disp) - np.einsum(
                 "ij,ij->", f_ext, x)
-        for (di, dj), d, length in self._springs(x.reshape(r, c, 3)):
+        for (di, dj), d, length in self.springs(x.reshape(r, c, 3)):
             stretch = length - self.rest_length[(di, dj)]
+            kb = self.k_between[(di, dj)]
             if with_energy:
-                energy += 0.5 * p.k_between * np.einsum("ij,ij->", stretch, stretch)
-            fs = (p.k_between * stretch / length)[..., None] * d
+                energy += 0.5 * _weighted_square(kb, stretch)
+            fs = (kb * stretch / length)[..., None] * d
             fg[: r - di, : c - dj] += fs
             fg[di:, dj:] -= fs
         return float(energy), f
@@ -193,9 +219,9 @@ class MSM:
         compressed springs is dropped, so every block is positive semi-definite and the
         assembled matrix (plus ``k_fixed I``) is positive definite whatever the state.
         """
-        kb = self.params.k_between
         out = {}
-        for fam, d, length in self._springs(x.reshape(self.rows, self.cols, 3)):
+        for fam, d, length in self.springs(x.reshape(self.rows, self.cols, 3)):
+            kb = self.k_between[fam]
             u = d / length[..., None]
             geo = kb * (1.0 - self.rest_length[fam] / length)
             if clamp:
@@ -238,13 +264,16 @@ class MSM:
         x = self.rest if x is None else x
         blocks = self.edge_stiffness(x, clamp)
         r, c = self.rows, self.cols
+        k_fixed = np.broadcast_to(np.asarray(self.k_fixed, dtype=float).reshape(-1),
+                                  (self.N,)).reshape(r, c)
         if self.by_columns:            # the transposed grid: family (di, dj) becomes (dj, di)
             blocks = {(dj, di): k.transpose(1, 0, 2, 3) for (di, dj), k in blocks.items()}
             r, c = c, r
+            k_fixed = k_fixed.T
         N, bw = self.N, self.band_width
         ab = np.zeros((bw + 1, 3 * N))
         diag = np.zeros((r, c, 3, 3))
-        diag[..., [0, 1, 2], [0, 1, 2]] = self.params.k_fixed
+        diag[..., [0, 1, 2], [0, 1, 2]] = k_fixed[..., None]
         for (di, dj), k in blocks.items():
             diag[: r - di, : c - dj] += k
             diag[di:, dj:] += k
@@ -260,6 +289,13 @@ class MSM:
             for b in range(a, 3):
                 ab[bw + a - b, b::3] = diag[:, a, b]
         return ab
+
+
+def _weighted_square(k: float | np.ndarray, a: np.ndarray) -> float:
+    """``sum(k a^2)`` over every element of ``a`` (2-D), ``k`` a scalar or one per row/spring."""
+    if np.ndim(k) == 0:
+        return float(k * np.einsum("ij,ij->", a, a))
+    return float(np.einsum("ij,ij->", k * a, a))
 
 
 # -- explicit integration (the paper's reference) ----------------------------------------------

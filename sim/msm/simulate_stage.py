@@ -30,6 +30,7 @@ from sim.msm.msm_layout import LabLayout, check_inside, read_layout
 from sim.msm.msm_prior import PRIOR
 from sim.msm.msm_prior_data import PriorRun, simulate_prior
 from sim.msm.msm_protocol import Protocol, parse_shard
+from sim.msm.msm_regions import check_map
 from sim.msm.msm_shards import merge_shards
 from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL
@@ -203,15 +204,27 @@ def _sized(params: MSMParams, size: tuple[float, float] | None, spacing: float |
 
 def _fitted(path: str | Path, params: MSMParams, protocol: Protocol
             ) -> tuple[MSMParams, Protocol, bool]:
-    """``params`` and ``protocol`` with fit-msm's spring constants and contact radius, and
-    the grid the fit was made on where it records one (then True)."""
+    """``params`` and ``protocol`` with fit-msm's spring constants, its stiffness map (a
+    file without one: uniform) and contact radius, and the grid the fit was made on where
+    it records one (then True)."""
     doc = validate_json_doc(path, MSM_PARAMS)
     grid = recorded_grid(doc["msm_params"], path)
     if grid is not None:
         params = replace(params, **{k: getattr(grid, k) for k in GRID_KEYS})
-    return (replace(params, k_between=doc["k_between"], k_fixed=doc["k_fixed"]),
+    return (replace(params, k_between=doc["k_between"], k_fixed=doc["k_fixed"],
+                    stiffness_map=_stiffness_map(doc["msm_params"], path)),
             replace(protocol, contact_radius=float(doc.get("contact_radius_m", 0.0))),
             grid is not None)
+
+
+def _stiffness_map(record: dict, path: str | Path) -> tuple | None:
+    """The ``stiffness_map`` of an ``msm_params`` record (None: uniform), checked."""
+    if record.get("stiffness_map") is None:
+        return None
+    try:
+        return check_map(record["stiffness_map"])
+    except BadInput as e:
+        raise BadInput(path, e.what) from None
 
 
 def _record(path: Path | None, arrays: dict[str, np.ndarray], params: MSMParams | None,

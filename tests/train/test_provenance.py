@@ -63,14 +63,14 @@ def test_the_log_keeps_its_provenance_beside_it(made) -> None:
 def test_metrics_carry_their_schema_and_provenance(made) -> None:
     doc = validate_metrics(made / "metrics.json")
     assert (doc["schema"], doc["schema_version"]) == (METRICS.name, METRICS.version) == \
-        ("phantom.metrics", "1.3")
+        ("phantom.metrics", "1.4")
     prov = doc["provenance"]
     assert (prov["schema"], prov["stage"]) == ("phantom.metrics", "eval")
     best = made / "tl" / "best.pt"
     assert prov["inputs"][str(best)] == sha256_file(best)
     assert set(prov["inputs"]) == {str(best), str(made / "states.h5"), str(made / "splits.json")}
     assert prov["params"] == {"device": "cpu", "scarcity": False, "scarcity_epochs": None,
-                              "scarcity_groups": None}
+                              "scarcity_groups": None, "lump": None, "truth": None}
 
 
 def test_the_onnx_model_carries_its_provenance(made) -> None:

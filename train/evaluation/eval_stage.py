@@ -24,7 +24,13 @@ from data_schema.json_docs import METRICS, validate_metrics
 from train.evaluation.coverage import error_ratios
 from train.evaluation.eval_params import EvalParams
 from train.evaluation.eval_view import write_eval_recording
-from train.evaluation.evaluate import evaluate_runs, shown_name, table2, test_errors
+from train.evaluation.evaluate import (
+    evaluate_runs,
+    footprint_errors,
+    shown_name,
+    table2,
+    test_errors,
+)
 from train.evaluation.scarcity import plot, scarcity_rows, write_csv
 from train.training.checkpoint import load_checkpoint
 
@@ -39,15 +45,16 @@ def run_eval(inputs: Sequence[Path], out: Path, params: EvalParams | None = None
     named = [p for p in (out, table_path, rrd) if p is not None]
     if any(same_path(a, b) for i, a in enumerate(named) for b in named[:i]):
         raise BadInput(out, "--out, its table (.md) and --rrd must be three different files")
-    result = evaluate_runs(runs, params.device)
+    lump = params.the_lump()
+    result = evaluate_runs(runs, params.device, lump)
     curve = (out.with_suffix(".scarcity.csv"), out.with_suffix(".scarcity.png")) \
         if params.scarcity else (None, None)
     if params.scarcity:
         result["scarcity"] = _scarcity(runs, out, params)
     table = table2(result)
     doc = {"schema": METRICS.name, "schema_version": METRICS.version, **result,
-           "provenance": make_provenance("eval", asdict(params), _inputs(runs), METRICS.name,
-                                         METRICS.version)}
+           "provenance": make_provenance("eval", asdict(params), _inputs(runs, params.truth),
+                                         METRICS.name, METRICS.version)}
     with atomic_outputs(out, table_path, rrd, *curve) as (tmp_json, tmp_table, tmp_rrd,
                                                           tmp_csv, tmp_png):
         tmp_json.write_text(json.dumps(doc, indent=1, allow_nan=False))
@@ -62,14 +69,15 @@ def run_eval(inputs: Sequence[Path], out: Path, params: EvalParams | None = None
             _, run, shown = test_errors(runs[0], params.device)
             ratios = None if run.intervals is None else \
                 [error_ratios(run.intervals, b, p) for b, p in shown]
-            write_eval_recording(tmp_rrd, shown, title, table, ratios)
+            write_eval_recording(tmp_rrd, shown, title, table, ratios,
+                                 footprint_errors(run, lump))
     return doc, table
 
 
-def _inputs(runs: Sequence[Path]) -> list[Path]:
+def _inputs(runs: Sequence[Path], truth: Path | None = None) -> list[Path]:
     """What an evaluation read: each run's best.pt, and the states file and manifest it
-    names (each once)."""
-    files: dict[Path, None] = {}
+    names (each once), and the twin's truth where it named the lump."""
+    files: dict[Path, None] = {} if truth is None else {Path(truth): None}
     for run in runs:
         meta = load_checkpoint(run / "best.pt")["meta"]
         for path in (run / "best.pt", Path(meta["data"]["file"]), Path(meta["splits"])):

@@ -20,19 +20,20 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import declare_up, phantom_view, recording
+from core.recording import colormap, declare_up, phantom_view, recording
 from train.data import Batch
+from train.evaluation.lump import REACH_M
 from train.model.si_units import Prediction
 
 APP_ID = "phantom-eval"
 ERROR_MM = 2.0
 
 
-def blueprint(centre: np.ndarray, size: float, shown: str, intervals: bool = False
-              ) -> rrb.Blueprint:
+def blueprint(centre: np.ndarray, size: float, shown: str, intervals: bool = False,
+              footprint: str | None = None) -> rrb.Blueprint:
     """The predicted beside the true surface, framed from above (and, with ``intervals``,
     the points coloured by error over radius); the force change; the scores beside the
-    references."""
+    references; with ``footprint`` (its view's name), the error over the footprint."""
     surface = phantom_view(f"{shown}: predicted (colour: error 0..{ERROR_MM:g} mm, blue..red) "
                            "beside true (grey)", ["+ /surface/**"], centre, size,
                            origin="/surface")
@@ -45,6 +46,7 @@ def blueprint(centre: np.ndarray, size: float, shown: str, intervals: bool = Fal
             rrb.TimeSeriesView(name="change of force [N]: true vs predicted", origin="/force"),
             rrb.TextDocumentView(name="scores beside the no-learning references",
                                  origin="/table"),
+            *([rrb.Spatial2DView(name=footprint, origin="/footprint")] if footprint else []),
         ),
         column_shares=[3, 2],
     ), collapse_panels=True)
@@ -67,17 +69,24 @@ def ratio_colors(ratio: np.ndarray) -> np.ndarray:
 
 
 def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]], name: str,
-                         table: str, ratios: list[np.ndarray] | None = None) -> None:
+                         table: str, ratios: list[np.ndarray] | None = None,
+                         footprint: tuple | None = None) -> None:
     """Log the examples in ``shown`` (the test batches of the run ``name``), with
     ``ratios`` (per batch (B, N): each point's error over its 90 % radius) where the run
-    keeps intervals, and ``table`` (the Markdown scores of every run beside the
-    references)."""
+    keeps intervals, ``table`` (the Markdown scores of every run beside the references),
+    and ``footprint`` (the test places (K, 2) m, their mean L_d (K,) m, the lump or None:
+    :func:`train.evaluation.evaluate.footprint_errors`)."""
     first = shown[0][0].target[0][shown[0][0].mask[0]].cpu().numpy() if shown else np.zeros((1, 3))
     size = max(float(np.ptp(first[:, :2], axis=0).max()), 0.02)
-    view = blueprint(first.mean(axis=0), size, name, ratios is not None)
+    view = blueprint(first.mean(axis=0), size, name, ratios is not None,
+                     None if footprint is None else
+                     f"mean L_d per test place: 0 .. {footprint[1].max() * 1e3:.2f} mm "
+                     "(viridis, size); the lump and its reach [mm]")
     with recording(APP_ID, path, view) as rec:
         declare_up(rec)
         rec.log("table", rr.TextDocument(table, media_type=rr.MediaType.MARKDOWN), static=True)
+        if footprint is not None:
+            _footprint(rec, *footprint)
         rec.log("force/true", rr.SeriesPoints(names=["true dF [N]"], colors=[(90, 90, 90)],
                                               marker_sizes=[4]), static=True)
         rec.log("force/predicted", rr.SeriesPoints(names=["predicted dF [N]"],
@@ -115,3 +124,18 @@ def _example(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int) -> None:
                                        colors=[(250, 200, 40), (220, 40, 40)], radii=[0.0015]))
     rec.log("force/true", rr.Scalars(float(b.dforce[j])))
     rec.log("force/predicted", rr.Scalars(float(p.dforce[j])))
+
+
+def _footprint(rec: rr.RecordingStream, xy: np.ndarray, ld: np.ndarray, lump: object) -> None:
+    """Each test place on the footprint (mm), coloured and sized by its mean L_d; the lump's
+    radius and its reach (radius + 10 mm) as circles."""
+    top = max(float(ld.max()), 1e-12)
+    rec.log("footprint/places", rr.Points2D(xy * 1e3, radii=1.0 + 3.0 * ld / top,
+                                            colors=colormap(ld / top),
+                                            labels=[f"{v * 1e3:.2f}" for v in ld]), static=True)
+    if lump is not None:
+        angle = np.linspace(0, 2 * np.pi, 65)
+        rings = [np.c_[lump.x + r * np.cos(angle), lump.y + r * np.sin(angle)] * 1e3
+                 for r in (lump.radius, lump.radius + REACH_M)]
+        rec.log("footprint/lump", rr.LineStrips2D(rings, colors=[(220, 40, 40), (250, 160, 60)],
+                                                  radii=[0.4]), static=True)

@@ -31,6 +31,7 @@ from train.data import (
     role_examples,
 )
 from train.evaluation.coverage import Coverage, absent, coverage, coverage_doc, coverage_table
+from train.evaluation.lump import PARTS, Lump, press_xy
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
@@ -38,6 +39,8 @@ from train.model.si_units import Prediction, distances, predict
 from train.training.calibrate import residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
+
+PLACE_M = 0.002            # m: test presses this close are one place on the footprint
 
 
 @dataclass
@@ -129,13 +132,20 @@ def test_errors(run_dir: Path, device: str = "cpu"
     return errs, run, shown
 
 
-def fold_coverage(run: LoadedRun, run_dir: Path) -> Coverage | None:
-    """The coverage of a run's intervals on its fold's test examples (None, said in one
-    line, where its checkpoint keeps none)."""
+def fold_coverage(run: LoadedRun, run_dir: Path, keep: np.ndarray | None = None,
+                  quiet: bool = False) -> Coverage | None:
+    """The coverage of a run's intervals on its fold's test examples (those of ``keep``
+    only, a mask in :func:`example_errors`' order, where given); None, said in one line
+    unless ``quiet``, where its checkpoint keeps none or ``keep`` keeps nothing."""
     if run.intervals is None:
-        absent(str(run_dir))
+        if not quiet:
+            absent(str(run_dir))
         return None
     pairs = example_pairs(run.states, run.test)
+    if keep is not None:
+        if not keep.any():
+            return None
+        pairs = pairs[torch.as_tensor(keep)]
     return coverage(run.intervals, residuals(run.model, run.norm, run.states, pairs))
 
 
@@ -156,6 +166,11 @@ def metrics(e: ExampleErrors) -> dict[str, dict[str, float | None]]:
             out[name][f"{key}_mm"] = float(np.mean(values) * 1e3) if finite else None
             out[name][f"{key}_sd_mm"] = float(np.std(values) * 1e3) if finite else None
     return out
+
+
+def subset(e: ExampleErrors, keep: np.ndarray) -> ExampleErrors:
+    """The examples of ``keep`` (a mask)."""
+    return ExampleErrors(e.set[keep], e.ld_mean[keep], e.ld_max[keep], e.force_err[keep])
 
 
 def pool(errors: list[ExampleErrors]) -> ExampleErrors:
@@ -180,11 +195,13 @@ def gains(model: dict, refs: dict[str, dict]) -> dict:
     return out
 
 
-def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
+def evaluate_runs(run_dirs: list[Path], device: str = "cpu", lump: Lump | None = None
+                  ) -> dict:
     """Metrics per run and per variant (pooled over its folds, with the spread over folds),
     each beside the no-learning references on the same test examples, and the gain over the
-    best of them. Runs are pooled only where their whole :class:`Variant` and test set are
-    the same (two variants may share a label)."""
+    best of them; with a ``lump``, the same over it and away from it
+    (:mod:`train.evaluation.lump`). Runs are pooled only where their whole :class:`Variant`
+    and test set are the same (two variants may share a label)."""
     runs, groups = [], {}
     for run_dir in run_dirs:
         run = load_run(run_dir, device)
@@ -198,9 +215,38 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu") -> dict:
                      "fold": run.meta["options"]["fold"], "test_set": test_set, "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m),
                      "intervals": _intervals(cover, m, run.intervals)})
-        groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1], cover))
-    return {"runs": runs, "overall": [_pooled(v, test_set, items)
+        parts = None
+        if lump is not None:
+            over = lump.over(press_xy(run.states, example_pairs(run.states, run.test)))
+            parts = {"over": over, "away": ~over}
+            covers = {k: fold_coverage(run, run_dir, keep, quiet=True)
+                      for k, keep in parts.items()}
+            runs[-1]["lump"] = _lump_row(lump, errs, refs, parts, covers)
+            parts = (parts, covers)
+        groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1], cover,
+                                                           parts))
+    return {"runs": runs, "overall": [_pooled(v, test_set, items, lump)
                                       for (v, test_set), items in groups.items()]}
+
+
+def _lump_row(lump: Lump, errs: ExampleErrors, refs: dict[str, ExampleErrors],
+              parts: dict[str, np.ndarray], covers: dict[str, Coverage | None]) -> dict:
+    """A row's ``lump``: the lump, and per part (over, away) the model's "all" metrics, the
+    references' on the same examples, the gain and the intervals' coverage; a part with no
+    test example is null."""
+    doc: dict = lump.as_doc()
+    for part in PARTS:
+        keep = parts[part]
+        if not keep.any():
+            doc[part] = None
+            continue
+        m = metrics(subset(errs, keep))["all"]
+        ref_m = {n: metrics(subset(e, keep))["all"] for n, e in refs.items()}
+        cover = covers[part]
+        doc[part] = {"metrics": m, "references": ref_m, "gain": gains(m, ref_m),
+                     "intervals": None if cover is None else coverage_doc(cover,
+                                                                          m["ld_mean_mm"])}
+    return doc
 
 
 def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = None
@@ -215,25 +261,38 @@ def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = No
     return doc
 
 
-def _pooled(variant: Variant, test_set: str,
-            items: list[tuple[ExampleErrors, dict[str, ExampleErrors], dict,
-                              Coverage | None]]) -> dict:
+def _pooled(variant: Variant, test_set: str, items: list[tuple], lump: Lump | None = None
+            ) -> dict:
     """The overall row of one variant on one test set: its runs' (errors, reference errors,
-    run row, coverage) pooled over their folds."""
+    run row, coverage, and with a ``lump`` the parts' masks and coverages) pooled over their
+    folds."""
     pooled = metrics(pool([e for e, *_ in items]))
     ref_m = {n: metrics(pool([r[n] for _, r, *_ in items]))["all"] for n in NAMES}
-    covers = [c for *_, c in items]
-    cover = None if None in covers else sum(covers[1:], covers[0])
-    fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r, _ in items]
+    cover = _sum_coverage([item[3] for item in items])
+    fold_ld = [r["metrics"]["all"]["ld_mean_mm"] for _, _, r, *_ in items]
     fold_ld = [v for v in fold_ld if v is not None] or [0.0]
-    return {"label": variant.label, "variant": variant.to_dict(),
+    row = {"label": variant.label, "variant": variant.to_dict(),
             "test_set": test_set, "folds": len(items),
-            "fold_ids": [r["fold"] for _, _, r, _ in items],
+            "fold_ids": [r["fold"] for _, _, r, *_ in items],
             "metrics": pooled, "fold_ld_mean_sd_mm": float(np.std(fold_ld)),
             "references": ref_m, "gain": gains(pooled["all"], ref_m),
             "folds_not_beating_references": [
-                r["fold"] for _, _, r, _ in items if not _beats(r["gain"]["ld_gain"])],
+                r["fold"] for _, _, r, *_ in items if not _beats(r["gain"]["ld_gain"])],
             "intervals": _intervals(cover, pooled)}
+    if lump is not None:
+        parts = {k: np.concatenate([item[4][0][k] for item in items]) for k in PARTS}
+        covers = {k: _sum_coverage([item[4][1][k] for item in items if item[4][0][k].any()])
+                  for k in PARTS}
+        refs = {n: pool([r[n] for _, r, *_ in items]) for n in NAMES}
+        row["lump"] = _lump_row(lump, pool([e for e, *_ in items]), refs, parts, covers)
+    return row
+
+
+def _sum_coverage(covers: list[Coverage | None]) -> Coverage | None:
+    """Coverages pooled; None where any is missing (or there is none)."""
+    if not covers or None in covers:
+        return None
+    return sum(covers[1:], covers[0])
 
 
 def shown_name(row: dict, rows: list[dict]) -> str:
@@ -304,7 +363,55 @@ def table2(result: dict) -> str:
         for name in NAMES:
             lines.append(_row(f"*reference: {name}*", row["test_set"], row["references"][name],
                               "", str(row["folds"])))
-    return "\n".join(lines) + "\n" + _fold_table(result) + coverage_table(result, shown_name)
+    return ("\n".join(lines) + "\n" + _fold_table(result) + coverage_table(result, shown_name)
+            + _lump_table(result))
+
+
+def _lump_table(result: dict) -> str:
+    """Over the lump and away from it, per variant: the model's mean L_d and force error
+    beside the best reference's on the same examples, and its 90 % coverage (empty without
+    a lump)."""
+    rows = [r for r in result["overall"] if r.get("lump") is not None]
+    if not rows:
+        return ""
+    lump = rows[0]["lump"]
+    x, y = lump["centre_mm"]
+    lines = [f"\nOver the lump at ({x:.0f}, {y:.0f}) mm, radius {lump['radius_mm']:.0f} mm (test "
+             f"presses within its radius + {lump['reach_mm']:.0f} mm) and away from it:\n",
+             "| Model/Train set | Test set | part | examples | Mean L_d [mm] | best reference "
+             "L_d [mm] | Force Absolute Error [N] | best reference force [N] | points in 90 % |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        for part in PARTS:
+            got = row["lump"][part]
+            if got is None:
+                lines.append(f"| {shown_name(row, result['overall'])} | {row['test_set']} | "
+                             f"{part} | 0 | | | | | |")
+                continue
+            m, g = got["metrics"], got["gain"]
+            inside = next((lv["coverage"] for lv in (got["intervals"] or {}).get("levels", [])
+                           if abs(lv["level"] - 0.9) < 1e-9), None)
+            lines.append(f"| {shown_name(row, result['overall'])} | {row['test_set']} | {part} "
+                         f"| {m['n']} | {_num(m['ld_mean_mm'])} | {g['ld_reference']}: "
+                         f"{_num(g['ld_reference_mm'])} | {_num(m['force_abs_n'])} | "
+                         f"{g['force_reference']}: {_num(g['force_reference_n'])} | "
+                         f"{'' if inside is None else f'{inside:.0%}'} |")
+    return "\n".join(lines) + "\n"
+
+
+def footprint_errors(run: LoadedRun, lump: Lump | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, Lump | None]:
+    """A run's test presses on the footprint: each place's (x, y) (K, 2) m and mean L_d (K,)
+    m over its examples (places within 2 mm are one), and the lump if any: for the
+    recording."""
+    errs = example_errors(run)[0]
+    xy = press_xy(run.states, example_pairs(run.states, run.test))
+    key = np.round(xy / PLACE_M).astype(np.int64)
+    places, which = np.unique(key, axis=0, return_inverse=True)
+    which = which.ravel()
+    ld = np.bincount(which, errs.ld_mean) / np.bincount(which)
+    centre = np.stack([np.bincount(which, xy[:, k]) / np.bincount(which) for k in (0, 1)], 1)
+    return centre, ld, lump
 
 
 def _fold_table(result: dict) -> str:
