@@ -12,6 +12,13 @@ from click.testing import CliRunner
 from pipeline.cli import cli
 
 
+def replace_text(path: Path, old: str, new: str) -> None:
+    """Spoil a text file in place: ``old`` (which must be there) becomes ``new``."""
+    text = path.read_text()
+    assert old in text, f"{old!r} not in {path}"
+    path.write_text(text.replace(old, new))
+
+
 def folder_hash(folder: Path) -> str:
     """The names and bytes of every file below ``folder``: an input must stay as it was."""
     h = hashlib.sha256()

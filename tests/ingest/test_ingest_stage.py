@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers.paths import REAL_SAMPLES
-from helpers.spoiled_session import folder_hash
+from helpers.spoiled_session import folder_hash, replace_text
 
 from core.provenance import sha256_file
 from core.recording import rrd_entities, rrd_has_blueprint, rrd_timelines
@@ -274,8 +274,7 @@ def _force_row_with_extra_field(folder: Path) -> str:
 
 
 def _cal_force_units_not_force(folder: Path) -> str:
-    cal = folder / "FT14048.cal"
-    cal.write_text(cal.read_text().replace('ForceUnits="N"', 'ForceUnits="mV"'))
+    replace_text(folder / "FT14048.cal", 'ForceUnits="N"', 'ForceUnits="mV"')
     return "FT14048.cal"
 
 

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers.spoiled_session import ingest_spoiled
+from helpers.spoiled_session import ingest_spoiled, replace_text
 from helpers.staged_twin import shared_clock_checked, staged_twin
 from helpers.truth_checks import check_states_against_truth
 
@@ -73,14 +73,12 @@ def test_plate_route_states_against_truth(plate_session):
 
 
 def _units_contradict(folder: Path) -> str:
-    toml = folder / "session.toml"
-    toml.write_text(toml.read_text().replace('kind = "wrench"', 'kind = "wrench"\nunits = "kN"'))
+    replace_text(folder / "session.toml", 'kind = "wrench"', 'kind = "wrench"\nunits = "kN"')
     return "channel 'Force_X' is in N as the file states, but force.units says kN"
 
 
 def _rate_disagrees(folder: Path) -> str:
-    toml = folder / "session.toml"
-    toml.write_text(toml.read_text().replace("rate_hz = 1000.0", "rate_hz = 2000.0"))
+    replace_text(folder / "session.toml", "rate_hz = 1000.0", "rate_hz = 2000.0")
     return "force.rate_hz is 2000 Hz but the time column gives 1000 Hz"
 
 
