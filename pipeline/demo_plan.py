@@ -185,13 +185,12 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         pre = per_fold_steps(out, s, states, splits, train, sd)
         inits = [pretrain_dir(out, fold) / "best.pt" for fold in range(s.folds)]
         steps = session + pre
-    runs = [out / "runs" / f"exp_{tag}_fold{fold}" for fold in range(s.folds)
+    runs = [(fold, tag, out / "runs" / f"exp_{tag}_fold{fold}") for fold in range(s.folds)
             for tag in VARIANTS]
     order = runs if pretraining == PER_FOLD else \
-        sorted(runs, key=lambda r: not r.name.startswith("exp_notl"))   # scratch: no wait
-    for run in order:
-        fold, tl = int(run.name[-1]), run.name.startswith("exp_tl")
-        init = ("--init", str(inits[fold])) if tl else ()
+        sorted(runs, key=lambda r: r[1] != "notl")      # scratch first: it waits for nothing
+    for fold, tag, run in order:
+        init = ("--init", str(inits[fold])) if tag == "tl" else ()
         steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
                            "--fold", str(fold), "--out", str(run), "--epochs",
                            str(s.finetune_epochs), *init, *train, *sd),
@@ -202,12 +201,11 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     if pretraining == GENERIC:                        # the study goes on beside the last runs
         steps += [replace(step, batch=FOLDS) for step in scarcity]
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
-    pres = sorted(set(inits))[:1] if pretraining == GENERIC else \
-        [pretrain_dir(out, fold) for fold in range(s.folds)]
-    pres = [p.parent if p.name == "best.pt" else p for p in pres]
-    steps.append(Step(("eval", *map(str, runs), *map(str, pres), "--out",
+    finetuned = [run for _, _, run in runs]
+    pres = list(dict.fromkeys(init.parent for init in inits))   # the pre-trained run(s)
+    steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), "--out",
                        str(out / "metrics.json")),
-                      tuple(r / "best.pt" for r in runs + pres), (out / "metrics.json",)))
+                      tuple(r / "best.pt" for r in finetuned + pres), (out / "metrics.json",)))
     return steps + (scarcity if pretraining == PER_FOLD else [])
 
 

@@ -73,8 +73,6 @@ class SimulateParams:
         check_bounds(self, self.BOUNDS)
         if self.shard is not None:
             parse_shard(self.shard)
-        if self.prior < 0:
-            raise BadInput(None, f"--prior {self.prior}: a number of phantoms, 0 or more")
         if self.prior:
             drawn = [name for name in DRAWN if getattr(self, name) != getattr(DEFAULTS, name)]
             if drawn:
