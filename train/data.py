@@ -35,11 +35,13 @@ class StateTensors:
     pairs: dict[str, torch.Tensor]   # set -> (E, 2) long: start, end
     width: torch.Tensor | None = None   # (S,) long: the marker slots each state's phantom
     #                                     uses (MSM drawn from a prior); None: all N - 1
+    location: np.ndarray | None = None  # (S,) each state's place id (states/location)
 
     def to(self, device: torch.device) -> StateTensors:
         return StateTensors(self.points.to(device), self.valid.to(device), self.tip.to(device),
                             self.force.to(device), {k: v.to(device) for k, v in
-                                                    self.pairs.items()}, self.width)
+                                                    self.pairs.items()}, self.width,
+                            self.location)
 
 
 @dataclass
@@ -64,10 +66,12 @@ def load_states(path: str | Path) -> StateTensors:
         tip, force = f["states/tip"][()], f["states/force"][()]
         width = f["phantoms/markers"][()][f["states/phantom"][()]] \
             if "states/phantom" in f else None
+        location = f["states/location"][()]
     pts = np.where(valid[..., None], pts, 0.0).astype(np.float32)
     return StateTensors(torch.from_numpy(pts), torch.from_numpy(valid), torch.from_numpy(tip),
                         torch.from_numpy(force.astype(np.float32)), pairs,
-                        None if width is None else torch.from_numpy(width.astype(np.int64)))
+                        None if width is None else torch.from_numpy(width.astype(np.int64)),
+                        location)
 
 
 def load_manifest(path: str | Path, data: str | Path) -> dict:

@@ -40,7 +40,7 @@ from train.training.calibrate import residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
 
-PLACE_M = 0.002            # m: test presses this close are one place on the footprint
+PLACE_M = 0.002            # m: without place ids, test presses this close are one place
 
 
 @dataclass
@@ -401,12 +401,14 @@ def _lump_table(result: dict) -> str:
 
 def footprint_errors(run: LoadedRun, lump: Lump | None = None
                      ) -> tuple[np.ndarray, np.ndarray, Lump | None]:
-    """A run's test presses on the footprint: each place's (x, y) (K, 2) m and mean L_d (K,)
-    m over its examples (places within 2 mm are one), and the lump if any: for the
-    recording."""
+    """A run's test presses on the footprint: each place's (x, y) (K, 2) m (the mean of its
+    examples' tips at their start) and mean L_d (K,) m over its examples (a place: the states'
+    location id), and the lump if any: for the recording."""
     errs = example_errors(run)[0]
-    xy = press_xy(run.states, example_pairs(run.states, run.test))
-    key = np.round(xy / PLACE_M).astype(np.int64)
+    pairs = example_pairs(run.states, run.test)
+    xy = press_xy(run.states, pairs)
+    key = run.states.location[pairs[:, 0].cpu().numpy()] if run.states.location is not None \
+        else np.round(xy / PLACE_M).astype(np.int64)
     places, which = np.unique(key, axis=0, return_inverse=True)
     which = which.ravel()
     ld = np.bincount(which, errs.ld_mean) / np.bincount(which)
