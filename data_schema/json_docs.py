@@ -1,13 +1,14 @@
 """JSON documents the pipeline writes: their required keys and types, and one validator.
 
-- ``phantom.msm_params`` 1.2: the spring constants ``pipeline fit-msm`` found (one object),
+- ``phantom.msm_params`` 1.3: the spring constants ``pipeline fit-msm`` found (one object),
   and in ``msm_params`` the full MSM parameters, the grid they were fitted on included: ``n``
   masses along x over ``size`` m, ``n_y`` along y over ``size_y`` m (1.1; a 1.0 record has
   ``n`` and ``size`` alone: the square); 1.2: ``map``, the stiffness map of ``fit-msm --map``
   (its regions' ``shape``, ``factors`` row by row along y, their ``sd``, the presses each is
   ``informed_by``, the shrinkage ``weight`` and its ``validation`` table, the distances, a
   ``note``) or null, and ``msm_params.stiffness_map`` the same factors (null or absent:
-  uniform, as every 1.0 and 1.1 document reads).
+  uniform, as every 1.0 and 1.1 document reads); 1.3: the map's ``stiffest`` region (its
+  ``region`` row and column, ``centre_mm``, ``factor``, ``sd``; null where none was fitted).
 - ``phantom.folds`` 2.0: k-fold split manifests (``pipeline split``) that other trainers read
   and users edit: the states file's name and sha256, the grouping (``sequence`` or
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as
@@ -63,7 +64,7 @@ class JsonSchema:
     keys: dict[str, type | tuple[type, ...]]
 
 
-MSM_PARAMS = JsonSchema("phantom.msm_params", "1.2", {
+MSM_PARAMS = JsonSchema("phantom.msm_params", "1.3", {
     "schema": str, "schema_version": str, "k_between": float, "k_fixed": float,
     "mean_distance_m": float, "msm_params": dict, "provenance": dict,
 })

@@ -37,7 +37,7 @@ from pipeline.demo_pool import WORKERS, Pool, StepResult, ready
 from pipeline.demo_times import TIMES, HostFigure, Times, measure_host
 from pipeline.options import OneOf, ranged, seed_option
 from pipeline.stage_cache import is_fresh, write_doc, write_stamp
-from pipeline.synth_cmd import MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
+from pipeline.synth_cmd import INCLUSION, LAYER, MARKER_PITCH_MM, MARKERS, MOCAP_RATE, SIZE
 from sim.twin.synth_params import SynthParams
 from train.training.train_params import DEVICES, TrainParams
 
@@ -79,12 +79,17 @@ from train.training.train_params import DEVICES, TrainParams
               help="The twin lab's phantom footprint LxW (mm).")
 @click.option("--mocap-rate", type=MOCAP_RATE,
               default=Lab.mocap_rate_hz, show_default=True, help="The twin lab's mocap rate.")
+@click.option("--inclusion", "inclusions", type=INCLUSION, multiple=True,
+              help="A lump in the twin lab's phantom, X,Y,DEPTH,RADIUS,RATIO (synth; repeat "
+                   "for more); eval then reports the errors over the first and away from it.")
+@click.option("--layer", type=LAYER, default=Lab.layer,
+              help="A top layer in the twin lab's phantom, THICKNESS,RATIO (synth).")
 @seed_option(SynthParams.seed)
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
          device: str, jobs: int | None, host_speed: bool | None, network: str | None,
          pretraining: str, markers: str, marker_pitch: float, size: str, mocap_rate: float,
-         seed: int) -> None:
+         inclusions: tuple[str, ...], layer: str | None, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
@@ -108,7 +113,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     threads = max(1, _cores() // jobs)
     host = _host_figure(not smoke if host_speed is None else host_speed)
     started = time.perf_counter()
-    lab = Lab(markers, marker_pitch, size, mocap_rate)
+    lab = Lab(markers, marker_pitch, size, mocap_rate, inclusions, layer)
     steps = demo_steps(out, seed, settings, device,
                        NETWORKS[network] if network else RECIPE, lab, pretraining)
     times = Times()

@@ -115,6 +115,15 @@ class Lab:
     marker_pitch_mm: float = SynthParams.marker_pitch_mm  # of a grid
     size_mm: str = SynthParams.size                      # the footprint LxW
     mocap_rate_hz: float = SynthParams.rate_hz
+    inclusions: tuple[str, ...] = SynthParams.inclusions  # X,Y,DEPTH,RADIUS,RATIO each
+    layer: str | None = SynthParams.layer                 # THICKNESS,RATIO
+
+    def __post_init__(self) -> None:
+        """Refuse, in synth's words and before any step runs, what synth would refuse (an
+        inclusion outside the block, a layer thicker than it, markers the footprint lacks)."""
+        SynthParams(markers=self.markers, marker_pitch_mm=self.marker_pitch_mm,
+                    size=self.size_mm, rate_hz=self.mocap_rate_hz,
+                    inclusions=tuple(self.inclusions), layer=self.layer)
 
     def synth_args(self) -> tuple[str, ...]:
         """The synth options that make this lab (none for the default one)."""
@@ -122,8 +131,10 @@ class Lab:
         pairs = [("--markers", self.markers, default.markers),
                  ("--marker-pitch", f"{self.marker_pitch_mm:g}", f"{default.marker_pitch_mm:g}"),
                  ("--size", self.size_mm, default.size_mm),
-                 ("--mocap-rate", f"{self.mocap_rate_hz:g}", f"{default.mocap_rate_hz:g}")]
-        return tuple(a for opt, v, d in pairs if v != d for a in (opt, v))
+                 ("--mocap-rate", f"{self.mocap_rate_hz:g}", f"{default.mocap_rate_hz:g}"),
+                 ("--layer", self.layer, default.layer)]
+        return tuple(a for opt, v, d in pairs if v != d for a in (opt, v)) + \
+            tuple(a for inclusion in self.inclusions for a in ("--inclusion", inclusion))
 
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
 OUT = Path("out/demo")   # where the demo writes unless told
@@ -203,7 +214,8 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
     finetuned = [run for _, _, run in runs]
     pres = list(dict.fromkeys(init.parent for init in inits))   # the pre-trained run(s)
-    steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), "--out",
+    truth = ("--truth", str(out / "session" / "truth.h5")) if lab.inclusions else ()
+    steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), *truth, "--out",
                        str(out / "metrics.json")),
                       tuple(r / "best.pt" for r in finetuned + pres), (out / "metrics.json",)))
     return steps + (scarcity if pretraining == PER_FOLD else [])

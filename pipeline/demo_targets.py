@@ -10,6 +10,8 @@ examples, :mod:`train.evaluation.references`):
   half of "nothing moves", force error below the linear reference;
 - fine-tuned with transfer learning (TL) and from scratch: mean L_d at least 30 % below the
   best reference in every fold; force error at most half the linear reference's;
+- with a lump (``--inclusion``): the same 30 % in every fold over the lump (the test presses
+  within its radius + 10 mm, beside the references on those presses) and away from it;
 - TL: pooled mean L_d at least 10 % below scratch trained as many epochs (the paper reports
   23 %, against a scratch model of its own), better in all folds but one; in the data-scarcity
   study, at least 30 % below scratch at every number of training presses shown;
@@ -57,6 +59,7 @@ def summary(out: Path, seconds: float, quick: bool, host_s: float | None = None)
     doc = validate_metrics(out / "metrics.json")
     checks += _msm_model(doc)
     checks += _fine_tuned(doc)
+    checks += _over_lump(doc)
     checks += _intervals(doc)
     checks += _scarcity(out)
     if quick:
@@ -138,6 +141,30 @@ def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
             ("MSM models, force error", all(a < b for a, b in zip(force, linear, strict=True)),
              ", ".join(f"{a:.3f}" for a in force) + " N; linear "
              + ", ".join(f"{b:.3f}" for b in linear) + " N")]
+
+
+def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
+    """Where eval split the test presses by a lump: TL and scratch, every fold that has test
+    presses there, over the lump and away from it, beside the best reference there."""
+    checks = []
+    for part, where in (("over", "over the lump"), ("away", "away from the lump")):
+        for variant, name in (("tl", "TL"), ("notl", "scratch")):
+            runs = sorted((r for r in doc["runs"] if variant_of(r) == variant
+                           and r.get("lump")), key=lambda r: r["fold"])
+            if not runs:
+                continue
+            held = [(r["fold"], r["lump"][part]) for r in runs if r["lump"][part]]
+            gains = [g["gain"]["ld_gain"] if g["gain"]["ld_gain"] is not None else -1.0
+                     for _, g in held]
+            none = [str(k) for k, g in ((r["fold"], r["lump"][part]) for r in runs) if not g]
+            checks.append((f"{name} {where}: mean L_d below the best reference",
+                           bool(held) and min(gains) >= FOLD_GAIN,
+                           ", ".join(f"fold {k}: {g:+.0%} ({part_doc['metrics']['n']} "
+                                     "examples)" for (k, part_doc), g
+                                     in zip(held, gains, strict=True))
+                           + (f"; no test press there in fold(s) {', '.join(none)}"
+                              if none else "") + f" (target {FOLD_GAIN:.0%} each)"))
+    return checks
 
 
 def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:

@@ -31,8 +31,9 @@ class RegionsType(click.ParamType):
 @click.argument("states", type=IN)
 @click.option("--out", type=OUT, default=None, help="JSON file for the fitted constants.")
 @click.option("--max-sequences", type=ranged(B["max_sequences"]), default=D.max_sequences,
-              show_default=True,
-              help="Sequences used (drawn with --seed when the file or fold has more).")
+              help="Sequences used (drawn with --seed when the file or fold has more) "
+                   f"[default: {D.UNIFORM_SEQUENCES}; with --map every one: a map needs "
+                   "every place].")
 @click.option("--splits", type=IN, default=None,
               help="Fold manifest of STATES: fit on the training presses of --fold only, so "
                    "the fit never sees that fold's test presses.")
@@ -59,15 +60,15 @@ class RegionsType(click.ParamType):
                    "which `simulate --params` carries. Regions without a press within 5 mm "
                    "stay at 1, said in one line.")
 @click.option("--regions", type=RegionsType(), default=D.regions,
-              show_default=f"{D.regions[0]}x{D.regions[1]}",
               help="With --map: RxC regions, R rows along y of C regions along x, over the "
-                   "footprint.")
+                   "footprint [default: the finest grid whose every region holds a press "
+                   "place in its middle: 4x4 for `synth --locations 4x4`].")
 @seed_option(D.seed)
 @rrd_option
-def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | None,
+def fit_msm(states: Path, out: Path | None, max_sequences: int | None, splits: Path | None,
             fold: int, start: tuple[float, float], contact_radius: float | None,
             spacing_mm: float | None, workers: int, stiffness_map: bool,
-            regions: tuple[int, int],
+            regions: tuple[int, int] | None,
             seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Fit the MSM spring constants to measured states (as the paper found 100 and 21 N/m).
 
@@ -84,14 +85,13 @@ def fit_msm(states: Path, out: Path | None, max_sequences: int, splits: Path | N
     """
     from sim.msm.fit_msm_params import FitMsmInputs
     from sim.msm.fit_msm_stage import run_fit_msm
-    shape = regions
-    if shape != D.regions and not stiffness_map:
+    if regions is not None and not stiffness_map:
         raise BadInput("--regions", "is the stiffness map's: give it with --map")
     rrd_path = resolve_rrd(out, rrd, no_rrd) if out is not None else None
     params = FitMsmParams(max_sequences=max_sequences, fold=fold, start=start,
                           contact_radius=contact_radius,
                           spacing=None if spacing_mm is None else spacing_mm * 1e-3,
-                          workers=workers, seed=seed, map=stiffness_map, regions=shape)
+                          workers=workers, seed=seed, map=stiffness_map, regions=regions)
     outcome = run_fit_msm(FitMsmInputs(states, splits), out, params, rrd_path)
     text = fit_summary(outcome.fit)
     if outcome.map is not None:
@@ -132,6 +132,10 @@ def map_summary(found) -> str:  # noqa: ANN001 - MapResult, imported lazily
              f"shrinkage weight {found.weight:g} (held-out presses); mean distance "
              f"{found.mean_distance_m * 1e3:.3f} mm (uniform {found.uniform_distance_m * 1e3:.3f}"
              f" mm) after {found.steps} step(s)"]
+    if found.stiffest:
+        top = found.stiffest
+        lines.append(f"stiffest region centred at ({top['centre_mm'][0]:g}, "
+                     f"{top['centre_mm'][1]:g}) mm: {top['factor']:.2f} +- {top['sd']:.2g}")
     if found.note:
         lines.append(f"note: {found.note}")
     return "\n".join(lines)

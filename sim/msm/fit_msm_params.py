@@ -33,7 +33,8 @@ class FitMsmParams:
     """Every setting of ``pipeline fit-msm``; bad input, in one line naming the setting, where
     one is out of its bounds."""
 
-    max_sequences: int = 10             # sequences used (drawn with the seed when more)
+    max_sequences: int | None = None    # sequences used (drawn with the seed when more);
+                                        # None: UNIFORM_SEQUENCES, or every one for a map
     fold: int = 0                       # the fold of ``splits`` whose training presses fit
     start: tuple[float, float] = (paper.K_BETWEEN, paper.K_FIXED)   # N/m, the paper's
     contact_radius: float | None = None  # m; None: 0 for lab states, an MSM file's own
@@ -41,7 +42,11 @@ class FitMsmParams:
     workers: int = 0                    # processes; 0: the cores this process may use
     seed: int = 0
     map: bool = False                   # also fit a stiffness map (sim.msm.msm_map_fit)
-    regions: tuple[int, int] = (3, 3)   # the map's regions: rows (along y) x per row (x)
+    regions: tuple[int, int] | None = None   # the map's regions: rows (along y) x per row
+                                             # (x); None: the finest the places cover
+
+    UNIFORM_SEQUENCES: ClassVar[int] = 10   # the constants are settled by ten presses; a map
+                                            # needs every place, so it takes every press
 
     BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
         "max_sequences": Bound(1, whole=True),
@@ -54,4 +59,11 @@ class FitMsmParams:
 
     def __post_init__(self) -> None:
         check_bounds(self, self.BOUNDS)
-        parse_regions(f"{self.regions[0]}x{self.regions[1]}")
+        if self.regions is not None:
+            parse_regions(f"{self.regions[0]}x{self.regions[1]}")
+
+    def sequences_used(self) -> int | None:
+        """How many sequences to read (None: every one)."""
+        if self.max_sequences is not None:
+            return self.max_sequences
+        return None if self.map else self.UNIFORM_SEQUENCES

@@ -48,7 +48,7 @@ def run_fit_msm(inputs: FitMsmInputs, out: str | Path | None,
     p = params or FitMsmParams()
     states, splits = inputs.states, inputs.splits
     only = training_sequences(splits, p.fold) if splits else None
-    sequences, msm = read_measured(states, max_sequences=p.max_sequences, seed=p.seed,
+    sequences, msm = read_measured(states, max_sequences=p.sequences_used(), seed=p.seed,
                                    contact_radius=p.contact_radius, only=only,
                                    spacing=p.spacing)
     workers = p.workers or default_workers()

@@ -13,10 +13,10 @@ phantom did, and is it closer to every press than a still surface. One timeline,
   of the fitted MSM, of the start constants and of a still surface, in mm, side by side;
 - with a stiffness map (``fit-msm --map``), ``map/regions``: a 2D view of the footprint (x
   right, y down as rerun draws 2D; mm), one box per region coloured by its factor (viridis
-  over the map's range, written in the view's name) and labelled ``factor +- sd`` (``held``
-  where no press informs it), and ``map/presses``: the presses' tips at rest, labelled by
-  their sequence ids, each joined by a line to the centre of every region it informs
-  (``map/informs``).
+  over the map's range, written in the view's name) and labelled ``factor +- sd [n]``, ``n``
+  the presses informing it (their tips within 5 mm; ``held`` where none does),
+  ``map/stiffest``: the stiffest fitted region outlined red, and ``map/presses``: the
+  presses' tips at rest. The map has a column of its own, beside the presses.
 """
 
 from __future__ import annotations
@@ -61,14 +61,15 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
     bars = rrb.Vertical(*(rrb.BarChartView(name=f"{name}: mean distance per press [mm]",
                                            origin=f"/distance/{key[:-2]}")
                           for key, name, _ in SERIES))
-    if found is not None:
+    columns: list = [rrb.Grid(*views), bars]
+    if found is not None:                     # the map first, as large as the presses' grid
         factors = np.asarray(found.factors)
-        views.insert(0, rrb.Spatial2DView(
+        columns.insert(0, rrb.Spatial2DView(
             name=f"stiffness map {found.shape[0]}x{found.shape[1]}: factor {factors.min():.2f}"
-                 f" .. {factors.max():.2f} (viridis), presses and the regions they inform "
-                 "[mm, y down]",
+                 f" .. {factors.max():.2f} (viridis), stiffest outlined red, [presses informing "
+                 "each]; press tips orange [mm, y down]",
             origin="/map"))
-    bp = rrb.Blueprint(rrb.Horizontal(rrb.Grid(*views), bars, column_shares=[3, 2]),
+    bp = rrb.Blueprint(rrb.Horizontal(*columns, column_shares=[3] * (len(columns) - 1) + [2]),
                        collapse_panels=False)
     with recording(APP_ID, path, bp) as rec:
         declare_up(rec)
@@ -119,17 +120,19 @@ def _log_map(rec: rr.RecordingStream, found: MapResult, footprint: tuple[float, 
     span = max(float(factors.max() - factors.min()), 1e-9)
     centres = region_centres(footprint, found.shape).reshape(-1, 2) * 1e3
     half = np.array([footprint[0] / cols, footprint[1] / rows]) * 1e3 / 2
-    labels = [f"{f:.2f} +- {sd:.2g}" if sd is not None else f"{f:.2f} (held)"
-              for f, sd in zip(factors, [v for row in found.sd for v in row], strict=True)]
+    counts = [len(presses) for row in found.informed_by for presses in row]
+    labels = [(f"{f:.2f} +- {sd:.2g} [{n}]" if sd is not None else f"{f:.2f} (held)")
+              for f, sd, n in zip(factors, [v for row in found.sd for v in row], counts,
+                                  strict=True)]
     rec.log("map/regions", rr.Boxes2D(centers=centres, half_sizes=np.tile(half * 0.97,
                                                                             (len(centres), 1)),
                                       colors=colormap((factors - factors.min()) / span),
                                       labels=labels, show_labels=True), static=True)
-    tips = {s.sequence: tip_xy(s) * 1e3 for s in sequences}
-    rec.log("map/presses", rr.Points2D(list(tips.values()), radii=[1.2], colors=[MEASURED],
-                                       labels=[str(k) for k in tips]), static=True)
-    links = [[tips[s], centres[i * cols + j]] for i in range(rows) for j in range(cols)
-             for s in found.informed_by[i][j]]
-    if links:
-        rec.log("map/informs", rr.LineStrips2D(links, radii=[0.3], colors=[MODEL]),
+    if found.stiffest is not None:
+        top = found.stiffest
+        rec.log("map/stiffest", rr.Boxes2D(centers=[top["centre_mm"]], half_sizes=[half * 0.97],
+                                           radii=[0.8], colors=[ERROR], draw_order=20.0),
                 static=True)
+    tips = [tip_xy(s) * 1e3 for s in sequences]                   # repeats share a place
+    rec.log("map/presses", rr.Points2D(tips, radii=[1.2], colors=[MEASURED], draw_order=30.0),
+            static=True)

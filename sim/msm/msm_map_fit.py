@@ -1,8 +1,9 @@
 """A stiffness map fitted to measured states: one factor per region, on top of the uniform fit.
 
 ``fit-msm --map`` first fits the uniform constants (:mod:`sim.msm.msm_fit`), then a factor
-``f_r = exp(theta_r)`` per region of a coarse grid over the footprint (:mod:`sim.msm.msm_regions`)
-minimising
+``f_r = exp(theta_r)`` per region of a grid over the footprint (:mod:`sim.msm.msm_regions`;
+by default the finest grid whose every region holds a press place in its middle, since a
+region is told apart only by the presses on it) minimising
 
     S(theta) = |r(theta)|^2 / |r(0)|^2 + w |theta|^2
 
@@ -43,7 +44,7 @@ import numpy as np
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_fit import at_points, distances, grid_states
 from sim.msm.msm_measured import MeasuredSequence
-from sim.msm.msm_regions import region_bounds
+from sim.msm.msm_regions import finest_grid, region_bounds, region_centres
 from sim.msm.msm_sensitivity import mass_regions, state_derivatives
 from sim.msm.workers import worker_pool
 
@@ -71,6 +72,8 @@ class MapResult:
     uniform_distance_m: float             # at the uniform fit
     steps: int
     note: str = ""                        # one line where regions could not be told apart
+    stiffest: dict | None = None          # the stiffest fitted region: its "region" (row,
+                                          # column), "centre_mm" (x, y), "factor" and "sd"
 
 
 def tip_xy(seq: MeasuredSequence) -> np.ndarray:
@@ -93,26 +96,34 @@ def informing(sequences: list[MeasuredSequence], footprint: tuple[float, float],
     return out
 
 
-def count_places(sequences: list[MeasuredSequence]) -> int:
-    """Distinct press places: tips resting within :data:`PLACE_M` of an earlier one join it."""
-    places: list[np.ndarray] = []
+def place_centres(sequences: list[MeasuredSequence]) -> np.ndarray:
+    """The distinct press places (K, 2), m: tips resting within :data:`PLACE_M` of an earlier
+    place join it, and a place is the mean of its tips."""
+    groups: list[list[np.ndarray]] = []
     for s in sequences:
-        if not any(np.linalg.norm(tip_xy(s) - p) <= PLACE_M for p in places):
-            places.append(tip_xy(s))
-    return len(places)
+        near = [g for g in groups if np.linalg.norm(tip_xy(s) - g[0]) <= PLACE_M]
+        if near:
+            near[0].append(tip_xy(s))
+        else:
+            groups.append([tip_xy(s)])
+    return np.array([np.mean(g, axis=0) for g in groups]).reshape(-1, 2)
 
 
-def fit_map(sequences: list[MeasuredSequence], params: MSMParams, shape: tuple[int, int],
-            seed: int = 0, workers: int = 1) -> MapResult:
-    """The map over ``shape`` regions on top of ``params``' uniform constants (see the module
-    docstring), the sequences shared among ``workers`` processes."""
+def fit_map(sequences: list[MeasuredSequence], params: MSMParams,
+            shape: tuple[int, int] | None = None, seed: int = 0, workers: int = 1
+            ) -> MapResult:
+    """The map over ``shape`` regions (None: the finest grid the press places cover,
+    :func:`sim.msm.msm_regions.finest_grid`) on top of ``params``' uniform constants (see the
+    module docstring), the sequences shared among ``workers`` processes."""
+    centres = place_centres(sequences)
+    shape = shape or finest_grid(centres, params.footprint)
     informed = informing(sequences, params.footprint, shape)
     free = np.flatnonzero([bool(s) for row in informed for s in row])
-    places, uniform = count_places(sequences), distances(
+    places, uniform = len(centres), distances(
         [at_points(params, s, grid_states(params, s)) for s in sequences], sequences).pooled
     if len(free) < 2:
-        note = (f"the presses cannot tell the {shape[0]}x{shape[1]} regions apart: "
-                f"{places} distinct place(s), {len(free)} region(s) with a press within "
+        note = (f"the presses cannot tell regions apart: {places} distinct place(s), "
+                f"{len(free)} of {shape[0]}x{shape[1]} region(s) with a press within "
                 f"{REACH_M * 1e3:g} mm; the map is uniform")
         ones = [[1.0] * shape[1] for _ in range(shape[0])]
         return MapResult(shape, ones, [[None] * shape[1] for _ in range(shape[0])], informed,
@@ -157,8 +168,9 @@ def _search(sequences: list[MeasuredSequence], params: MSMParams, shape: tuple[i
         theta, ev = new, trial
         if np.abs(delta).max() < STEP_TOL:
             break
-    return _result(ev, theta, weight, scale, table, shape, free, informed, places, uniform,
-                   steps, sequences)
+    found = _result(ev, theta, weight, scale, table, shape, free, informed, places, uniform,
+                    steps, sequences)
+    return replace(found, stiffest=stiffest_region(found, params.footprint))
 
 
 @dataclass(frozen=True)
@@ -246,6 +258,18 @@ def _choose_weight(ev: _Evaluation, theta: np.ndarray, groups: list[np.ndarray],
         table.append({"weight": weight, "held_out_rms_m": math.sqrt(total / len(ev.r))})
     best = min(table, key=lambda row: row["held_out_rms_m"])
     return best["weight"], table
+
+
+def stiffest_region(found: MapResult, footprint: tuple[float, float]) -> dict | None:
+    """The fitted region (not held at 1) of the largest factor: where the map puts a lump."""
+    fitted = [(f, (i, j)) for i, row in enumerate(found.factors) for j, f in enumerate(row)
+              if found.sd[i][j] is not None]
+    if not fitted:
+        return None
+    factor, (i, j) = max(fitted)
+    centre = region_centres(footprint, found.shape)[i, j] * 1e3
+    return {"region": [i, j], "centre_mm": [round(float(v), 3) for v in centre],
+            "factor": factor, "sd": found.sd[i][j]}
 
 
 def _press_covariance(ev: _Evaluation, ridge: float) -> np.ndarray:

@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from core.errors import BadInput
+from core.progress import warn
 from data_schema.hdf5 import attr_text
 from data_schema.states import footprint, validate_states
 from sim.msm.msm import MSM, MSMError, MSMParams
@@ -89,9 +90,9 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     sequences = []
     for s, r in rows.items():
         r = r[np.argsort(step[r], kind="stable")]
-        if step[r[0]] != 0:
-            raise BadInput(path, f"sequence {s} has no rest state (step 0)")
-        if len(r) >= 2:
+        if step[r[0]] != 0:           # extract left its rest out (the tip hidden, say)
+            warn(f"{path}: sequence {s} has no rest state (step 0): left out of the fit")
+        elif len(r) >= 2:
             loads = fvec[r[1:]] if fvec is not None else _loads_along_tip(force[r[1:]], tip[r])
             sequences.append(_measured(path, model, s, tip[r[0]],
                                        [points[int(i)] for i in r], loads, contact_radius))

@@ -23,6 +23,9 @@ import numpy as np
 from core.errors import BadInput
 
 MAX_REGIONS = 64          # 8 x 8: a finer map asks more of the presses than they can tell
+MIDDLE = 0.375            # a place this far from a region's centre (share of its size, per
+                          # axis) is in its middle: a grid whose boundaries run through the
+                          # places would be told apart by the tips' noise alone
 
 
 def parse_regions(text: str, option: str = "--regions") -> tuple[int, int]:
@@ -84,3 +87,28 @@ def mass_factors(rest_xy: np.ndarray, footprint: tuple[float, float],
     table = np.asarray(factors, dtype=float)
     idx = region_of(rest_xy, footprint, table.shape)
     return table[idx[:, 0], idx[:, 1]]
+
+
+def finest_grid(places: np.ndarray, footprint: tuple[float, float]) -> tuple[int, int]:
+    """The finest grid (rows, columns) whose every region holds a press place (K, 2), m,
+    in its middle (:data:`MIDDLE`): a map as fine as the presses can tell. The most regions
+    win, then the squarest; (1, 1) when no finer grid is covered."""
+    places = np.asarray(places, dtype=float).reshape(-1, 2)
+    best = (1, 1)
+    for rows in range(1, MAX_REGIONS + 1):
+        for cols in range(1, MAX_REGIONS // rows + 1):
+            if (rows * cols, -abs(rows - cols)) > (best[0] * best[1], -abs(best[0] - best[1])) \
+                    and _covered(places, footprint, (rows, cols)):
+                best = (rows, cols)
+    return best
+
+
+def _covered(places: np.ndarray, footprint: tuple[float, float], shape: tuple[int, int]
+             ) -> bool:
+    """Whether every region of ``shape`` holds a place in its middle."""
+    size = np.asarray(footprint) / np.asarray(shape[::-1])          # (x, y) size of a region
+    cell = np.floor(places / size)
+    middle = np.all(np.abs(places - (cell + 0.5) * size) <= MIDDLE * size, axis=1)
+    inside = np.all((cell >= 0) & (cell < np.asarray(shape[::-1])), axis=1) & middle
+    held = {(int(c[1]), int(c[0])) for c in cell[inside]}
+    return len(held) == shape[0] * shape[1]

@@ -156,3 +156,28 @@ def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
     assert generic(1, Lab(markers="scattered:20", size_mm="150x80")) == mine
     tl = [s for s in demo_steps(tmp_path, 1, QUICK) if "exp_tl_fold3" in str(s.outputs[0])]
     assert tl[0].inputs[-1] == tmp_path / "runs" / "generic" / "best.pt"
+
+
+def test_a_lab_with_a_lump_and_a_layer_is_evaluated_over_the_lump(tmp_path):
+    """``--inclusion`` and ``--layer`` make the twin's phantom not uniform (synth's options,
+    tests/sim/twin); eval then splits the test presses over the lump and away from it, from
+    its truth (tests/train/evaluation/test_lump.py)."""
+    steps = demo_steps(tmp_path, 0, SMOKE, lab=Lab(inclusions=("72,23,10,12,3",),
+                                                   layer="3,4"))
+    synth = steps[[s.args[0] for s in steps].index("synth")].args
+    assert synth[synth.index("--inclusion") + 1] == "72,23,10,12,3"
+    assert synth[synth.index("--layer") + 1] == "3,4"
+    ev = [s for s in steps if s.args[0] == "eval" and "--scarcity" not in s.args][0].args
+    assert ev[ev.index("--truth") + 1] == str(tmp_path / "session" / "truth.h5")
+    uniform = demo_steps(tmp_path, 0, SMOKE)
+    assert not any("--truth" in s.args or "--inclusion" in s.args for s in uniform)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--inclusion", "150,50,10,12,3"], "outside"), (["--layer", "40,3"], "thinner")])
+def test_a_lump_or_layer_synth_would_refuse_stops_the_demo_before_it_starts(tmp_path, args,
+                                                                             words):
+    out = tmp_path / "demo"
+    res = CliRunner().invoke(cli, ["demo", "--smoke", "--out", str(out), *args])
+    assert res.exit_code == 2 and words in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not out.exists()

@@ -13,12 +13,13 @@ import pytest
 from click.testing import CliRunner
 
 from core.recording import rrd_entities
+from data_schema.json_docs import MSM_PARAMS
 from pipeline.cli import cli
 from sim.msm.msm import MSM, MSMError, MSMParams
-from sim.msm.msm_map_fit import fit_map
+from sim.msm.msm_map_fit import fit_map, place_centres
 from sim.msm.msm_measured import read_measured
 from sim.msm.msm_protocol import Protocol
-from sim.msm.msm_regions import mass_factors, parse_regions
+from sim.msm.msm_regions import finest_grid, mass_factors, parse_regions
 from sim.msm.msm_sensitivity import mass_regions, state_derivatives
 from sim.msm.msm_static import simulate_sequence
 from sim.msm.simulate_stage import generate
@@ -96,6 +97,30 @@ def test_malformed_regions_are_refused(text):
         parse_regions(text)
 
 
+def _grid_of_places(*mm: float) -> np.ndarray:
+    """Places (K, 2) in m on the grid of the given x = y positions (mm)."""
+    return np.array([(x, y) for y in mm for x in mm]) * 1e-3
+
+
+@pytest.mark.parametrize("places, footprint, shape", [
+    (_grid_of_places(20, 40, 60, 80), (0.1, 0.1), (4, 4)),         # synth --locations 4x4
+    (_grid_of_places(20, 50, 80), (0.1, 0.1), (3, 3)),             # synth --locations 3x3
+    (_grid_of_places(19.8, 40.2, 59.9, 80.1), (0.1, 0.1), (4, 4)),  # the tips' noise: no 5x5
+    (np.array([[0.05, 0.05]]), (0.1, 0.1), (1, 1)),                # one place: uniform
+    (np.array([[0.02, 0.05], [0.08, 0.05]]), (0.1, 0.1), (1, 2)),   # two along x
+    (np.array([[0.02, 0.05], [0.08, 0.05]]) + 0.025, (0.1, 0.1), (1, 1)),  # off the middles
+])
+def test_the_finest_grid_holds_a_place_in_every_region_s_middle(places, footprint, shape):
+    assert finest_grid(places, footprint) == shape
+
+
+def test_places_are_the_mean_tips_of_presses_within_5_mm(tmp_path):
+    sequences, _ = read_measured(_made(tmp_path / "flat.h5", None))
+    centres = place_centres(sequences + sequences)        # each press twice: the same places
+    assert len(centres) == len(place_centres(sequences)) == len(
+        {tuple(np.round(s.rest[s.is_tip][0, :2], 6)) for s in sequences})
+
+
 # -- the map fitted back ---------------------------------------------------------------------
 
 PROTOCOL = Protocol(locations=12, directions=1, steps=3, fmax=1.0, seed=2)
@@ -131,6 +156,9 @@ def test_one_place_cannot_tell_regions_apart(tmp_path):
     assert found.factors == [[1.0] * 3] * 3
     assert "cannot tell" in found.note and "uniform" in found.note
     assert found.places == 1
+    found = fit_map(sequences, grid)                      # the finest grid one place covers
+    assert found.shape == (1, 1) and found.factors == [[1.0]] and found.stiffest is None
+    assert "cannot tell" in found.note and "uniform" in found.note
 
 
 def test_cli_map_round_trips_through_simulate(tmp_path):
@@ -143,8 +171,11 @@ def test_cli_map_round_trips_through_simulate(tmp_path):
     assert result.exit_code == 0, result.output
     assert "stiffness map 2x2" in result.output
     doc = json.loads(params.read_text())
-    assert doc["schema_version"] == "1.2"
+    assert doc["schema_version"] == MSM_PARAMS.version
     np.testing.assert_allclose(doc["msm_params"]["stiffness_map"], STIFF, rtol=0.1)
+    assert doc["map"]["stiffest"]["region"] == [1, 1]          # STIFF's 3x region
+    assert doc["map"]["stiffest"]["centre_mm"] == pytest.approx([75.0, 75.0])
+    assert "stiffest region centred at (75, 75) mm" in result.output
     assert "map/regions" in " ".join(rrd_entities(params.with_suffix(".rrd")))
     out = tmp_path / "again.h5"
     result = CliRunner().invoke(cli, ["simulate", "--params", str(params), "--out", str(out),
@@ -185,8 +216,10 @@ def test_the_uniform_twin_comes_out_flat(tmp_path):
         res = CliRunner().invoke(cli, ["-q", *map(str, args)])
         assert res.exit_code == 0, res.output
     params = folder / "params.json"
-    res = CliRunner().invoke(cli, ["fit-msm", str(folder / "states.h5"), "--map",
-                                   "--max-sequences", "18", "--out", str(params), "--no-rrd"])
+    res = CliRunner().invoke(cli, ["fit-msm", str(folder / "states.h5"), "--map",  # every press
+                                   "--out", str(params), "--no-rrd"])
     assert res.exit_code == 0, res.output
-    factors = np.asarray(json.loads(params.read_text())["map"]["factors"])
+    found = json.loads(params.read_text())["map"]
+    assert found["shape"] == [3, 3]                       # the finest grid 3x3 places cover
+    factors = np.asarray(found["factors"])
     assert np.abs(factors / factors.mean() - 1).max() <= 0.2, factors
