@@ -8,7 +8,8 @@
   ``informed_by``, the shrinkage ``weight`` and its ``validation`` table, the distances, a
   ``note``) or null, and ``msm_params.stiffness_map`` the same factors (null or absent:
   uniform, as every 1.0 and 1.1 document reads); 1.3: the map's ``stiffest`` region (its
-  ``region`` row and column, ``centre_mm``, ``factor``, ``sd``; null where none was fitted).
+  ``region`` row and column, ``centre_mm``, ``factor``, ``sd``, and ``peak_mm`` among its
+  neighbours; null where none was fitted).
 - ``phantom.folds`` 2.0: k-fold split manifests (``pipeline split``) that other trainers read
   and users edit: the states file's name and sha256, the grouping (``sequence`` or
   ``location``), ratio and seed, and per fold ``train``/``val``/``test`` each as

@@ -135,7 +135,9 @@ def map_summary(found) -> str:  # noqa: ANN001 - MapResult, imported lazily
     if found.stiffest:
         top = found.stiffest
         lines.append(f"stiffest region centred at ({top['centre_mm'][0]:g}, "
-                     f"{top['centre_mm'][1]:g}) mm: {top['factor']:.2f} +- {top['sd']:.2g}")
+                     f"{top['centre_mm'][1]:g}) mm: {top['factor']:.2f} +- {top['sd']:.2g}; "
+                     f"the peak among its neighbours at ({top['peak_mm'][0]:.0f}, "
+                     f"{top['peak_mm'][1]:.0f}) mm")
     if found.note:
         lines.append(f"note: {found.note}")
     return "\n".join(lines)

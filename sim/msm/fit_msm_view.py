@@ -15,7 +15,8 @@ phantom did, and is it closer to every press than a still surface. One timeline,
   right, y down as rerun draws 2D; mm), one box per region coloured by its factor (viridis
   over the map's range, written in the view's name) and labelled ``factor +- sd [n]``, ``n``
   the presses informing it (their tips within 5 mm; ``held`` where none does),
-  ``map/stiffest``: the stiffest fitted region outlined red, and ``map/presses``: the
+  ``map/stiffest``: the stiffest fitted region outlined red, ``map/peak``: the peak among it
+  and its neighbours (a red point, where the map puts a lump), and ``map/presses``: the
   presses' tips at rest. The map has a column of its own, beside the presses.
 """
 
@@ -67,7 +68,7 @@ def write_fit_recording(path: str | Path, params: MSMParams, result: FitResult,
         columns.insert(0, rrb.Spatial2DView(
             name=f"stiffness map {found.shape[0]}x{found.shape[1]}: factor {factors.min():.2f}"
                  f" .. {factors.max():.2f} (viridis), stiffest outlined red, [presses informing "
-                 "each]; press tips orange [mm, y down]",
+                 "each], the peak red; press tips orange [mm, y down]",
             origin="/map"))
     bp = rrb.Blueprint(rrb.Horizontal(*columns, column_shares=[3] * (len(columns) - 1) + [2]),
                        collapse_panels=False)
@@ -133,6 +134,8 @@ def _log_map(rec: rr.RecordingStream, found: MapResult, footprint: tuple[float, 
         rec.log("map/stiffest", rr.Boxes2D(centers=[top["centre_mm"]], half_sizes=[half * 0.97],
                                            radii=[0.8], colors=[ERROR], draw_order=20.0),
                 static=True)
+        rec.log("map/peak", rr.Points2D([top["peak_mm"]], radii=[2.0], colors=[ERROR],
+                                        labels=["peak"], draw_order=40.0), static=True)
     tips = [tip_xy(s) * 1e3 for s in sequences]                   # repeats share a place
     rec.log("map/presses", rr.Points2D(tips, radii=[1.2], colors=[MEASURED], draw_order=30.0),
             static=True)

@@ -73,7 +73,8 @@ class MapResult:
     steps: int
     note: str = ""                        # one line where regions could not be told apart
     stiffest: dict | None = None          # the stiffest fitted region: its "region" (row,
-                                          # column), "centre_mm" (x, y), "factor" and "sd"
+                                          # column), "centre_mm" (x, y), "factor", "sd", and
+                                          # "peak_mm" (x, y) among its neighbours
 
 
 def tip_xy(seq: MeasuredSequence) -> np.ndarray:
@@ -261,15 +262,24 @@ def _choose_weight(ev: _Evaluation, theta: np.ndarray, groups: list[np.ndarray],
 
 
 def stiffest_region(found: MapResult, footprint: tuple[float, float]) -> dict | None:
-    """The fitted region (not held at 1) of the largest factor: where the map puts a lump."""
-    fitted = [(f, (i, j)) for i, row in enumerate(found.factors) for j, f in enumerate(row)
-              if found.sd[i][j] is not None]
-    if not fitted:
+    """The fitted region (not held at 1) of the largest factor: where the map puts a lump.
+    Its ``peak_mm`` is the centre of mass of that region and its fitted neighbours, each
+    weighted by its factor above the map's median (a peak between regions is shared by them:
+    a lump between four places stiffens all four)."""
+    fitted = np.array([[sd is not None for sd in row] for row in found.sd])
+    if not fitted.any():
         return None
-    factor, (i, j) = max(fitted)
-    centre = region_centres(footprint, found.shape)[i, j] * 1e3
-    return {"region": [i, j], "centre_mm": [round(float(v), 3) for v in centre],
-            "factor": factor, "sd": found.sd[i][j]}
+    factors = np.asarray(found.factors)
+    i, j = np.unravel_index(np.argmax(np.where(fitted, factors, -np.inf)), factors.shape)
+    centres = region_centres(footprint, found.shape) * 1e3
+    near = np.zeros_like(fitted)
+    near[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2] = True
+    weight = np.where(near & fitted, np.clip(factors - np.median(factors[fitted]), 0, None), 0)
+    peak = (weight[..., None] * centres).sum((0, 1)) / weight.sum() if weight.sum() > 0 \
+        else centres[i, j]
+    return {"region": [int(i), int(j)], "centre_mm": [round(float(v), 3) for v in centres[i, j]],
+            "peak_mm": [round(float(v), 3) for v in peak], "factor": float(factors[i, j]),
+            "sd": found.sd[i][j]}
 
 
 def _press_covariance(ev: _Evaluation, ridge: float) -> np.ndarray:

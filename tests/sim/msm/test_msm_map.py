@@ -16,7 +16,7 @@ from core.recording import rrd_entities
 from data_schema.json_docs import MSM_PARAMS
 from pipeline.cli import cli
 from sim.msm.msm import MSM, MSMError, MSMParams
-from sim.msm.msm_map_fit import fit_map, place_centres
+from sim.msm.msm_map_fit import MapResult, fit_map, place_centres, stiffest_region
 from sim.msm.msm_measured import read_measured
 from sim.msm.msm_protocol import Protocol
 from sim.msm.msm_regions import finest_grid, mass_factors, parse_regions
@@ -121,6 +121,31 @@ def test_places_are_the_mean_tips_of_presses_within_5_mm(tmp_path):
         {tuple(np.round(s.rest[s.is_tip][0, :2], 6)) for s in sequences})
 
 
+def _map(factors: list[list[float]], held: tuple[tuple[int, int], ...] = ()) -> MapResult:
+    rows, cols = len(factors), len(factors[0])
+    sd = [[None if (i, j) in held else 0.01 for j in range(cols)] for i in range(rows)]
+    return MapResult((rows, cols), factors, sd, [[[]] * cols] * rows, rows * cols, 1.0, [],
+                     0.0, 0.0, 1)
+
+
+def test_the_peak_lies_between_regions_that_share_a_lump():
+    """Two neighbouring regions equally stiff above a flat map: the peak halfway between their
+    centres; a held region (no press) is never the stiffest; a lone stiff region is its own
+    peak."""
+    flat = [[1.0] * 4 for _ in range(4)]
+    shared = [row[:] for row in flat]
+    shared[1][1] = shared[1][2] = 1.2                      # y band 1, x bands 1 and 2
+    top = stiffest_region(_map(shared), (0.1, 0.1))
+    assert top["peak_mm"] == pytest.approx([50.0, 37.5])
+    assert top["centre_mm"] in ([37.5, 37.5], [62.5, 37.5])
+    held = [row[:] for row in flat]
+    held[0][0], held[3][3] = 5.0, 1.3
+    top = stiffest_region(_map(held, held=((0, 0),)), (0.1, 0.1))
+    assert top["region"] == [3, 3] and top["peak_mm"] == pytest.approx([87.5, 87.5])
+    assert stiffest_region(_map(flat, held=tuple((i, j) for i in range(4) for j in range(4))),
+                           (0.1, 0.1)) is None
+
+
 # -- the map fitted back ---------------------------------------------------------------------
 
 PROTOCOL = Protocol(locations=12, directions=1, steps=3, fmax=1.0, seed=2)
@@ -175,6 +200,7 @@ def test_cli_map_round_trips_through_simulate(tmp_path):
     np.testing.assert_allclose(doc["msm_params"]["stiffness_map"], STIFF, rtol=0.1)
     assert doc["map"]["stiffest"]["region"] == [1, 1]          # STIFF's 3x region
     assert doc["map"]["stiffest"]["centre_mm"] == pytest.approx([75.0, 75.0])
+    assert doc["map"]["stiffest"]["peak_mm"] == pytest.approx([75.0, 75.0], abs=2.0)
     assert "stiffest region centred at (75, 75) mm" in result.output
     assert "map/regions" in " ".join(rrd_entities(params.with_suffix(".rrd")))
     out = tmp_path / "again.h5"
