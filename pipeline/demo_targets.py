@@ -143,27 +143,32 @@ def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
              + ", ".join(f"{b:.3f}" for b in linear) + " N")]
 
 
+def _ld_gain(row: dict) -> float:
+    """A row's mean L_d gain over the best reference; -100 % where predictions were not
+    finite (no gain to report)."""
+    gain = row["gain"]["ld_gain"]
+    return -1.0 if gain is None else gain
+
+
 def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
     """Where eval split the test presses by a lump: TL and scratch, every fold that has test
     presses there, over the lump and away from it, beside the best reference there."""
     checks = []
     for part, where in (("over", "over the lump"), ("away", "away from the lump")):
         for variant, name in (("tl", "TL"), ("notl", "scratch")):
-            runs = sorted((r for r in doc["runs"] if variant_of(r) == variant
-                           and r.get("lump")), key=lambda r: r["fold"])
-            if not runs:
+            folds = sorted(((r["fold"], r["lump"][part]) for r in doc["runs"]
+                            if variant_of(r) == variant and r.get("lump")),
+                           key=lambda fold_rows: fold_rows[0])
+            held = [(k, rows) for k, rows in folds if rows]
+            empty = [str(k) for k, rows in folds if not rows]
+            if not folds:
                 continue
-            held = [(r["fold"], r["lump"][part]) for r in runs if r["lump"][part]]
-            gains = [g["gain"]["ld_gain"] if g["gain"]["ld_gain"] is not None else -1.0
-                     for _, g in held]
-            none = [str(k) for k, g in ((r["fold"], r["lump"][part]) for r in runs) if not g]
+            text = ", ".join(f"fold {k}: {_ld_gain(rows):+.0%} ({rows['metrics']['n']} "
+                             "examples)" for k, rows in held)
+            text += f"; no test press there in fold(s) {', '.join(empty)}" if empty else ""
             checks.append((f"{name} {where}: mean L_d below the best reference",
-                           bool(held) and min(gains) >= FOLD_GAIN,
-                           ", ".join(f"fold {k}: {g:+.0%} ({part_doc['metrics']['n']} "
-                                     "examples)" for (k, part_doc), g
-                                     in zip(held, gains, strict=True))
-                           + (f"; no test press there in fold(s) {', '.join(none)}"
-                              if none else "") + f" (target {FOLD_GAIN:.0%} each)"))
+                           bool(held) and min(_ld_gain(rows) for _, rows in held) >= FOLD_GAIN,
+                           f"{text} (target {FOLD_GAIN:.0%} each)"))
     return checks
 
 
@@ -172,8 +177,7 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
     by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
           for v in ("tl", "notl")}
     for variant, name in (("tl", "TL"), ("notl", "scratch")):
-        gains = [r["gain"]["ld_gain"] if r["gain"]["ld_gain"] is not None else -1.0
-                 for r in by[variant]]                      # -100 %: predictions not finite
+        gains = [_ld_gain(r) for r in by[variant]]
         force = [r["metrics"]["all"]["force_abs_n"]
                  / r["references"][FORCE_LINEAR]["force_abs_n"] for r in by[variant]]
         checks.append((f"{name}: mean L_d below the best reference in every fold",

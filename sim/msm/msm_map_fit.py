@@ -97,17 +97,25 @@ def informing(sequences: list[MeasuredSequence], footprint: tuple[float, float],
     return out
 
 
+def place_ids(sequences: list[MeasuredSequence]) -> np.ndarray:
+    """Each sequence's press place (K,): a tip resting within :data:`PLACE_M` of an earlier
+    place's first tip joins it."""
+    firsts: list[np.ndarray] = []
+    ids = np.empty(len(sequences), dtype=int)
+    for k, s in enumerate(sequences):
+        near = [i for i, p in enumerate(firsts) if np.linalg.norm(tip_xy(s) - p) <= PLACE_M]
+        if not near:
+            firsts.append(tip_xy(s))
+        ids[k] = near[0] if near else len(firsts) - 1
+    return ids
+
+
 def place_centres(sequences: list[MeasuredSequence]) -> np.ndarray:
-    """The distinct press places (K, 2), m: tips resting within :data:`PLACE_M` of an earlier
-    place join it, and a place is the mean of its tips."""
-    groups: list[list[np.ndarray]] = []
-    for s in sequences:
-        near = [g for g in groups if np.linalg.norm(tip_xy(s) - g[0]) <= PLACE_M]
-        if near:
-            near[0].append(tip_xy(s))
-        else:
-            groups.append([tip_xy(s)])
-    return np.array([np.mean(g, axis=0) for g in groups]).reshape(-1, 2)
+    """The distinct press places (K, 2), m: the mean tip of each place's presses."""
+    ids = place_ids(sequences)
+    tips = np.array([tip_xy(s) for s in sequences]).reshape(-1, 2)
+    return np.array([tips[ids == i].mean(axis=0) for i in range(ids.max(initial=-1) + 1)]
+                    ).reshape(-1, 2)
 
 
 def fit_map(sequences: list[MeasuredSequence], params: MSMParams,
@@ -220,19 +228,12 @@ def _groups(sequences: list[MeasuredSequence], seed: int) -> list[np.ndarray]:
     """The presses (indices) of each held-out group: the presses of each place in a seeded
     order, the k-th of every place in group k mod :data:`VALIDATION_GROUPS`, so a group
     holds out presses at places the others still press (where a place has more than one)."""
-    places: list[np.ndarray] = []
+    ids = place_ids(sequences)
+    seen = np.zeros(ids.max(initial=-1) + 1, dtype=int)
     group = np.empty(len(sequences), dtype=int)
-    seen: list[int] = []
     for k in np.random.default_rng(seed).permutation(len(sequences)):
-        xy = tip_xy(sequences[k])
-        near = [i for i, p in enumerate(places) if np.linalg.norm(xy - p) <= PLACE_M]
-        if near:
-            seen[near[0]] += 1
-            group[k] = seen[near[0]] % VALIDATION_GROUPS
-        else:
-            places.append(xy)
-            seen.append(0)
-            group[k] = 0
+        group[k] = seen[ids[k]] % VALIDATION_GROUPS
+        seen[ids[k]] += 1
     return [np.flatnonzero(group == g) for g in range(VALIDATION_GROUPS) if (group == g).any()]
 
 
