@@ -12,7 +12,8 @@ fine-tuning run, its minutes counted in the setting's) and fine-tune from that
 (``tl:80:pre40``); everything else is the demo's own TL run's options
 (``runs/exp_tl_foldK/best.pt``: the recipe, its seed, its fold). ``--init`` starts every ``tl``
 setting from that checkpoint instead (one pre-training for every fold and lab: the generic
-model, docs/model.md). Each run trains on one thread,
+model, docs/model.md); with ``preN`` the fold's MSM run starts from it (the generic model
+adapted to the fold's fitted MSM for N epochs, then fine-tuned). Each run trains on one thread,
 ``--jobs`` at a time (a run is one fold's fine-tuning), into ``OUT/<demo>/<setting>_fK`` (a run
 already there is scored again, not retrained). Printed: per demo and setting the pooled mean
 L_d over the folds' test examples (weighted by their count), each fold's, and the mean minutes
@@ -47,7 +48,8 @@ def fine_tune(job: tuple[Path, int, str, Path, Path | None]) -> dict:
     tic = time.perf_counter()
     init = generic or demo / "runs" / f"msm_fold{fold}" / "best.pt"
     if pre:
-        init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"), pre)
+        init = trained(demo / "runs" / f"msm_fold{fold}", run.with_name(run.name + "_pre"), pre,
+                       generic)
     trained(demo / "runs" / f"exp_tl_fold{fold}", run, tune, init if start == "tl" else None)
     return score(run, time.perf_counter() - tic, metrics, test_errors)
 
@@ -142,8 +144,6 @@ def main() -> None:
         ap.error(str(e))
     from train.evaluation.evaluate import metrics, test_errors
 
-    if a.init is not None and any(parse(s)[2] for s in a.settings):
-        ap.error("--init and preN exclude each other: preN pre-trains the fold's own model")
     jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}", a.init)
             for d in a.demos for s in a.settings for f in range(FOLDS)]
     with ProcessPoolExecutor(a.jobs) as pool:

@@ -1,8 +1,10 @@
 """A new lab's day one: the generic model with no lab data, on every lab we have, beside the
 predictors that learn nothing, on the same test examples.
 
-    python benchmarks/bench_zero_shot.py --generic RUN/best.pt [--labs default 6x6 scattered] \
+    python benchmarks/bench_zero_shot.py [--generic RUN/best.pt] [--labs default 6x6 scattered] \
         [--seeds 0 1 2] [--out DIR]
+
+``--generic``: a checkpoint, or (the default) the generic model shipped with the package.
 
 Each lab is a twin session made as ``pipeline demo`` makes its own (synth -> ingest -> sync ->
 extract -> split into 5 folds grouped by press, the lab's options and seed), into
@@ -80,7 +82,8 @@ def pooled(rows: list[dict[str, float]], key: str) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--generic", type=Path, required=True, help="the generic model's best.pt")
+    ap.add_argument("--generic", default="generic",
+                    help="the generic model's checkpoint [default: the one shipped]")
     ap.add_argument("--labs", nargs="+", choices=list(LABS), default=list(LABS))
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_zero_shot"))
@@ -88,6 +91,7 @@ def main() -> None:
     import torch
 
     from data_schema.json_docs import NEAREST_PRESS, NOTHING_MOVES
+    from train.generic_model import resolve
 
     torch.set_num_threads(1)
     print("| lab, seed | generic, per fold (mm) | nothing moves | nearest press | beats nothing "
@@ -96,7 +100,7 @@ def main() -> None:
     by_lab: dict[str, list[dict[str, float]]] = {}
     for lab in a.labs:
         for seed in a.seeds:
-            rows = fold_rows(a.generic, *session(a.out, lab, seed))
+            rows = fold_rows(resolve(a.generic), *session(a.out, lab, seed))
             by_lab.setdefault(lab, []).extend(rows)
             show = {k: " ".join(f"{r[k]:.3f}" for r in rows)
                     for k in ("generic", NOTHING_MOVES, NEAREST_PRESS)}

@@ -21,13 +21,13 @@ from pathlib import Path
 import click
 
 from pipeline.demo_plan import (
-    GENERIC,
     NETWORKS,
     OUT,
     PAPER,
     PRETRAINING,
     QUICK,
     RECIPE,
+    SHIPPED_MODEL,
     SMOKE,
     Lab,
     Step,
@@ -65,12 +65,14 @@ from train.training.train_params import DEVICES, TrainParams
               help="Train this network with the rest of the recipe [default: the recipe's]: "
                    "the tip's offsets in the heads or in the first layer, or the paper's "
                    "(docs/results.md compares them; docs/model.md, Latency).")
-@click.option("--pretraining", type=OneOf(PRETRAINING), default=GENERIC,
+@click.option("--pretraining", type=OneOf(PRETRAINING), default=SHIPPED_MODEL,
               show_default=True,
-              help="generic: one model for every lab, pre-trained once on MSM data drawn from "
-                   "the prior (the same whatever the lab or --seed); per-fold: per fold the "
-                   "MSM fitted on its training presses, simulated at the lab's markers and "
-                   "pre-trained on (five times the work).")
+              help="shipped: none here, every fold starts from the generic model shipped with "
+                   "the package (train/generic_model.pt); generic: that model made here, one "
+                   "model for every lab pre-trained once on MSM data drawn from the prior (the "
+                   "same whatever the lab or --seed; the shipped one is the quick settings'); "
+                   "per-fold: per fold the MSM fitted on its training presses, simulated at "
+                   "the lab's markers and pre-trained on (five times the work).")
 @click.option("--markers", type=MARKERS, default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
 @click.option("--marker-pitch", type=MARKER_PITCH_MM,
@@ -95,7 +97,8 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
     --markers, --size and --mocap-rate make it another lab's phantom), session.mcap,
     session_synced.h5, session_states.h5 and splits.json (ingest, sync, extract, split);
-    the pre-training: msm/prior.h5 and prior_splits.json (MSM data drawn from the prior) and
+    the pre-training: none with the shipped generic model (the default), with --pretraining
+    generic msm/prior.h5 and prior_splits.json (MSM data drawn from the prior) and
     runs/generic (the generic model), or with --pretraining per-fold, per fold msm/foldK/
     (params.json: fit-msm on that fold's training presses only; msm.h5 and splits.json: that
     MSM, sized to the footprint, sampled at the markers' layout) and runs/msm_foldK;

@@ -6,10 +6,14 @@ The protocol, as a lab with only its presses would run it:
    lab knobs (:class:`Lab`: markers, footprint, mocap rate) make it another lab's phantom;
 2. the pre-training, one of :data:`PRETRAINING`:
 
-   - ``generic`` (the default): one model for every lab, pre-trained once on MSM data drawn
-     from the prior (``simulate --prior``: springs, footprint, markers and press drawn per
-     phantom, :mod:`sim.msm.msm_prior`), with the same seed whatever the lab or the demo's
-     seed, so every fold of every lab starts from the same model (:func:`generic_steps`);
+   - ``shipped`` (the default): none here; every fold starts from the generic model shipped
+     with the package (:mod:`train.generic_model`), made by ``generic`` below with the quick
+     settings (``scripts/build_generic.py``);
+   - ``generic``: that model made here: one model for every lab, pre-trained once on MSM data
+     drawn from the prior (``simulate --prior``: springs, footprint, markers and press drawn
+     per phantom, :mod:`sim.msm.msm_prior`), with the same seed whatever the lab or the
+     demo's seed, so every fold of every lab starts from the same model
+     (:func:`generic_steps`);
    - ``per-fold``: per fold, ``fit-msm --splits --fold`` (the MSM's constants fitted to this
      phantom on that fold's training presses only), ``simulate --params --layout`` (that MSM
      sized to the lab's footprint, sampled at its markers) and a pre-training on it;
@@ -23,7 +27,7 @@ as soon as the steps of its batch that write its inputs are done. Per fold, that
 (:data:`FOLDS`) holds every fold's fit, MSM, pre-training and fine-tuning, then the scarcity
 runs' folds have theirs; with the generic model it holds everything but eval: the session's
 stages and the runs from scratch go on while the prior's data are simulated and the generic
-model pre-trains.
+model pre-trains (with the shipped one, nothing waits for it).
 
 Settings: ``quick`` (minutes on 2 CPU cores), the paper's (the full MSM set, 250 epochs,
 batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
@@ -37,6 +41,7 @@ from pathlib import Path
 from sim.msm import paper
 from sim.twin.synth_params import SynthParams
 from train import paper as cgnn_paper
+from train.generic_model import SHIPPED
 from train.model.config import Offsets
 from train.training.recipes import OURS
 
@@ -72,6 +77,8 @@ class Settings:
     prior_locations: int = 1          # ... places pressed on each
     prior_directions: int = 1         # ... directions at each place
     generic_epochs: int = 1           # the generic model's pre-training
+    generic_lr: float = 5e-4          # ... its step size: at the fine-tuning's 2e-3 the prior's
+    #                                   variety silences the second and third graph layers
 
 
 # The recipe the measurements support (docs/model.md, "Training that learns";
@@ -89,21 +96,24 @@ NETWORKS = {
     "paper": (*RECIPE, "--offsets", Offsets.NONE.value),
 }
 # quick: the generic model pre-trained on 24 phantoms of the prior x 4 places x 2 directions
-# (3,072 states) for 20 epochs; per fold (--pretraining per-fold) a small MSM set (16 places x
-# 3 directions) seen for 80 epochs, and the fit on 3 training presses (what each costs and
-# buys: docs/results.md, "One pre-training for every lab")
+# (3,072 states) for 120 epochs at 5e-4 (the shipped model's recipe); per fold (--pretraining
+# per-fold) a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on 3
+# training presses (what each costs and buys: docs/results.md, "One pre-training for every
+# lab")
 QUICK = Settings(msm_locations=16, msm_directions=3, pretrain_epochs=80, finetune_epochs=80,
                  lr=2e-3, fit_sequences=3, prior_phantoms=24, prior_locations=4,
-                 prior_directions=2, generic_epochs=20)
+                 prior_directions=2, generic_epochs=120)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
                  pretrain_epochs=cgnn_paper.EPOCHS, finetune_epochs=cgnn_paper.EPOCHS,
                  lr=cgnn_paper.LR, scarcity_folds=5,
                  scarcity_groups=12, fit_sequences=10, prior_phantoms=100, prior_locations=10,
-                 prior_directions=paper.DIRECTIONS, generic_epochs=cgnn_paper.EPOCHS)
+                 prior_directions=paper.DIRECTIONS, generic_epochs=cgnn_paper.EPOCHS,
+                 generic_lr=cgnn_paper.LR)
 # Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
                  lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2,
-                 prior_phantoms=2, prior_locations=3, prior_directions=1, generic_epochs=1)
+                 prior_phantoms=2, prior_locations=3, prior_directions=1, generic_epochs=1,
+                 generic_lr=1e-3)
 
 
 @dataclass(frozen=True)
@@ -171,14 +181,16 @@ def pretrain_dir(out: Path, fold: int) -> Path:
     return out / "runs" / f"msm_fold{fold}"
 
 
-GENERIC, PER_FOLD = "generic", "per-fold"
-PRETRAINING = (GENERIC, PER_FOLD)     # how the demo pre-trains: once for every lab, or per fold
+SHIPPED_MODEL, GENERIC, PER_FOLD = "shipped", "generic", "per-fold"
+# how the demo pre-trains: not at all (the package's generic model), once for every lab, or per
+# fold
+PRETRAINING = (SHIPPED_MODEL, GENERIC, PER_FOLD)
 GENERIC_SEED = 0                      # the generic model's seed, whatever the lab's
 
 
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab(),
-               pretraining: str = GENERIC) -> list[Step]:
+               pretraining: str = SHIPPED_MODEL) -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping).
     ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``);
     ``pretraining``: one of :data:`PRETRAINING`."""
@@ -188,8 +200,11 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
-    if pretraining == GENERIC:
-        pre = generic_steps(out, s, train)
+    if pretraining == SHIPPED_MODEL:
+        inits = [SHIPPED] * s.folds
+        steps = [replace(step, parallel=True, batch=FOLDS) for step in session]
+    elif pretraining == GENERIC:
+        pre = generic_steps(out, s, device, recipe)
         inits = [pre[-1].outputs[0]] * s.folds
         steps = pre + [replace(step, parallel=True, batch=FOLDS) for step in session]
     else:
@@ -209,11 +224,12 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                           (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
                           stage="train (fine-tuning)"))
     scarcity = [_scarcity_step(out, fold, s, device) for fold in range(s.scarcity_folds)]
-    if pretraining == GENERIC:                        # the study goes on beside the last runs
+    if pretraining != PER_FOLD:                       # the study goes on beside the last runs
         steps += [replace(step, batch=FOLDS) for step in scarcity]
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
     finetuned = [run for _, _, run in runs]
-    pres = list(dict.fromkeys(init.parent for init in inits))   # the pre-trained run(s)
+    pres = [] if pretraining == SHIPPED_MODEL else \
+        list(dict.fromkeys(init.parent for init in inits))      # the pre-trained run(s)
     truth = ("--truth", str(out / "session" / "truth.h5")) if lab.inclusions else ()
     steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), *truth, "--out",
                        str(out / "metrics.json")),
@@ -221,11 +237,13 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     return steps + (scarcity if pretraining == PER_FOLD else [])
 
 
-def generic_steps(out: Path, s: Settings, train: tuple[str, ...]) -> list[Step]:
+def generic_steps(out: Path, s: Settings, device: str = "auto",
+                  recipe: tuple[str, ...] = RECIPE) -> list[Step]:
     """The generic model: the prior's MSM data (``msm/prior.h5``), one fold of it, and the
-    pre-training (``runs/generic``), all with :data:`GENERIC_SEED`; the last step's output is
-    the model every fold fine-tunes from."""
+    pre-training (``runs/generic``, at the settings' ``generic_lr``), all with
+    :data:`GENERIC_SEED`; the last step's output is the model every fold fine-tunes from."""
     sd = ("--seed", str(GENERIC_SEED))
+    train = ("--device", device, "--lr", str(s.generic_lr), "--batch", str(s.batch), *recipe)
     prior, splits, run = out / "msm" / "prior.h5", out / "msm" / "prior_splits.json", \
         out / "runs" / "generic"
     return [

@@ -49,7 +49,7 @@ SETTINGS: dict[str, tuple[type | Named, ...]] = {
     "replay": (ReplayParams,),
     "inspect": (),
     "demo": ({"out": (demo_plan.OUT, None), "seed": (SynthParams.seed, None),
-              "device": (TrainParams.device, None), "pretraining": (demo_plan.GENERIC, None),
+              "device": (TrainParams.device, None), "pretraining": (demo_plan.SHIPPED_MODEL, None),
               "jobs": (None, WORKERS), "markers": (LAB.markers, None),
               "marker_pitch": (LAB.marker_pitch_mm, SynthParams.BOUNDS["marker_pitch_mm"]),
               "size": (LAB.size_mm, None),

@@ -18,14 +18,16 @@ from data_schema.states import validate_states
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, SMOKE, Lab, demo_steps
+from pipeline.demo_plan import GENERIC, NETWORKS, QUICK, RECIPE, SMOKE, Lab, demo_steps
+from train.generic_model import SHIPPED
 
 
 def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
-    """The generic pre-training: one model, pre-trained once on the prior's MSM data, is where
-    every fold's TL run starts."""
+    """The generic pre-training made here: one model, pre-trained once on the prior's MSM
+    data, is where every fold's TL run starts."""
     out = tmp_path / "demo"
-    res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
+    generic = ["-q", "demo", "--smoke", "--pretraining", GENERIC, "--out", str(out)]
+    res = CliRunner().invoke(cli, generic)
     assert res.exit_code == 0, res.output
     assert (out / "session" / "truth.h5").is_file()
     raw = read_raw_mcap(out / "session.mcap")
@@ -57,7 +59,7 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
         if line.strip().startswith("MISSED"):
             assert "sync" not in line, line
     assert "transfer learning, pooled over folds" in res.output
-    steps = demo_steps(out, 0, SMOKE)
+    steps = demo_steps(out, 0, SMOKE, pretraining=GENERIC)
     times = json.loads((out / "demo_times.json").read_text())     # every step timed, once
     assert sorted(tuple(s["args"]) for s in times["steps"]) == sorted(s.args for s in steps)
     assert not any(s["skipped"] for s in times["steps"])
@@ -66,13 +68,13 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     tunes = [s for s in times["steps"] if s["stage"] == "train (fine-tuning)"]
     assert len(tunes) == 2 * SMOKE.folds and all(s["seconds"] > 0 for s in tunes)
     assert times["host_speed_s"] is None and times["host_speed"].startswith("absent")
-    again = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])
+    again = CliRunner().invoke(cli, generic)
     assert again.exit_code == 0, again.output
     assert again.output.count("(unchanged since its last run: skipped)") == len(steps)
     times = json.loads((out / "demo_times.json").read_text())
     assert all(s["skipped"] and s["seconds"] == 0 for s in times["steps"])
     (out / "msm" / "prior_splits.json").unlink()   # the prior's split gone: what reads it, and
-    third = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--out", str(out)])   # on
+    third = CliRunner().invoke(cli, generic)   # on
     assert third.exit_code == 0, third.output
     lines = third.output.splitlines()
     rerun = [line for line, after in zip(lines, lines[1:] + [""], strict=True)
@@ -129,8 +131,8 @@ def test_the_per_fold_pretraining_fits_each_fold_on_another_labs_phantom(tmp_pat
 def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, network):
     """``--network`` adds its flags after the recipe's to every training run (pre-training
     and both fine-tunings); every other step is the same."""
-    ours = demo_steps(tmp_path, 0, SMOKE)
-    other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network])
+    ours = demo_steps(tmp_path, 0, SMOKE, pretraining=GENERIC)
+    other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network], pretraining=GENERIC)
     trains = [(a.args, b.args) for a, b in zip(ours, other, strict=True) if a.args[0] == "train"]
     assert len(trains) == 1 + 2 * SMOKE.folds              # pre-training and two fine-tunings
     extra = NETWORKS[network][len(RECIPE):]
@@ -146,7 +148,7 @@ def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
     commands whatever the lab's markers, footprint or rate and the demo's seed; a fine-tuning
     starts from it."""
     def generic(seed: int, lab: Lab) -> list[tuple[str, ...]]:
-        return [s.args for s in demo_steps(tmp_path, seed, QUICK, lab=lab)
+        return [s.args for s in demo_steps(tmp_path, seed, QUICK, lab=lab, pretraining=GENERIC)
                 if s.stage in ("simulate --prior", "train (pre-training)")
                 or s.args[:2] == ("split", str(tmp_path / "msm" / "prior.h5"))]
 
@@ -154,8 +156,24 @@ def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
     assert len(mine) == 3
     assert generic(2, Lab(markers="6x6", marker_pitch_mm=12, mocap_rate_hz=300)) == mine
     assert generic(1, Lab(markers="scattered:20", size_mm="150x80")) == mine
-    tl = [s for s in demo_steps(tmp_path, 1, QUICK) if "exp_tl_fold3" in str(s.outputs[0])]
+    tl = [s for s in demo_steps(tmp_path, 1, QUICK, pretraining=GENERIC)
+          if "exp_tl_fold3" in str(s.outputs[0])]
     assert tl[0].inputs[-1] == tmp_path / "runs" / "generic" / "best.pt"
+
+
+def test_by_default_every_fold_fine_tunes_from_the_shipped_model(tmp_path):
+    """The default pre-training is none: no prior's data, no pre-training step; every TL
+    run starts from the package's generic model, and eval scores the fine-tuned runs only
+    (the shipped model's own test set is the prior's, not here)."""
+    steps = demo_steps(tmp_path, 0, QUICK)
+    assert not any(s.stage in ("simulate --prior", "train (pre-training)") for s in steps)
+    tl = [s for s in steps if s.args[0] == "train" and "--init" in s.args]
+    assert len(tl) == QUICK.folds
+    assert all(s.args[s.args.index("--init") + 1] == str(SHIPPED) for s in tl)
+    ev = [s for s in steps if s.args[0] == "eval" and "--scarcity" not in s.args][0]
+    assert not any(str(SHIPPED.parent) == a for a in ev.args)
+    assert {Path(a).name for a in ev.args[1:-2]} == {
+        f"exp_{v}_fold{k}" for v in ("tl", "notl") for k in range(QUICK.folds)}
 
 
 def test_a_lab_with_a_lump_and_a_layer_is_evaluated_over_the_lump(tmp_path):
