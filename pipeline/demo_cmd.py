@@ -20,6 +20,7 @@ from pathlib import Path
 
 import click
 
+from core.errors import BadInput
 from pipeline.demo_plan import (
     NETWORKS,
     OUT,
@@ -27,6 +28,7 @@ from pipeline.demo_plan import (
     PRETRAINING,
     QUICK,
     RECIPE,
+    RECIPE_NETWORK,
     SHIPPED_MODEL,
     SMOKE,
     Lab,
@@ -112,6 +114,10 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     from pipeline.demo_targets import summary
 
     settings = SMOKE if smoke else QUICK if quick else PAPER
+    if pretraining == SHIPPED_MODEL and network not in (None, RECIPE_NETWORK):
+        raise BadInput("--network", f"{network}: the shipped generic model is the recipe's "
+                       "network; make one of this network with --pretraining generic (or "
+                       "per-fold)")
     jobs = jobs or (1 if _on_gpu(device) else _cores())
     threads = max(1, _cores() // jobs)
     host = _host_figure(not smoke if host_speed is None else host_speed)

@@ -95,6 +95,7 @@ NETWORKS = {
     "tip-offsets": (*RECIPE, "--offsets", Offsets.GRAPH.value),
     "paper": (*RECIPE, "--offsets", Offsets.NONE.value),
 }
+RECIPE_NETWORK = "head-offsets"   # the recipe's own, and so the shipped generic model's
 # quick: the generic model pre-trained on 24 phantoms of the prior x 4 places x 2 directions
 # (3,072 states) for 120 epochs at 5e-4 (the shipped model's recipe); per fold (--pretraining
 # per-fold) a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on 3

@@ -10,7 +10,7 @@ import numpy as np
 from core.text import count
 from live.protocol.address import parse_address
 from live.session.live_params import LiveParams
-from pipeline.options import Parsed, ranged
+from pipeline.options import Checkpoint, Parsed, ranged
 
 D = LiveParams              # the option defaults are its fields', the bounds its BOUNDS
 
@@ -34,10 +34,12 @@ D = LiveParams              # the option defaults are its fields', the bounds it
 @click.option("--calibration", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=None, help="A synced file (`pipeline sync`) whose tip calibration to "
                                  "use instead of the session's pivot recording.")
-@click.option("--model", type=click.Path(exists=True, path_type=Path), default=None,
+@click.option("--model", type=Checkpoint(folder=True), default=None,
               help="A trained run (`pipeline train`; its folder or a checkpoint) trained on "
-                   "this phantom's markers: its surface for the tip now beside the markers, "
-                   "its L_d and force error, as each press goes on.")
+                   "this phantom's markers, or 'generic' (the generic model shipped with the "
+                   "package: a first session's prediction before any training): its surface "
+                   "for the tip now beside the markers, its L_d and force error, as each "
+                   "press goes on.")
 @click.option("--spawn", is_flag=True, help="Also show the recording in a rerun viewer.")
 @click.option("--serve", is_flag=True, help="Also serve the recording to a web browser.")
 @click.option("--states/--no-states", default=D.states, show_default=True,

@@ -15,6 +15,7 @@ from core.bounds import Bound, one_of
 from core.errors import BadInput
 from core.protocol import FOOTPRINT_SIDE
 from core.recording import default_rrd_path
+from train.generic_model import resolve as resolve_model
 
 
 def rrd_option(f: Callable[..., Any]) -> Callable[..., Any]:
@@ -232,3 +233,19 @@ def _option_name(param: click.Parameter | None) -> str:
     opts = getattr(param, "opts", None) or []
     longest = max(opts, key=len) if opts else (param.name or "value")
     return longest if longest.startswith("-") else longest.upper()
+
+
+class Checkpoint(click.ParamType):
+    """A trained model: an existing checkpoint (or, with ``folder``, a run folder), or
+    ``generic``, the generic model shipped with the package (:mod:`train.generic_model`)."""
+
+    name = "PATH|generic"
+
+    def __init__(self, folder: bool = False) -> None:
+        self.path = click.Path(exists=True, dir_okay=folder, path_type=Path)
+
+    def convert(self, value: object, param: click.Parameter | None,
+                ctx: click.Context | None) -> Path:
+        if isinstance(value, Path):
+            return value
+        return self.path.convert(str(resolve_model(str(value))), param, ctx)

@@ -8,26 +8,14 @@ import click
 from click.core import ParameterSource
 
 from core.errors import BadInput
-from pipeline.options import OneOf, ranged, seed_option
+from pipeline.options import Checkpoint, OneOf, ranged, seed_option
 from train.generic_model import NAME as GENERIC_NAME
-from train.generic_model import resolve
 from train.model.config import CGNNConfig, Offsets
 from train.training.recipes import PAPER, RECIPES, recipe
 from train.training.train_params import DEVICES, Loss, Schedule, TrainOptions, TrainParams
 
 EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 
-
-class InitCheckpoint(click.ParamType):
-    """--init: an existing checkpoint file, or the shipped generic model's name."""
-
-    name = "FILE|generic"
-
-    def convert(self, value: object, param: click.Parameter | None,
-                ctx: click.Context | None) -> Path:
-        if isinstance(value, Path):
-            return value
-        return EXISTING.convert(str(resolve(str(value))), param, ctx)
 T, N = TrainOptions, CGNNConfig     # the option defaults are their fields' (the paper's)
 B = T.BOUNDS | N.BOUNDS            # and the options' bounds theirs
 
@@ -44,7 +32,7 @@ B = T.BOUNDS | N.BOUNDS            # and the options' bounds theirs
 @click.option("--fold", type=ranged(B["fold"]), default=T.fold, show_default=True)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Run folder: best.pt, last.pt, log.csv, provenance.json, train.rrd.")
-@click.option("--init", type=InitCheckpoint(), default=None,
+@click.option("--init", type=Checkpoint(), default=None,
               help="Start from this checkpoint (transfer learning from an MSM run), or "
                    f"'{GENERIC_NAME}': the generic model shipped with the package, pre-trained "
                    "once on MSM data drawn from the prior, with --recipe ours (docs/model.md).")

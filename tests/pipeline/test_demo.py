@@ -199,3 +199,15 @@ def test_a_lump_or_layer_synth_would_refuse_stops_the_demo_before_it_starts(tmp_
     res = CliRunner().invoke(cli, ["demo", "--smoke", "--out", str(out), *args])
     assert res.exit_code == 2 and words in res.output
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("network", ["tip-offsets", "paper"])
+def test_another_network_than_the_shipped_models_is_refused_before_any_step(tmp_path,
+                                                                            network):
+    """The shipped generic model is the recipe's network: fine-tuning another from it would
+    fail in every fold, so the demo says so in one line and writes nothing."""
+    out = tmp_path / "demo"
+    res = CliRunner().invoke(cli, ["-q", "demo", "--smoke", "--network", network, "--out",
+                                   str(out)])
+    assert res.exit_code == 2 and not out.exists()
+    assert "--pretraining generic" in res.output + res.stderr

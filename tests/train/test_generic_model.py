@@ -12,8 +12,10 @@ from click.testing import CliRunner
 from helpers.staged_twin import staged_twin
 
 from data_schema.json_docs import NOTHING_MOVES
+from live.session.model import LiveModel
 from pipeline.cli import cli
 from pipeline.generic_build import build_record
+from pipeline.options import Checkpoint
 from train.data import load_manifest, load_states, role_examples
 from train.evaluation.evaluate import LoadedRun, example_errors, reference_errors
 from train.generic_model import NAME, SHIPPED, resolve, slim, to_bytes, weights_sha256
@@ -64,8 +66,13 @@ def test_slimming_writes_the_same_bytes_twice_and_reads_back(shipped, tmp_path):
     assert back["meta"]["data"]["file"] == Path(shipped["meta"]["data"]["file"]).name
 
 
-def test_init_names_the_shipped_model():
+def test_init_and_live_name_the_shipped_model():
+    """``--init generic`` and ``live --model generic`` resolve to the shipped file; live takes
+    it on any phantom's markers (it was trained on none in particular)."""
     assert resolve(NAME) == SHIPPED and resolve("runs/x/best.pt") == Path("runs/x/best.pt")
+    assert Checkpoint(folder=True).convert(NAME, None, None) == SHIPPED
+    live = LiveModel(SHIPPED, [f"m{i}" for i in range(20)])
+    assert live.predictor.point_names is None
 
 
 def test_with_no_lab_data_it_beats_nothing_moves(shipped, lab):
