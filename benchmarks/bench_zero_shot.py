@@ -56,18 +56,13 @@ def fold_rows(generic: Path, states: Path, splits: Path) -> list[dict[str, float
     """Per fold: the generic model's and the references' mean L_d (mm) on its test examples,
     and their count."""
     from data_schema.json_docs import FORCE_LINEAR
-    from train.data import load_manifest, load_states, role_examples
-    from train.evaluation.evaluate import LoadedRun, example_errors, reference_errors
-    from train.training.checkpoint import load_checkpoint, model_from
+    from train.evaluation.evaluate import example_errors, on_lab, reference_errors
+    from train.training.checkpoint import load_checkpoint
 
-    model, norm = model_from(load_checkpoint(generic), "cpu")
-    doc = load_manifest(splits, states)
-    data = load_states(states)
+    state = load_checkpoint(generic, "cpu")
     rows = []
     for fold in range(FOLDS):
-        run = LoadedRun(model, norm, data, role_examples(doc, fold, "test"),
-                        {"options": {"fold": fold}}, splits,
-                        role_examples(doc, fold, "train", states))
+        run = on_lab(state, states, splits, fold)
         errs, _ = example_errors(run)
         refs = reference_errors(run)
         rows.append({"n": len(errs.ld_mean), "generic": errs.ld_mean.mean() * 1e3,

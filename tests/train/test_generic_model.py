@@ -16,10 +16,9 @@ from live.session.model import LiveModel
 from pipeline.cli import cli
 from pipeline.generic_build import build_record
 from pipeline.options import Checkpoint
-from train.data import load_manifest, load_states, role_examples
-from train.evaluation.evaluate import LoadedRun, example_errors, reference_errors
+from train.evaluation.evaluate import example_errors, on_lab, reference_errors
 from train.generic_model import NAME, SHIPPED, resolve, slim, to_bytes, weights_sha256
-from train.training.checkpoint import load_checkpoint, model_from
+from train.training.checkpoint import load_checkpoint
 
 
 @pytest.fixture(scope="module")
@@ -78,13 +77,8 @@ def test_init_and_live_name_the_shipped_model():
 def test_with_no_lab_data_it_beats_nothing_moves(shipped, lab):
     """Zero-shot on a twin lab it never saw: its mean L_d on each fold's test presses is
     below "nothing moves" on the same examples (the lab's own measured states as truth)."""
-    model, norm = model_from(shipped)
-    states, splits = lab / "states.h5", lab / "splits.json"
-    doc, data = load_manifest(splits, states), load_states(states)
     for fold in range(2):
-        run = LoadedRun(model, norm, data, role_examples(doc, fold, "test"),
-                        {"options": {"fold": fold}}, splits,
-                        role_examples(doc, fold, "train", states))
+        run = on_lab(shipped, lab / "states.h5", lab / "splits.json", fold)
         errs, _ = example_errors(run)
         still = reference_errors(run)[NOTHING_MOVES]
         assert errs.ld_mean.mean() < still.ld_mean.mean(), fold

@@ -85,6 +85,18 @@ def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
                      else None)
 
 
+def on_lab(state: dict, data: Path, splits: Path, fold: int,
+           device: str = "cpu") -> LoadedRun:
+    """A model trained elsewhere (``state``: a checkpoint, as the generic model) on a lab's
+    fold: its test examples as they are (zero-shot: the model's own normaliser), and the
+    fold's training examples for the references that fit on them."""
+    doc = load_manifest(splits, data)
+    model, norm = model_from(state, device)
+    return LoadedRun(model, norm, load_states(data).to(device),
+                     role_examples(doc, fold, "test"), {"options": {"fold": fold}}, splits,
+                     role_examples(doc, fold, "train", data))
+
+
 @torch.no_grad()
 def example_errors(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
                    predictor: Callable[[Batch], Prediction] | None = None, batch: int = 64
