@@ -6,7 +6,8 @@ longer"), so the trade of minutes against pooled L_d can be re-measured.
         tl:240 tl:160:cosine scratch:160] [--init GENERIC.pt] [--jobs 2] [--out DIR]
 
 A setting is ``tl`` (from the fold's ``runs/msm_foldK/best.pt``) or ``scratch`` (random
-weights), the epochs, and optionally the schedule and ``preN``: pre-train the fold's MSM run
+weights), the epochs, and optionally the schedule, the step size (``lr1e-3``), the batch
+(``bs64``) and ``preN``: pre-train the fold's MSM run
 again for N epochs (``preN-cosine``: with that schedule; its own options otherwise; beside the
 fine-tuning run, its minutes counted in the setting's) and fine-tune from that
 (``tl:80:pre40``); everything else is the demo's own TL run's options
@@ -65,12 +66,14 @@ def parse(setting: str) -> tuple[str, dict, dict | None]:
     epochs, rest = (parts[0] if parts else ""), parts[1:]
     pre = [r[3:] for r in rest if r.startswith("pre")]
     lr = [float(r[2:]) for r in rest if r.startswith("lr")]
-    schedule = [r for r in rest if not r.startswith(("pre", "lr"))]
+    batch = [int(r[2:]) for r in rest if r.startswith("bs")]
+    schedule = [r for r in rest if not r.startswith(("pre", "lr", "bs"))]
     if start not in ("tl", "scratch") or len(pre) > 1 or len(schedule) > 1 \
             or (pre and start == "scratch"):
-        raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:lrRATE]"
+        raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:lrRATE][:bsBATCH]"
                          "[:preN[-SCHEDULE]] (preN only with tl)")
-    tune = {**changes(epochs, *schedule), **({"lr": lr[0]} if lr else {})}
+    tune = {**changes(epochs, *schedule), **({"lr": lr[0]} if lr else {}),
+            **({"batch": batch[0]} if batch else {})}
     return start, tune, changes(*pre[0].split("-", 1)) if pre else None
 
 

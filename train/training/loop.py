@@ -28,7 +28,7 @@ import copy
 import math
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -176,7 +176,10 @@ def initial_model(states: StateTensors, train: torch.Tensor, opts: TrainOptions,
                   config: CGNNConfig, init: Path | None, init_state: dict | None
                   ) -> tuple[CGNN, Normaliser]:
     """The seeded network and the normaliser of the training examples; with ``init_state``
-    (transfer learning) its weights and phantom frame's statistics, the envelope this run's."""
+    (transfer learning) its weights. The normaliser stays this run's own, so a model
+    pre-trained on many footprints reads the lab's points centred and scaled as the lab's
+    (measured better than the pre-trained model's statistics, most where the lab's footprint
+    is far from the prior's mean: docs/results.md, "The lab's own normaliser")."""
     torch.manual_seed(opts.seed)
     model = CGNN(config)
     norm = fit_normaliser(states, train, opts.seed)
@@ -186,7 +189,7 @@ def initial_model(states: StateTensors, train: torch.Tensor, opts: TrainOptions,
         raise BadInput(init, "its network (widths, k, conditioning or offsets) differs from "
                              "this run's: transfer learning needs the same network")
     model.load_state_dict(init_state["model"])
-    return model, replace(Normaliser.from_dict(init_state["norm"]), envelope=norm.envelope)
+    return model, norm
 
 
 def resume(run: Run, last: Path, device: torch.device) -> None:
