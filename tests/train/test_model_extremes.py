@@ -325,8 +325,11 @@ def test_a_run_keeps_the_envelope_of_every_training_example(dent_run: Path,
                                                             tmp_path: Path) -> None:
     """The dent data press in 1 mm steps from the surface to 5 mm (single steps 1 mm, multi
     steps up to 5 mm), 0.5 N a step: the shortest press is 1 mm, the lowest tip 5 mm down.
-    Fine-tuned (``--init``) on dent data of 3 steps, the envelope is that data's."""
-    env = Normaliser.from_dict(load_checkpoint(dent_run / "best.pt")["norm"]).envelope
+    Fine-tuned (``--init``) on dent data of 3 steps, the envelope is that data's, and so is
+    the whole normaliser: the one a run from scratch on the same data fits, not the
+    pre-trained model's."""
+    env_run = Normaliser.from_dict(load_checkpoint(dent_run / "best.pt")["norm"])
+    env = env_run.envelope
     assert env.press_min == pytest.approx(1e-3, rel=1e-5)
     assert env.tip_lowest == pytest.approx(-5e-3, rel=1e-5)
     assert env.press_max == pytest.approx(5e-3, rel=1e-5)
@@ -340,7 +343,10 @@ def test_a_run_keeps_the_envelope_of_every_training_example(dent_run: Path,
     cfg = CGNNConfig(**load_checkpoint(dent_run / "best.pt")["config"])
     run_train(TrainInputs(data, splits, dent_run / "best.pt"), d / "tl",
               TrainParams(TrainOptions(epochs=1, batch=8), cfg, "cpu"))
-    tuned = Normaliser.from_dict(load_checkpoint(d / "tl" / "best.pt")["norm"])
+    run_train(TrainInputs(data, splits), d / "scratch",
+              TrainParams(TrainOptions(epochs=1, batch=8), cfg, "cpu"))
+    tuned, scratch = (Normaliser.from_dict(load_checkpoint(d / r / "best.pt")["norm"])
+                      for r in ("tl", "scratch"))
     assert tuned.envelope.tip_lowest == pytest.approx(-3e-3, rel=1e-5)
-    assert tuned.centre == Normaliser.from_dict(load_checkpoint(dent_run / "best.pt")["norm"]
-                                                ).centre
+    assert tuned.disp_scale != pytest.approx(env_run.disp_scale, rel=1e-3)   # other data
+    assert tuned == scratch
