@@ -33,7 +33,8 @@ B = T.BOUNDS | N.BOUNDS            # and the options' bounds theirs
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Run folder: best.pt, last.pt, log.csv, provenance.json, train.rrd.")
 @click.option("--init", type=Checkpoint(), default=None,
-              help="Start from this checkpoint (transfer learning from an MSM run), or "
+              help="Start from this checkpoint's weights (transfer learning from an MSM run; "
+                   "the normaliser is fitted on this run's data), or "
                    f"'{GENERIC_NAME}': the generic model shipped with the package, pre-trained "
                    "once on MSM data drawn from the prior, with --recipe ours (docs/model.md).")
 @click.option("--no-cond", is_flag=True, help="The noCond ablation: no condition C.")
