@@ -68,7 +68,7 @@ def parse(setting: str) -> tuple[str, dict, dict | None]:
     lr = [float(r[2:]) for r in rest if r.startswith("lr")]
     batch = [int(r[2:]) for r in rest if r.startswith("bs")]
     schedule = [r for r in rest if not r.startswith(("pre", "lr", "bs"))]
-    if start not in ("tl", "scratch") or len(pre) > 1 or len(schedule) > 1 \
+    if start not in ("tl", "scratch") or max(len(pre), len(lr), len(batch), len(schedule)) > 1 \
             or (pre and start == "scratch"):
         raise ValueError(f"setting {setting!r}: tl|scratch:EPOCHS[:SCHEDULE][:lrRATE][:bsBATCH]"
                          "[:preN[-SCHEDULE]] (preN only with tl)")
