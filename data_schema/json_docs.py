@@ -141,7 +141,7 @@ def _check_fold(path: str | Path, fold: Any, where: str) -> None:
         previous = set(subset)
 
 
-METRICS = JsonSchema("phantom.metrics", "1.4", {
+METRICS = JsonSchema("phantom.metrics", "1.5", {
     "schema": str, "schema_version": str, "runs": list, "overall": list, "provenance": dict,
 })
 METRICS_OPTIONAL = {"scarcity": list}
@@ -176,6 +176,8 @@ INTERVALS_OPTIONAL = {"calibration": dict, "tip_point": dict}
 INTERVAL_LEVEL = {"level": float, "points": int, "coverage": _NUMBER,
                   "mean_radius_mm": _NUMBER_OR_NONE, "examples": int, "force_coverage": _NUMBER,
                   "force_half_width_n": _NUMBER_OR_NONE}
+# 1.5: the [low, high] range each share falls in by chance (train/evaluation/coverage_band.py)
+LEVEL_BANDS = {"band": list, "force_band": list}
 INTERVAL_NEAR = {"from_mm": _NUMBER, "to_mm": _NUMBER_OR_NONE, "points": int,
                  "coverage": _NUMBER, "mean_radius_mm": _NUMBER_OR_NONE}
 CALIBRATION = {"presses": int, "examples": int}
@@ -190,8 +192,11 @@ GAIN = {"ld_reference": _TEXT_OR_NONE, "ld_reference_mm": _NUMBER_OR_NONE,
         "force_reference_n": _NUMBER_OR_NONE, "force_gain": _NUMBER_OR_NONE}
 SCARCITY_ROW = {"fold": int, "groups": int, "predictor": str, "ld_mean_mm": _NUMBER_OR_NONE,
                 "ld_max_mm": _NUMBER_OR_NONE, "force_abs_n": _NUMBER}
-# 1.3: a model's row, the shares of test points and examples inside its 90 % intervals
-SCARCITY_OPTIONAL = {"points_90": _NUMBER_OR_NONE, "force_90": _NUMBER_OR_NONE}
+# 1.3: a model's row, the shares of test points and examples inside its 90 % intervals; 1.5:
+# the range each falls in by chance
+SCARCITY_OPTIONAL = {"points_90": _NUMBER_OR_NONE, "force_90": _NUMBER_OR_NONE,
+                     "points_90_low": _NUMBER_OR_NONE, "points_90_high": _NUMBER_OR_NONE,
+                     "force_90_low": _NUMBER_OR_NONE, "force_90_high": _NUMBER_OR_NONE}
 METRIC_KEYS = ("n", "force_mse_n2", "force_abs_n", "force_abs_sd_n", "ld_mean_mm",
                "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")
 LD_KEYS = ("ld_mean_mm", "ld_mean_sd_mm", "ld_max_mm", "ld_max_sd_mm")  # None: moves no point
@@ -268,13 +273,30 @@ def _check_intervals(path: str | Path, doc: dict, where: str) -> None:
     if "tip_point" in doc:
         items.append(("tip_point", INTERVAL_NEAR, f"{where}.tip_point", doc["tip_point"]))
     for kind, keys, here, item in items:
-        _typed_keys(path, item, keys, here)
+        if kind == "levels":
+            _typed_keys(path, item, {**keys, **LEVEL_BANDS}, here, optional=LEVEL_BANDS)
+            _check_bands(path, item, here)
+        else:
+            _typed_keys(path, item, keys, here)
         if kind == "levels" and not 0 < item["level"] < 1:
             raise BadInput(path, f"{here}.level is {item['level']}: not in (0, 1)")
         _check_shares(path, item, ("coverage", "force_coverage"), here)
-        _check_numbers(path, {k: v for k, v in item.items() if v is not None}, here)
+        _check_numbers(path, {k: v for k, v in item.items()
+                              if v is not None and k not in LEVEL_BANDS}, here)
         if item["points"] < 1 or item.get("examples", 1) < 1:
             raise BadInput(path, f"{here} must count at least one point and example")
+
+
+def _check_bands(path: str | Path, item: dict, where: str) -> None:
+    """Each band a level has is a [low, high] pair of shares, low at most high."""
+    for key in LEVEL_BANDS:
+        pair = item.get(key)
+        if pair is None:
+            continue
+        if not (len(pair) == 2 and all(isinstance(v, _NUMBER) and not isinstance(v, bool)
+                                       and 0 <= v <= 1 for v in pair) and pair[0] <= pair[1]):
+            raise BadInput(path, f"{where}.{key} is {pair!r}: not a [low, high] pair of "
+                                 "shares in [0, 1]")
 
 
 def _check_shares(path: str | Path, item: dict, keys: Any, where: str) -> None:

@@ -55,11 +55,13 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     press's displacement; force linear in the tip's motion), on the same test examples, with
     its gain over the best of them. Where a run's best.pt keeps intervals (calibrated on its
     fold's validation presses), also their coverage on the test presses at 80, 90 and 95 %
-    (points inside their radius, the force inside its interval, mean widths), and the
-    recording colours the points by error over their 90 % radius; a run without them is said
-    in one line. The recording also shows each test place on the footprint by its mean L_d;
-    with --lump or --truth, the lump, and metrics.json (phantom.metrics 1.4) and the table
-    carry the rows over the lump and away from it.
+    (points inside their radius, the force inside its interval, mean widths), each beside
+    the range a calibrated table's share falls in by chance (the fold's calibration presses
+    re-drawn among its held-out presses, per run and pooled), and the recording colours
+    the points by error over their 90 % radius; a run without them is said in one line.
+    The recording also shows each test place on the footprint by its mean L_d; with --lump
+    or --truth, the lump, and metrics.json (phantom.metrics 1.5) and the table carry the rows
+    over the lump and away from it.
     """
     from train.evaluation.eval_stage import run_eval
     from train.evaluation.evaluate import not_beating

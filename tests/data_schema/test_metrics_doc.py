@@ -89,6 +89,7 @@ CASES = [
     (("overall", 0, "fold_ids"), [0], "fold_ids must list"),
     (("overall", 0, "folds_not_beating_references"), [3], "only folds of them"),
     (("scarcity", 0, "force_abs_n"), None, "scarcity[0].force_abs_n"),
+    (("scarcity", 0, "force_90_high"), 1.5, "force_90_high is 1.5: not in [0, 1]"),
     (("provenance",), _DROP, "'provenance' missing"),
     (("schema_version",), "2.0", "not compatible"),
     (("schema",), "phantom.folds", "not a phantom.metrics document"),
@@ -140,6 +141,11 @@ INTERVAL_CASES = [
     (("by_distance", 0, "force_coverage"), 0.5, None),        # a key added by hand
     (("calibration", "presses"), "3", "calibration.presses"),
     (("radius_to_ld",), _DROP, "radius_to_ld missing"),
+    (("levels", 0, "band"), [0.85, 0.95], None),                # 1.5: the range by chance
+    (("levels", 0, "band"), [0.95, 0.85], "band is [0.95, 0.85]: not a [low, high] pair"),
+    (("levels", 0, "force_band"), [0.9], "force_band is [0.9]: not a [low, high] pair"),
+    (("levels", 0, "force_band"), [0.8, 1.2], "not a [low, high] pair of shares"),
+    (("levels", 0, "band"), "0.9", "band missing or not of type"),
 ]
 
 

@@ -1,6 +1,7 @@
-"""The demo's interval targets: met by coverage at the levels, missed by coverage off them,
-by huge radii, by radii that do not fall with distance, and by runs without intervals; the
-scarcity study's models with the fewest presses alike."""
+"""The demo's interval targets: met by pooled shares inside the range re-drawn calibrations
+give, missed by a share outside it or without one, by huge radii, by radii that do not fall
+with distance, and by runs without intervals; the scarcity study's models with the fewest
+presses alike, each inside its fold's range."""
 
 from __future__ import annotations
 
@@ -8,45 +9,78 @@ import copy
 
 from pipeline.demo_targets import _intervals, _scarce_intervals
 
+TL = {"pretrained": {"model": "cGNN"}, "train_data": "Exp"}
+SCRATCH = {"pretrained": None, "train_data": "Exp"}
 
-def _run(fold: int, shift: float = 0.0, ratio: float = 2.0, far_mm: float = 0.1) -> dict:
-    levels = [{"level": q, "coverage": q + shift, "force_coverage": q + shift}
-              for q in (0.8, 0.9, 0.95)]
+
+def _levels(shift: float = 0.0, force_shift: float = 0.0, band: float | None = 0.04
+            ) -> list[dict]:
+    """Each reported level's shares (the level plus a shift) with bands of +- ``band``
+    around the level (none where None)."""
+    out = []
+    for q in (0.8, 0.9, 0.95):
+        v = {"level": q, "coverage": q + shift, "force_coverage": q + force_shift}
+        if band is not None:
+            v |= {"band": [q - band, q + band], "force_band": [q - 2 * band, q + 2 * band]}
+        out.append(v)
+    return out
+
+
+def _run(fold: int, ratio: float = 2.0, far_mm: float = 0.1, variant: dict = TL) -> dict:
     near = [{"mean_radius_mm": 0.5}, {"mean_radius_mm": far_mm}]
-    return {"run": f"runs/exp_tl_fold{fold}", "fold": fold,
-            "variant": {"pretrained": {"model": "cGNN"}, "train_data": "Exp"},
-            "intervals": {"levels": levels, "radius_to_ld": ratio, "by_distance": near}}
+    return {"run": f"runs/exp_{'tl' if variant['pretrained'] else 'notl'}_fold{fold}",
+            "fold": fold, "variant": variant,
+            "intervals": {"levels": _levels(shift=-0.1), "radius_to_ld": ratio,
+                          "by_distance": near}}
 
 
-def _ok(runs: list[dict]) -> list[bool]:
-    return [ok for _, ok, _ in _intervals({"runs": runs})]
+def _doc(runs: list[dict], **pooled: float | None) -> dict:
+    """Runs (each fold's shares far off: only the pooled rows are held to the bands) and
+    the pooled rows of TL and scratch."""
+    rows = [{"variant": v, "intervals": {"levels": _levels(**pooled)}} for v in (TL, SCRATCH)]
+    return {"runs": runs, "overall": rows}
 
 
-def test_coverage_at_the_levels_meets_every_target() -> None:
-    assert _ok([_run(0), _run(1, shift=0.02)]) == [True] * 4
+def _ok(doc: dict) -> list[bool]:
+    return [ok for _, ok, _ in _intervals(doc)]
+
+
+def test_pooled_shares_inside_their_bands_meet_every_target() -> None:
+    runs = [_run(0), _run(1), _run(0, variant=SCRATCH)]
+    assert _ok(_doc(runs)) == [True] * 4
+    assert _ok(_doc(runs, shift=0.03, force_shift=-0.07)) == [True] * 4
+    text = _intervals(_doc(runs))[0][2]
+    assert "TL: 80.0% (76-84)" in text and "scratch: 80.0% (76-84)" in text
 
 
 def test_each_way_to_miss_is_named() -> None:
-    assert _ok([_run(0), _run(1, shift=-0.06)])[:2] == [False, False]   # one fold off
-    assert _ok([_run(0, ratio=3.5)])[2] is False                        # covering by size
-    assert _ok([_run(0, far_mm=0.9)])[3] is False                       # far not smaller
+    runs = [_run(0), _run(1)]
+    assert _ok(_doc(runs, shift=-0.05))[:2] == [False, True]          # points outside
+    assert _ok(_doc(runs, force_shift=0.09))[:2] == [True, False]     # force outside
+    assert _ok(_doc(runs, band=None))[:2] == [False, False]           # no band measured
+    assert _ok(_doc([_run(0, ratio=3.5)]))[2] is False                # covering by size
+    assert _ok(_doc([_run(0, far_mm=0.9)]))[3] is False               # far not smaller
     none = copy.deepcopy(_run(0))
     none["intervals"] = None
-    ((name, ok, text),) = _intervals({"runs": [none]})
+    ((name, ok, text),) = _intervals(_doc([none]))
     assert not ok and "absent" in text
 
 
-def _scarce(groups: int, points: float | None, force: float | None, predictor: str = "TL"
-            ) -> dict:
+def _scarce(groups: int, points: float | None, force: float | None, predictor: str = "TL",
+            band: tuple[float, float] | None = (0.85, 0.95)) -> dict:
+    low, high = band or (None, None)
     return {"fold": 0, "groups": groups, "predictor": predictor, "points_90": points,
-            "force_90": force}
+            "force_90": force, "points_90_low": low, "points_90_high": high,
+            "force_90_low": low, "force_90_high": high}
 
 
-def test_the_scarcity_studys_fewest_presses_are_held_to_the_same_shares() -> None:
+def test_the_scarcity_studys_fewest_presses_are_held_to_their_bands() -> None:
     refs = {"fold": 0, "groups": 1, "predictor": "nothing moves"}     # no intervals
-    met = [_scarce(1, 0.91, 0.88), _scarce(1, 0.89, 0.93, "no TL"), _scarce(2, 0.5, 0.5), refs]
+    met = [_scarce(1, 0.91, 0.88), _scarce(1, 0.89, 0.93, "no TL"), _scarce(2, 0.5, 0.5),
+           refs]
     ((name, ok, text),) = _scarce_intervals(met)
-    assert ok and "1 training press " in name and "fold 0 TL: points 91.0%" in text
-    assert not _scarce_intervals([_scarce(1, 0.85, 0.90), refs])[0][1]    # points off
+    assert ok and "1 training press " in name and "fold 0 TL: points 91.0% (85-95)" in text
+    assert not _scarce_intervals([_scarce(1, 0.80, 0.90), refs])[0][1]    # points off
     assert not _scarce_intervals([_scarce(1, 0.90, 0.97), refs])[0][1]    # force off
+    assert not _scarce_intervals([_scarce(1, 0.90, 0.90, band=None), refs])[0][1]
     assert _scarce_intervals([_scarce(1, None, None), refs]) == []        # none kept

@@ -72,17 +72,21 @@ def coverage(table: IntervalTable, r: Residuals) -> Coverage:
                     np.bincount(near, radius, minlength=bins))
 
 
-def coverage_doc(c: Coverage, ld_mean_mm: float | None) -> dict:
+def coverage_doc(c: Coverage, ld_mean_mm: float | None,
+                 band: dict[str, list[list[float]]] | None = None) -> dict:
     """The JSON of a coverage: per level the points' and the force's share inside and mean
-    width, by distance at :data:`SHOWN` (the surface's points; the tip's own point, where
-    there is one, as ``tip_point``), and the mean radius at :data:`SHOWN` over the mean L_d
-    (``radius_to_ld``: intervals that cover by being huge show there)."""
+    width (with a ``band``, :func:`train.evaluation.coverage_band.band`, the range each share
+    falls in by chance: ``band`` and ``force_band``), by distance at :data:`SHOWN` (the
+    surface's points; the tip's own point, where there is one, as ``tip_point``), and the mean
+    radius at :data:`SHOWN` over the mean L_d (``radius_to_ld``: intervals that cover by being
+    huge show there)."""
     levels = [{"level": q, "points": int(c.points[k]),
                "coverage": float(c.inside[k] / c.points[k]),
                "mean_radius_mm": _mean(c.radius[k], c.points[k], 1e3),
                "examples": int(c.examples[k]),
                "force_coverage": float(c.force_inside[k] / c.examples[k]),
-               "force_half_width_n": _mean(c.half_width[k], c.examples[k], 1.0)}
+               "force_half_width_n": _mean(c.half_width[k], c.examples[k], 1.0),
+               **({"band": band["points"][k], "force_band": band["force"][k]} if band else {})}
               for k, q in enumerate(REPORTED)]
     edges = (0.0, TIP_MM, *NEAR_MM, None)
     near = [{"from_mm": edges[d], "to_mm": edges[d + 1], "points": int(c.near_points[d]),
@@ -111,7 +115,7 @@ def error_ratios(table: IntervalTable, b: Batch, p: Prediction, level: float = S
                  ) -> np.ndarray:
     """Each point's error over its radius at ``level`` (B, N): at most 1 inside, above 1
     outside (NaN where the point is not valid)."""
-    r = batch_residuals(b, p, 0)
+    r = batch_residuals(b, p)
     dist, depth, height = r.point_features.T
     ratio = np.full(b.mask.shape, np.nan)
     ratio[b.mask.cpu().numpy()] = r.point_error / table.radii(level_index(level), dist, depth,
@@ -131,7 +135,9 @@ def coverage_table(result: dict, name: Callable[[dict, list[dict]], str]) -> str
             *(f"points {q:.0%}" for q in REPORTED), *(f"force {q:.0%}" for q in REPORTED),
             f"radius {SHOWN:.0%} / L_d"]
     lines = ["", "Intervals on the test presses, calibrated on each fold's validation presses "
-                 "(share inside / mean radius or half-width)", "",
+                 "(share inside / mean radius or half-width; in brackets the range a "
+                 "calibrated table's share falls in by chance, its calibration presses "
+                 "re-drawn among the fold's held-out presses)", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
         shown = name(row, result["overall"])
@@ -154,10 +160,10 @@ def _fold_names(runs: list[dict]) -> list[str]:
 
 
 def _coverage_row(name: str, test_set: str, fold: str, doc: dict) -> str:
-    points = [f"{v['coverage']:.1%} / {_width(v['mean_radius_mm'], 'mm')}"
-              for v in doc["levels"]]
-    force = [f"{v['force_coverage']:.1%} / {_width(v['force_half_width_n'], 'N')}"
-             for v in doc["levels"]]
+    points = [f"{v['coverage']:.1%}{_band(v.get('band'))} / "
+              f"{_width(v['mean_radius_mm'], 'mm')}" for v in doc["levels"]]
+    force = [f"{v['force_coverage']:.1%}{_band(v.get('force_band'))} / "
+             f"{_width(v['force_half_width_n'], 'N')}" for v in doc["levels"]]
     ratio = "–" if doc["radius_to_ld"] is None else f"{doc['radius_to_ld']:.2f}"
     return "| " + " | ".join([name, test_set, fold, *points, *force, ratio]) + " |"
 
@@ -183,6 +189,11 @@ def _near_table(rows: list[dict], overall: list[dict],
 
 def _near_cell(b: dict) -> str:
     return f"{b['coverage']:.1%} / {_width(b['mean_radius_mm'], 'mm')}; {b['points']}"
+
+
+def _band(pair: list[float] | None) -> str:
+    """' (83-95 %)' for a share's band, nothing where there is none."""
+    return "" if pair is None else f" ({pair[0] * 100:.0f}-{pair[1] * 100:.0f} %)"
 
 
 def _width(value: float | None, unit: str) -> str:

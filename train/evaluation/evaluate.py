@@ -12,6 +12,7 @@ gain over the best of them: a model that does not beat them has learned nothing 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 import torch
 
 from core.errors import BadInput
+from data_schema.states import example_groups
 from train.data import (
     SETS,
     Batch,
@@ -31,12 +33,13 @@ from train.data import (
     role_examples,
 )
 from train.evaluation.coverage import Coverage, absent, coverage, coverage_doc, coverage_table
+from train.evaluation.coverage_band import band, redrawn_counts
 from train.evaluation.lump import PARTS, Lump, press_xy
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
 from train.model.si_units import Prediction, distances, predict
-from train.training.calibrate import residuals
+from train.training.calibrate import joined, residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
 
@@ -161,6 +164,22 @@ def fold_coverage(run: LoadedRun, run_dir: Path, keep: np.ndarray | None = None,
     return coverage(run.intervals, residuals(run.model, run.norm, run.states, pairs))
 
 
+def fold_redraws(run: LoadedRun) -> np.ndarray | None:
+    """The coverage of a run's fold with its calibration presses re-drawn among its held-out
+    (validation and test) presses (:func:`~train.evaluation.coverage_band.redrawn_counts`);
+    None where the run keeps no intervals or no press would be left to score."""
+    if run.intervals is None:
+        return None
+    doc = json.loads(run.splits.read_text())
+    fold = run.meta["options"]["fold"]
+    groups = example_groups(run.meta["data"]["file"], doc["group_by"])
+    held = [role_examples(doc, fold, "val"), run.test]
+    parts = [residuals(run.model, run.norm, run.states, example_pairs(run.states, ids))
+             for ids in held]
+    press = np.concatenate([groups[s][ids[s]] for ids in held for s in SETS])
+    return redrawn_counts(joined(parts), press, run.intervals.presses, fold)
+
+
 def metrics(e: ExampleErrors) -> dict[str, dict[str, float | None]]:
     """Table 2 metrics for single, multi and both (mm, N, N^2); L_d is None for a predictor
     that moves no point (the linear force reference)."""
@@ -223,10 +242,11 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu", lump: Lump | None =
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
         variant, test_set = recorded_variant(run.meta), source_name(run.meta["data"]["file"])
         cover = fold_coverage(run, run_dir)
+        redrawn = None if cover is None else fold_redraws(run)
         runs.append({"run": str(run_dir), "label": variant.label, "variant": variant.to_dict(),
                      "fold": run.meta["options"]["fold"], "test_set": test_set, "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m),
-                     "intervals": _intervals(cover, m, run.intervals)})
+                     "intervals": _intervals(cover, m, run.intervals, redrawn)})
         parts = None
         if lump is not None:
             over = lump.over(press_xy(run.states, example_pairs(run.states, run.test)))
@@ -236,7 +256,7 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu", lump: Lump | None =
             runs[-1]["lump"] = _lump_row(lump, errs, refs, parts, covers)
             parts = (parts, covers)
         groups.setdefault((variant, test_set), []).append((errs, refs, runs[-1], cover,
-                                                           parts))
+                                                           parts, redrawn))
     return {"runs": runs, "overall": [_pooled(v, test_set, items, lump)
                                       for (v, test_set), items in groups.items()]}
 
@@ -261,13 +281,15 @@ def _lump_row(lump: Lump, errs: ExampleErrors, refs: dict[str, ExampleErrors],
     return doc
 
 
-def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = None
-               ) -> dict | None:
-    """A row's intervals: their coverage (and, for a run, the calibration they stand on);
-    None where they are absent."""
+def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = None,
+               redrawn: np.ndarray | None = None) -> dict | None:
+    """A row's intervals: their coverage, with the band re-drawn calibrations put it in
+    where ``redrawn`` counts are given (and, for a run, the calibration they stand on); None
+    where they are absent."""
     if cover is None:
         return None
-    doc = coverage_doc(cover, m["all"]["ld_mean_mm"])
+    doc = coverage_doc(cover, m["all"]["ld_mean_mm"],
+                       None if redrawn is None else band(redrawn))
     if table is not None:
         doc["calibration"] = {"presses": table.presses, "examples": table.examples}
     return doc
@@ -290,7 +312,7 @@ def _pooled(variant: Variant, test_set: str, items: list[tuple], lump: Lump | No
             "references": ref_m, "gain": gains(pooled["all"], ref_m),
             "folds_not_beating_references": [
                 r["fold"] for _, _, r, *_ in items if not _beats(r["gain"]["ld_gain"])],
-            "intervals": _intervals(cover, pooled)}
+            "intervals": _intervals(cover, pooled, redrawn=_summed([item[5] for item in items]))}
     if lump is not None:
         parts = {k: np.concatenate([item[4][0][k] for item in items]) for k in PARTS}
         covers = {k: _sum_coverage([item[4][1][k] for item in items if item[4][0][k].any()])
@@ -305,6 +327,13 @@ def _sum_coverage(covers: list[Coverage | None]) -> Coverage | None:
     if not covers or None in covers:
         return None
     return sum(covers[1:], covers[0])
+
+
+def _summed(redrawn: list[np.ndarray | None]) -> np.ndarray | None:
+    """Folds' re-drawn counts added draw by draw; None where any is missing."""
+    if not redrawn or any(r is None for r in redrawn):
+        return None
+    return np.sum(redrawn, axis=0)
 
 
 def shown_name(row: dict, rows: list[dict]) -> str:

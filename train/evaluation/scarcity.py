@@ -8,7 +8,8 @@ fitted on the same training groups (:mod:`train.evaluation.references`). Written
 ``scarcity.json``, ``scarcity.csv`` and a three-panel ``scarcity.png`` (mean L_d, max L_d, force
 error over training groups; the references dashed). A model's row also says how many of the
 test points and examples fall inside its 90 % intervals (calibrated on the fold's validation
-presses at the end of its training): whether they hold with the fewest training presses.
+presses at the end of its training), and with one training press the range each share falls in
+by chance (:mod:`train.evaluation.coverage_band`): whether they hold with the fewest presses.
 """
 
 from __future__ import annotations
@@ -22,11 +23,13 @@ import numpy as np
 
 from core.progress import say
 from train.evaluation.coverage import SHOWN
+from train.evaluation.coverage_band import band
 from train.evaluation.evaluate import (
     ExampleErrors,
     LoadedRun,
     example_errors,
     fold_coverage,
+    fold_redraws,
     load_run,
     metrics,
     reference_errors,
@@ -39,7 +42,8 @@ from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
 
 FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n",
-          "points_90", "force_90")
+          "points_90", "force_90", "points_90_low", "points_90_high", "force_90_low",
+          "force_90_high")
 MODELS = {False: "no TL", True: "TL"}
 
 
@@ -64,7 +68,7 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
                       TrainParams(sub, config, device))
             run = load_run(out_dir / tag, device)
             rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0])
-                        | _covered(run, out_dir / tag))
+                        | _covered(run, out_dir / tag, with_band=n == 1))
         rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
     return rows
 
@@ -76,15 +80,19 @@ def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors) -> dict:
             "force_abs_n": m["force_abs_n"]}
 
 
-def _covered(run: LoadedRun, run_dir: Path) -> dict[str, float | None]:
+def _covered(run: LoadedRun, run_dir: Path, with_band: bool) -> dict:
     """The shares of the fold's test points and examples inside the run's intervals at
-    :data:`~train.evaluation.coverage.SHOWN` (None where it keeps none)."""
+    :data:`~train.evaluation.coverage.SHOWN` (None where it keeps none); ``with_band``, also
+    the range each falls in by chance (:mod:`train.evaluation.coverage_band`)."""
     c = fold_coverage(run, run_dir)
-    if c is None:
-        return {"points_90": None, "force_90": None}
+    redrawn = fold_redraws(run) if c is not None and with_band else None
     k = REPORTED.index(SHOWN)
-    return {"points_90": float(c.inside[k] / c.points[k]),
-            "force_90": float(c.force_inside[k] / c.examples[k])}
+    shares = {"points_90": None, "force_90": None} if c is None else {
+        "points_90": float(c.inside[k] / c.points[k]),
+        "force_90": float(c.force_inside[k] / c.examples[k])}
+    b = None if redrawn is None else band(redrawn)
+    return shares | {f"{what}_90_{end}": None if b is None else b[what][k][i]
+                     for what in ("points", "force") for i, end in enumerate(("low", "high"))}
 
 
 def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[float]]:

@@ -74,13 +74,31 @@ def binned_quantiles(scores: np.ndarray, features: np.ndarray,
                     for k, e in enumerate(edges)], 1)
     shape = tuple(len(e) + 1 for e in edges)
     levels = np.asarray(LEVELS)
+    nodes = _node_quantiles(scores, idx, shape, levels)
+    empty = (np.full(len(levels), np.inf), 0)           # a node without scores
     width = np.full((*shape, len(levels)), np.inf)
     count = np.zeros((*shape, len(levels)), np.int64)
     for leaf in np.ndindex(*shape):
         for depth in range(len(shape), -1, -1):          # the leaf, then its parents
-            mine = (idx[:, :depth] == leaf[:depth]).all(1)
-            q = conformal_quantile(scores[mine], levels)
-            todo = (count[leaf] == 0) & ((mine.sum() >= MIN_COUNT) & np.isfinite(q)
-                                         | (depth == 0))
-            width[leaf][todo], count[leaf][todo] = q[todo], mine.sum()
+            q, n = nodes.get(leaf[:depth], empty)
+            todo = (count[leaf] == 0) & ((n >= MIN_COUNT) & np.isfinite(q) | (depth == 0))
+            width[leaf][todo], count[leaf][todo] = q[todo], n
     return edges, width, count
+
+
+def _node_quantiles(scores: np.ndarray, idx: np.ndarray, shape: tuple[int, ...],
+                    levels: np.ndarray) -> dict[tuple, tuple[np.ndarray, int]]:
+    """Each node of the bins' tree that holds scores (a leaf's first ``depth`` bin indices,
+    the root ``()`` included), its quantiles at ``levels`` and its count: each computed once
+    (a table is refitted many times over in :mod:`train.evaluation.coverage_band`)."""
+    out: dict[tuple, tuple[np.ndarray, int]] = {}
+    for depth in range(len(shape) + 1):
+        key = np.ravel_multi_index(idx[:, :depth].T, shape[:depth]) if depth else \
+            np.zeros(len(scores), np.int64)
+        order = np.argsort(key, kind="stable")
+        ids, first, counts = np.unique(key[order], return_index=True, return_counts=True)
+        for k, a, n in zip(ids, first, counts, strict=True):
+            node = np.unravel_index(k, shape[:depth]) if depth else ()
+            out[tuple(int(i) for i in node)] = (
+                conformal_quantile(scores[order[a:a + n]], levels), int(n))
+    return out

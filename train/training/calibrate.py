@@ -12,7 +12,7 @@ train runner stores the table (:class:`train.intervals.table.IntervalTable`) in 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -40,20 +40,31 @@ class Residuals:
     force_error: np.ndarray      # (E,) N, predicted - true
     force_features: np.ndarray   # (E, 2) m: depth, height
 
+    def subset(self, keep: np.ndarray) -> Residuals:
+        """The examples of the mask ``keep`` (E,) with their points, renumbered from 0."""
+        number = np.cumsum(keep) - 1
+        mine = keep[self.point_example]
+        return Residuals(self.point_error[mine], self.point_features[mine],
+                         number[self.point_example[mine]], self.force_error[keep],
+                         self.force_features[keep])
 
-def batch_residuals(b: Any, p: Prediction, first: int) -> Residuals:
-    """The residuals of one predicted batch (examples numbered from ``first``)."""
+
+def batch_residuals(b: Any, p: Prediction) -> Residuals:
+    """The residuals of one predicted batch (its examples numbered from 0)."""
     err = distances(p, b).double().cpu().numpy()
     mask = b.mask.cpu().numpy()
     f = press_features(b.points.double().cpu().numpy(), mask, b.cond.double().cpu().numpy())
     ex = np.broadcast_to(np.arange(len(mask))[:, None], mask.shape)
-    return Residuals(err[mask], f.of_points()[mask], ex[mask] + first,
+    return Residuals(err[mask], f.of_points()[mask], ex[mask],
                      (p.dforce - b.dforce).double().cpu().numpy(), f.of_force())
 
 
 def joined(parts: list[Residuals]) -> Residuals:
-    """Several batches' residuals as one."""
-    return Residuals(*(np.concatenate([getattr(r, f) for r in parts])
+    """Several sets of residuals as one, their examples numbered on in turn."""
+    first = np.cumsum([0] + [len(r.force_error) for r in parts[:-1]])
+    numbered = [replace(r, point_example=r.point_example + k)
+                for r, k in zip(parts, first, strict=True)]
+    return Residuals(*(np.concatenate([getattr(r, f) for r in numbered])
                        for f in Residuals.__dataclass_fields__))
 
 
@@ -61,11 +72,10 @@ def joined(parts: list[Residuals]) -> Residuals:
 def residuals(model: nn.Module, norm: Normaliser, states: StateTensors, pairs: torch.Tensor,
               batch: int = 64) -> Residuals:
     """The residuals of ``model`` on the examples ``pairs`` (E, 2)."""
-    parts, first = [], 0
+    parts = []
     for rows in pairs.split(batch):
         b = make_batch(states, rows)
-        parts.append(batch_residuals(b, predict(model, norm, b), first))
-        first += len(rows)
+        parts.append(batch_residuals(b, predict(model, norm, b)))
     return joined(parts)
 
 

@@ -64,6 +64,22 @@ def test_folds_pool_by_adding() -> None:
     assert doc["levels"][1]["points"] == 16 and doc["levels"][1]["coverage"] == 5 / 8
 
 
+def test_each_share_carries_its_band_into_the_document_and_the_table() -> None:
+    """The range each share falls in by chance sits beside it, level by level; none where
+    none was measured (a run whose presses cannot be re-drawn)."""
+    bands = {"points": [[0.5, 0.7], [0.55, 0.75], [0.6, 0.8]],
+             "force": [[0.3, 0.9], [0.35, 0.95], [0.4, 1.0]]}
+    doc = coverage_doc(coverage(known_table(), _residuals()), 0.275, bands)
+    assert [v["band"] for v in doc["levels"]] == bands["points"]
+    assert [v["force_band"] for v in doc["levels"]] == bands["force"]
+    variant = {"model": "cGNN"}
+    table = coverage_table({"overall": [{"variant": variant, "test_set": "Exp",
+                                         "intervals": doc}], "runs": []}, lambda r, o: "TL")
+    assert "| TL | Exp | all | 62.5% (50-70 %) / " in table and "50.0% (35-95 %) / " in table
+    plain = coverage_doc(coverage(known_table(), _residuals()), 0.275)
+    assert "band" not in plain["levels"][0] and "force_band" not in plain["levels"][0]
+
+
 def test_the_table_names_runs_that_share_a_fold_by_their_folder() -> None:
     """Each lab fold's MSM set is fold 0 of its own manifest: its rows name the run."""
     doc = coverage_doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)

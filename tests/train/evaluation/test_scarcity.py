@@ -46,6 +46,8 @@ def test_each_group_count_has_both_models_and_the_three_references(study) -> Non
     for r in rows:
         if r["predictor"] in ("TL", "no TL"):
             assert 0 <= r["points_90"] <= 1 and 0 <= r["force_90"] <= 1
+            for what in ("points", "force"):      # one press: the range it falls in by chance
+                assert 0 <= r[f"{what}_90_low"] <= r[f"{what}_90_high"] <= 1
 
 
 def test_each_retraining_is_the_run_on_its_subset_with_its_init_or_none(study) -> None:

@@ -14,7 +14,7 @@ from torch import nn
 
 from train.data import load_states
 from train.model.normalise import Normaliser
-from train.training.calibrate import residuals
+from train.training.calibrate import joined, residuals
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
@@ -49,6 +49,25 @@ def test_scores_are_the_errors_against_the_truth(tmp_path: Path) -> None:
     np.testing.assert_allclose(r.point_features[:, 0], np.hypot(planar, out_of_range).ravel(),
                                atol=1e-6)
     np.testing.assert_allclose(r.force_features[:, 0], top[:, 0] - bottom[:, 0], atol=1e-6)
+
+
+def test_residuals_keep_each_examples_points_when_cut_and_joined(tmp_path: Path) -> None:
+    """Batches of 7 number the examples on; a subset and a join renumber them, each
+    example's points and force staying together."""
+    arrays = write_dent_states(tmp_path / "s.h5")
+    states = load_states(tmp_path / "s.h5")
+    pairs = states.pairs["multi"]
+    r = residuals(Still(), Normaliser((0.05, 0.05, 0.0), 0.05, 1e-3, 1.0, 0.1), states, pairs,
+                  batch=7)
+    n = arrays["states/points"].shape[1]
+    np.testing.assert_array_equal(r.point_example, np.repeat(np.arange(len(pairs)), n))
+    keep = np.arange(len(pairs)) % 3 == 0
+    both = joined([r.subset(keep), r.subset(~keep)])
+    order = np.r_[np.flatnonzero(keep), np.flatnonzero(~keep)]
+    np.testing.assert_array_equal(both.point_example, r.point_example)
+    np.testing.assert_array_equal(both.force_error, r.force_error[order])
+    np.testing.assert_array_equal(both.point_error,
+                                  r.point_error.reshape(len(pairs), n)[order].ravel())
 
 
 @pytest.fixture(scope="module")
