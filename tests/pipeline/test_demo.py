@@ -211,3 +211,17 @@ def test_another_network_than_the_shipped_models_is_refused_before_any_step(tmp_
                                    str(out)])
     assert res.exit_code == 2 and not out.exists()
     assert "--pretraining generic" in res.output + res.stderr
+
+
+def test_the_quick_demo_fine_tunes_longer_than_its_scarcity_study_retrains(tmp_path):
+    """Every fold's TL and scratch run trains QUICK.finetune_epochs; the scarcity study's
+    runs are retrained for QUICK.scarcity_epochs (fewer: 16 runs a demo)."""
+    steps = demo_steps(tmp_path, 0, QUICK, pretraining=GENERIC)
+    tunes = [s.args for s in steps if s.stage == "train (fine-tuning)"]
+    assert len(tunes) == 2 * QUICK.folds
+    assert all(a[a.index("--epochs") + 1] == str(QUICK.finetune_epochs) for a in tunes)
+    studies = [s.args for s in steps if "--scarcity" in s.args]
+    assert len(studies) == QUICK.scarcity_folds
+    assert all(a[a.index("--scarcity-epochs") + 1] == str(QUICK.scarcity_epochs)
+               for a in studies)
+    assert QUICK.scarcity_epochs < QUICK.finetune_epochs

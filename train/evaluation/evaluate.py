@@ -33,7 +33,7 @@ from train.data import (
     role_examples,
 )
 from train.evaluation.coverage import Coverage, absent, coverage, coverage_doc, coverage_table
-from train.evaluation.coverage_band import band, redrawn_counts
+from train.evaluation.coverage_band import band, counts_of, redrawn_counts
 from train.evaluation.lump import PARTS, Lump, press_xy
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.intervals.table import IntervalTable
@@ -283,13 +283,13 @@ def _lump_row(lump: Lump, errs: ExampleErrors, refs: dict[str, ExampleErrors],
 
 def _intervals(cover: Coverage | None, m: dict, table: IntervalTable | None = None,
                redrawn: np.ndarray | None = None) -> dict | None:
-    """A row's intervals: their coverage, with the band re-drawn calibrations put it in
-    where ``redrawn`` counts are given (and, for a run, the calibration they stand on); None
-    where they are absent."""
+    """A row's intervals: their coverage, with the band it is judged against where the
+    re-drawn calibrations' ``redrawn`` counts are given (and, for a run, the calibration
+    they stand on); None where they are absent."""
     if cover is None:
         return None
     doc = coverage_doc(cover, m["all"]["ld_mean_mm"],
-                       None if redrawn is None else band(redrawn))
+                       None if redrawn is None else band(counts_of(cover), redrawn))
     if table is not None:
         doc["calibration"] = {"presses": table.presses, "examples": table.examples}
     return doc

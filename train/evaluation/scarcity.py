@@ -23,7 +23,7 @@ import numpy as np
 
 from core.progress import say
 from train.evaluation.coverage import SHOWN
-from train.evaluation.coverage_band import band
+from train.evaluation.coverage_band import band, counts_of
 from train.evaluation.evaluate import (
     ExampleErrors,
     LoadedRun,
@@ -90,7 +90,7 @@ def _covered(run: LoadedRun, run_dir: Path, with_band: bool) -> dict:
     shares = {"points_90": None, "force_90": None} if c is None else {
         "points_90": float(c.inside[k] / c.points[k]),
         "force_90": float(c.force_inside[k] / c.examples[k])}
-    b = None if redrawn is None else band(redrawn)
+    b = None if redrawn is None else band(counts_of(c), redrawn)
     return shares | {f"{what}_90_{end}": None if b is None else b[what][k][i]
                      for what in ("points", "force") for i, end in enumerate(("low", "high"))}
 
