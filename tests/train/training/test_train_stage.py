@@ -231,8 +231,11 @@ def test_scarcity_retrains_on_nested_subsets_with_and_without_transfer(dent, tmp
         assert ("points_90" in r) == model and ("force_90" in r) == model
         if model:
             assert 0 <= r["points_90"] <= 1 and 0 <= r["force_90"] <= 1
+        banded = model and r["groups"] == 1          # the fewest presses: judged by chance's range
+        assert (r.get("points_90_low") is not None) == banded
     header = out.with_suffix(".scarcity.csv").read_text().splitlines()[0]
-    assert header.endswith("points_90,force_90")
+    assert header.endswith("points_90,force_90,points_90_low,points_90_high,force_90_low,"
+                           "force_90_high")
     assert out.with_suffix(".scarcity.png").stat().st_size > 0
 
 
