@@ -75,7 +75,8 @@ def band(observed: np.ndarray, counts: np.ndarray, share: float = SHARE
     worst = np.maximum((mid - shares) / down, (shares - mid) / up).max(1)     # (n,)
     allowed = int(np.floor((1 - share) * len(rows) + 1e-9))   # draws that may lie beyond
     cut = np.sort(worst)[len(rows) - 1 - allowed]
-    pairs = np.clip(np.stack([mid - cut * down, mid + cut * up], 1), 0.0, 1.0)
+    edge = 1e-12                                   # the cut's own row stays inside in floats
+    pairs = np.clip(np.stack([mid - cut * down - edge, mid + cut * up + edge], 1), 0.0, 1.0)
     levels = len(REPORTED)
     return {"points": pairs[:levels].tolist(), "force": pairs[levels:].tolist()}
 
