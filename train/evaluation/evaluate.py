@@ -39,7 +39,7 @@ from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, 
 from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
 from train.model.si_units import Prediction, distances, predict
-from train.training.calibrate import joined, residuals
+from train.training.calibrate import Residuals, joined, residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
 
@@ -164,20 +164,31 @@ def fold_coverage(run: LoadedRun, run_dir: Path, keep: np.ndarray | None = None,
     return coverage(run.intervals, residuals(run.model, run.norm, run.states, pairs))
 
 
-def fold_redraws(run: LoadedRun) -> np.ndarray | None:
-    """The coverage of a run's fold with its calibration presses re-drawn among its held-out
-    (validation and test) presses (:func:`~train.evaluation.coverage_band.redrawn_counts`);
-    None where the run keeps no intervals or no press would be left to score."""
+def coverage_and_band(run: LoadedRun, run_dir: Path
+                      ) -> tuple[Coverage | None, np.ndarray | None]:
+    """:func:`fold_coverage` of all the fold's test examples and :func:`fold_redraws`, the
+    test examples predicted once; (None, None), said in one line, where the run keeps no
+    intervals."""
     if run.intervals is None:
-        return None
+        absent(str(run_dir))
+        return None, None
+    test = residuals(run.model, run.norm, run.states, example_pairs(run.states, run.test))
+    return coverage(run.intervals, test), fold_redraws(run, test)
+
+
+def fold_redraws(run: LoadedRun, test: Residuals) -> np.ndarray | None:
+    """The coverage of a run's fold with its calibration presses re-drawn among its held-out
+    (validation and test) presses (:func:`~train.evaluation.coverage_band.redrawn_counts`),
+    from the residuals of its ``test`` examples and of its validation examples; None where
+    no press would be left to score."""
     doc = json.loads(run.splits.read_text())
     fold = run.meta["options"]["fold"]
     groups = example_groups(run.meta["data"]["file"], doc["group_by"])
-    held = [role_examples(doc, fold, "val"), run.test]
-    parts = [residuals(run.model, run.norm, run.states, example_pairs(run.states, ids))
-             for ids in held]
-    press = np.concatenate([groups[s][ids[s]] for ids in held for s in SETS])
-    return redrawn_counts(joined(parts), press, run.intervals.presses, fold)
+    val = role_examples(doc, fold, "val")
+    held = joined([residuals(run.model, run.norm, run.states, example_pairs(run.states, val)),
+                   test])
+    press = np.concatenate([groups[s][ids[s]] for ids in (val, run.test) for s in SETS])
+    return redrawn_counts(held, press, run.intervals.presses, fold)
 
 
 def metrics(e: ExampleErrors) -> dict[str, dict[str, float | None]]:
@@ -241,8 +252,7 @@ def evaluate_runs(run_dirs: list[Path], device: str = "cpu", lump: Lump | None =
         m = metrics(errs)
         ref_m = {n: metrics(e)["all"] for n, e in refs.items()}
         variant, test_set = recorded_variant(run.meta), source_name(run.meta["data"]["file"])
-        cover = fold_coverage(run, run_dir)
-        redrawn = None if cover is None else fold_redraws(run)
+        cover, redrawn = coverage_and_band(run, run_dir)
         runs.append({"run": str(run_dir), "label": variant.label, "variant": variant.to_dict(),
                      "fold": run.meta["options"]["fold"], "test_set": test_set, "metrics": m,
                      "references": ref_m, "gain": gains(m["all"], ref_m),

@@ -27,9 +27,9 @@ from train.evaluation.coverage_band import band, counts_of
 from train.evaluation.evaluate import (
     ExampleErrors,
     LoadedRun,
+    coverage_and_band,
     example_errors,
     fold_coverage,
-    fold_redraws,
     load_run,
     metrics,
     reference_errors,
@@ -84,8 +84,8 @@ def _covered(run: LoadedRun, run_dir: Path, with_band: bool) -> dict:
     """The shares of the fold's test points and examples inside the run's intervals at
     :data:`~train.evaluation.coverage.SHOWN` (None where it keeps none); ``with_band``, also
     the range each falls in by chance (:mod:`train.evaluation.coverage_band`)."""
-    c = fold_coverage(run, run_dir)
-    redrawn = fold_redraws(run) if c is not None and with_band else None
+    c, redrawn = coverage_and_band(run, run_dir) if with_band \
+        else (fold_coverage(run, run_dir), None)
     k = REPORTED.index(SHOWN)
     shares = {"points_90": None, "force_90": None} if c is None else {
         "points_90": float(c.inside[k] / c.points[k]),
