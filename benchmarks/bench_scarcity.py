@@ -3,7 +3,7 @@ protocol's, on the same presses (docs/results.md, "The scarcity study against th
 protocol"), so the gains at few presses can be re-measured like for like.
 
     python benchmarks/bench_scarcity.py DEMO_OUT [DEMO_OUT ...] [--folds 0 1] \
-        [--groups 1 2 3 4] [--fits protocol own] [--jobs 2] [--out DIR]
+        [--groups 1 2 3 4] [--fits protocol own] [--epochs N] [--jobs 2] [--out DIR]
 
 A quick demo's scarcity study (``DEMO_OUT/scarcity``) retrains folds on their first 1..n
 training presses from scratch and from the generic model. Here the same folds are retrained on
@@ -19,7 +19,9 @@ steps and settings), the fit being either
 Printed per demo and number of presses: the mean L_d over the folds' test examples (the mean of
 the folds' means, as the study's table) of scratch, of TL from the generic model (both the
 demo's own runs) and of TL from each per-fold fit, and each TL's gain over scratch; the
-no-learning references beside them. Each run trains on one thread, ``--jobs`` at a time, into
+no-learning references beside them. ``--epochs`` other than the demo's scarcity epochs trains
+every run at that many, scratch and the generic model's TL again too (like for like). Each run
+trains on one thread, ``--jobs`` at a time, into
 ``OUT/<demo>/...`` (a run already there is scored again, not retrained).
 """
 
@@ -38,6 +40,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 FITS = ("protocol", "own")
+RETRAINED = {"scratch": "no TL", "generic": "TL"}   # the demo's own runs, trained again
 
 
 def pretraining(demo: Path, out: Path, fold: int, fit: str, n: int) -> Path:
@@ -83,9 +86,10 @@ def own_presses(splits: Path, fold: int, n: int) -> dict:
     return doc
 
 
-def fine_tune(job: tuple[Path, Path, int, str, int]) -> float:
-    """One scarcity run from a per-fold pre-trained model: trained unless there; its mean
-    L_d (mm) on the fold's test examples."""
+def fine_tune(job: tuple[Path, Path, int, str, int, int]) -> float:
+    """One scarcity run (``kind``: a per-fold fit's pre-trained model, or one of
+    :data:`RETRAINED`) at ``epochs``: trained unless there; its mean L_d (mm) on the fold's
+    test examples."""
     import torch
 
     torch.set_num_threads(1)
@@ -96,13 +100,15 @@ def fine_tune(job: tuple[Path, Path, int, str, int]) -> float:
     from train.training.train_params import TrainInputs, TrainOptions, TrainParams
     from train.training.train_stage import run_train
 
-    demo, out, fold, fit, n = job
-    init = pretraining(demo, out, fold, fit, n)
-    run = out / demo.name / f"{fit}_f{fold}_n{n:02d}"
+    demo, out, fold, kind, n, epochs = job
     meta = load_checkpoint(demo / "runs" / f"exp_tl_fold{fold}" / "best.pt")["meta"]
+    init = {"scratch": None, "generic": meta["init"] and Path(meta["init"])}[kind] \
+        if kind in RETRAINED else pretraining(demo, out, fold, kind, n)
+    run = out / demo.name / (f"{kind}_f{fold}_n{n:02d}"
+                             + ("" if epochs == QUICK.scarcity_epochs else f"_e{epochs}"))
     if not (run / "best.pt").is_file():
         opts = dataclasses.replace(TrainOptions.from_dict(meta["options"]),
-                                   epochs=QUICK.scarcity_epochs, train_groups=n)
+                                   epochs=epochs, train_groups=n)
         run_train(TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]), init), run,
                   TrainParams(opts, CGNNConfig.from_dict(meta["config"]), "cpu"))
     return metrics(example_errors(load_run(run, "cpu"))[0])["all"]["ld_mean_mm"]
@@ -146,21 +152,27 @@ def main() -> None:
     ap.add_argument("--folds", nargs="+", type=int, default=[0, 1])
     ap.add_argument("--groups", nargs="+", type=int, default=[1, 2, 3, 4])
     ap.add_argument("--fits", nargs="+", choices=FITS, default=list(FITS))
+    ap.add_argument("--epochs", type=int, default=None,
+                    help="every run's epochs (default: the quick demo's scarcity epochs)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_scarcity"))
     a = ap.parse_args()
+    from pipeline.demo_plan import QUICK
+
+    epochs = a.epochs or QUICK.scarcity_epochs
+    kinds = a.fits + ([] if epochs == QUICK.scarcity_epochs else list(RETRAINED))
     shared = [(d, a.out, f, "protocol", 0) for d in a.demos for f in a.folds] \
         if "protocol" in a.fits else []
-    jobs = [(d, a.out, f, fit, n) for d in a.demos for fit in a.fits for n in a.groups
-            for f in a.folds]
+    jobs = [(d, a.out, f, kind, n, epochs) for d in a.demos for kind in kinds
+            for n in a.groups for f in a.folds]
     with ProcessPoolExecutor(a.jobs) as pool:
         if shared:                  # one pre-training per fold, before the runs that share it
             list(pool.map(pretraining, *zip(*shared, strict=True)))
         done = dict(zip(jobs, pool.map(fine_tune, jobs), strict=True))
     for d in a.demos:
         table(d, a.folds, a.groups, a.fits,
-              {(f"TL, per-fold fit: {fit}", f, n): ld
-               for (demo, _, f, fit, n), ld in done.items() if demo == d})
+              {(RETRAINED.get(kind, f"TL, per-fold fit: {kind}"), f, n): ld
+               for (demo, _, f, kind, n, _), ld in done.items() if demo == d})
 
 
 if __name__ == "__main__":
