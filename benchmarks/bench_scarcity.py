@@ -95,23 +95,17 @@ def fine_tune(job: tuple[Path, Path, int, str, int, int]) -> float:
     torch.set_num_threads(1)
     from pipeline.demo_plan import QUICK
     from train.evaluation.evaluate import example_errors, load_run, metrics
-    from train.model.config import CGNNConfig
-    from train.training.checkpoint import load_checkpoint
-    from train.training.train_params import TrainInputs, TrainOptions, TrainParams
-    from train.training.train_stage import run_train
+    from train.evaluation.scarcity import Retraining
 
     demo, out, fold, kind, n, epochs = job
-    meta = load_checkpoint(demo / "runs" / f"exp_tl_fold{fold}" / "best.pt")["meta"]
-    init = {"scratch": None, "generic": meta["init"] and Path(meta["init"])}[kind] \
-        if kind in RETRAINED else pretraining(demo, out, fold, kind, n)
+    again = Retraining.of(demo / "runs" / f"exp_tl_fold{fold}", epochs)
+    init = {"scratch": None, "generic": again.init}[kind] if kind in RETRAINED \
+        else pretraining(demo, out, fold, kind, n)
     run = out / demo.name / (f"{kind}_f{fold}_n{n:02d}"
                              + ("" if epochs == QUICK.scarcity_epochs else f"_e{epochs}"))
-    if not (run / "best.pt").is_file():
-        opts = dataclasses.replace(TrainOptions.from_dict(meta["options"]),
-                                   epochs=epochs, train_groups=n)
-        run_train(TrainInputs(Path(meta["data"]["file"]), Path(meta["splits"]), init), run,
-                  TrainParams(opts, CGNNConfig.from_dict(meta["config"]), "cpu"))
-    return metrics(example_errors(load_run(run, "cpu"))[0])["all"]["ld_mean_mm"]
+    loaded = load_run(run, "cpu") if (run / "best.pt").is_file() \
+        else again.train(n, init, run, "cpu")
+    return metrics(example_errors(loaded)[0])["all"]["ld_mean_mm"]
 
 
 def study_rows(demo: Path, folds: list[int]) -> dict[tuple[str, int, int], float]:

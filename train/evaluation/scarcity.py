@@ -47,26 +47,52 @@ FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n
 MODELS = {False: "no TL", True: "TL"}
 
 
+@dataclasses.dataclass(frozen=True)
+class Retraining:
+    """A run's fold, to be trained again on its first n training groups with the run's own
+    options and network (``epochs`` of them, unless given otherwise)."""
+
+    opts: TrainOptions
+    config: CGNNConfig
+    data: Path
+    splits: Path
+    init: Path | None            # the run's --init (its pre-trained model), or None
+
+    @classmethod
+    def of(cls, run_dir: Path, epochs: int | None = None) -> Retraining:
+        """The retraining of ``run_dir`` (its best.pt's record), at ``epochs`` if given."""
+        meta = load_checkpoint(run_dir / "best.pt")["meta"]
+        opts = TrainOptions.from_dict(meta["options"])
+        return cls(dataclasses.replace(opts, epochs=epochs or opts.epochs),
+                   CGNNConfig.from_dict(meta["config"]), Path(meta["data"]["file"]),
+                   Path(meta["splits"]), Path(meta["init"]) if meta["init"] else None)
+
+    def groups(self) -> int:
+        """How many nested subsets of training groups the fold's manifest gives."""
+        return len(json.loads(self.splits.read_text())["folds"][self.opts.fold]["train_subsets"])
+
+    def train(self, n: int, init: Path | None, out: Path, device: str = "cpu") -> LoadedRun:
+        """The fold trained on its first ``n`` groups from ``init`` (None: from scratch) into
+        ``out``; the run loaded."""
+        run_train(TrainInputs(self.data, self.splits, init), out,
+                  TrainParams(dataclasses.replace(self.opts, train_groups=n), self.config,
+                              device))
+        return load_run(out, device)
+
+
 def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str = "cpu",
                   most: int | None = None) -> list[dict]:
     """Retrain ``run_dir``'s fold on 1..n groups (at most ``most``), with and without its
     --init, and score each beside the references fitted on the same groups."""
-    meta = load_checkpoint(run_dir / "best.pt")["meta"]
-    opts = TrainOptions.from_dict(meta["options"])
-    opts = dataclasses.replace(opts, epochs=epochs or opts.epochs)
-    config = CGNNConfig.from_dict(meta["config"])
-    data, splits = Path(meta["data"]["file"]), Path(meta["splits"])
-    n_groups = len(json.loads(splits.read_text())["folds"][opts.fold]["train_subsets"])
-    inits = [None] + ([Path(meta["init"])] if meta["init"] else [])
+    again = Retraining.of(run_dir, epochs)
+    opts, n_groups = again.opts, again.groups()
+    inits = [None] + ([again.init] if again.init else [])
     rows = []
     for n in range(1, min(n_groups, most or n_groups) + 1):
         for init in inits:
             tag = f"fold{opts.fold}_n{n:02d}_{'tl' if init else 'notl'}"
             say(f"scarcity: {tag}")
-            sub = dataclasses.replace(opts, train_groups=n)
-            run_train(TrainInputs(data, splits, init), out_dir / tag,
-                      TrainParams(sub, config, device))
-            run = load_run(out_dir / tag, device)
+            run = again.train(n, init, out_dir / tag, device)
             rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0])
                         | _covered(run, out_dir / tag, with_band=n == 1))
         rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
