@@ -69,6 +69,10 @@ MSM_PARAMS = JsonSchema("phantom.msm_params", "1.3", {
     "schema": str, "schema_version": str, "k_between": float, "k_fixed": float,
     "mean_distance_m": float, "msm_params": dict, "provenance": dict,
 })
+SOLID_PARAMS = JsonSchema("phantom.solid_params", "1.0", {
+    "schema": str, "schema_version": str, "material": dict, "sd": dict, "block": dict,
+    "mesh": dict, "labels": dict, "distances_mm": dict, "provenance": dict,
+})
 FOLDS = JsonSchema("phantom.folds", "2.0", {
     "schema": str, "schema_version": str, "data": dict, "group_by": str, "ratio": list,
     "seed": int, "groups": int, "note": str, "folds": list, "provenance": dict,

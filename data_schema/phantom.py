@@ -10,6 +10,8 @@ session.toml's optional ``[phantom]`` table (lengths in mm, as labs measure them
                                  # (default: a square grid when their number is a square)
     anchor = "P00"               # with anchor_mm: this marker rests at anchor_mm in the
     anchor_mm = [10.0, 12.5]     # footprint; default: the markers' centroid at its centre
+    interior = "interior.nii.gz" # what lies inside, with [phantom.labels]: read by fit-solid
+                                 # (data_schema/interior.py), not by the frame
 
 Ingest keeps it in the MCAP's ``session`` record and sync in the synced file's ``phantom``
 attribute, both as JSON in metres (:meth:`PhantomLayout.as_json`); extract builds the frame
@@ -28,6 +30,7 @@ from core.protocol import FOOTPRINT_M
 
 MIN_MARKERS = 4          # a rest plane and an in-plane axis need at least this many markers
 KEYS = ("size_mm", "x_axis", "rows", "anchor", "anchor_mm")
+INTERIOR_KEYS = ("interior", "labels")   # what lies inside: data_schema/interior.py
 
 
 @dataclass(frozen=True)
@@ -63,7 +66,7 @@ def read_layout(path: Path, t: dict | None, markers: list[str]) -> PhantomLayout
         raise BadInput(path, f"mocap.phantom_markers names {len(markers)} marker(s): a phantom "
                              f"needs at least {MIN_MARKERS} (a rest plane and an in-plane axis)")
     t = {} if t is None else t
-    unknown = sorted(set(t) - set(KEYS))
+    unknown = sorted(set(t) - set(KEYS) - set(INTERIOR_KEYS))
     if unknown:
         raise BadInput(path, f"[phantom] has unknown key(s) {unknown}; it takes {', '.join(KEYS)}")
     size = _mm_pair(path, t, "size_mm", positive=True)

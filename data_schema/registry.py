@@ -13,6 +13,7 @@ from data_schema.json_docs import (
     METRIC_ROWS,
     METRICS,
     MSM_PARAMS,
+    SOLID_PARAMS,
     validate_folds,
     validate_json_doc,
     validate_metrics,
@@ -47,6 +48,7 @@ def validator_for(name: str) -> Callable[[str | Path], Any] | None:
 JSON_VALIDATORS: dict[str, Callable[[str | Path], Any]] = {
     FOLDS.name: validate_folds, METRICS.name: validate_metrics,
     MSM_PARAMS.name: lambda path: validate_json_doc(path, MSM_PARAMS),
+    SOLID_PARAMS.name: lambda path: validate_json_doc(path, SOLID_PARAMS),
 }
 
 

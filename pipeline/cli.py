@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "split": "pipeline.split_cmd:split",
     "simulate": "pipeline.simulate_cmd:simulate",
     "fit-msm": "pipeline.fit_msm_cmd:fit_msm",
+    "fit-solid": "pipeline.fit_solid_cmd:fit_solid",
     "train": "pipeline.train_cmd:train",
     "eval": "pipeline.eval_cmd:eval_",
     "export": "pipeline.export_cmd:export",
@@ -72,7 +73,8 @@ def cli(quiet: bool) -> None:
     \b
     A lab session: synth (or your lab's files) -> ingest -> sync -> extract -> split
       -> train -> eval -> export.
-    The MSM the network is pre-trained on: simulate, fit-msm.
+    The MSM the network is pre-trained on: simulate, fit-msm; the solid model of the
+      phantom with its interior: fit-solid.
     Sessions as they happen: live (from QTM's real-time stream), replay (a recorded
       session served as QTM's real-time server).
     Any file: inspect. Every stage on a synthetic session: demo.

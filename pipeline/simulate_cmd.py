@@ -64,6 +64,12 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
                    "(phantom.msm_params JSON): overrides --k-between, --k-fixed and "
                    "--contact-radius, and brings the grid they were fitted on (a --size, "
                    "--spacing-mm or --layout footprint asking for another is refused).")
+@click.option("--solid", type=IN, default=None,
+              help="Simulate the solid model of `pipeline fit-solid --out` (phantom.solid_params "
+                   "JSON: the block with its interior, fitted to a lab) instead of the MSM, at "
+                   "the --layout states' markers (needed): the same protocol (--locations, "
+                   "--directions, --steps, --fmax, --max-angle, --seed, --shard), its places "
+                   "the top face's mesh nodes inside the markers' bounding box; source=\"solid\".")
 @click.option("--contact-radius", type=ranged(B["contact_radius"]),
               default=D.contact_radius, show_default=True,
               help="The load is shared by every mass within this radius (m) of the loaded "
@@ -100,12 +106,13 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
              steps: int, fmax: float,
              size: tuple[float, float] | None, spacing_mm: float | None,
              k_between: float, k_fixed: float, thickness: float, params_file: Path | None,
-             contact_radius: float, layout: Path | None, max_angle_deg: float, tol: float,
+             solid: Path | None, contact_radius: float, layout: Path | None,
+             max_angle_deg: float, tol: float,
              workers: int, shard: str | None, merge: bool, rrd_sequences: int,
              shards: tuple[Path, ...], seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Generate the paper's mass-spring-model (MSM) training states.
 
-    Reads nothing (or --params, --layout; with --merge, the SHARDS files). Writes --out, a
+    Reads nothing (or --params, --layout, --solid; with --merge, the SHARDS files). Writes --out, a
     phantom.states HDF5 file laid out like extracted lab states: states/points (S, N, 3) in m
     (every mass, or with --layout the lab's markers then the tip), tip (the loaded mass),
     force, force_vector, step, sequence (= location * directions + direction), location;
@@ -151,13 +158,14 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
     else:
         if shards:
             raise BadInput(None, "SHARDS are only read with --merge")
-        run = run_simulate(SimulateInputs(layout=layout, params_file=params_file), out, params,
-                           rrd_path)
+        run = run_simulate(SimulateInputs(layout=layout, params_file=params_file, solid=solid),
+                           out, params, rrd_path)
         sim = run.sim
         unit = "phantoms of the prior" if prior else "locations"
         what = (f"simulated {len(sim.locations)} {unit} with {run.workers} workers "
                 f"(max residual {sim.max_residual:.2g} N solved, "
-                f"{sim.stored_residual:.2g} N as stored in float32)")
+                f"{sim.stored_residual:.2g} N as stored in float32)") if sim is not None else \
+            "simulated the solid (linear elasticity, one factorisation)"
     a = run.arrays
     click.echo(f"{out}: {len(a['states/step'])} states, {len(a['single/start'])} single-step and "
                f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s; "

@@ -25,10 +25,11 @@ from sim.msm.msm_protocol import CONTACT_RADIUS, MAX_ANGLE, Protocol, parse_shar
 @dataclass(frozen=True)
 class SimulateInputs:
     """The files a simulation may read: a lab's states file whose markers it samples
-    (``layout``) and fit-msm's constants (``params_file``)."""
+    (``layout``), fit-msm's constants (``params_file``) or fit-solid's solid (``solid``)."""
 
     layout: Path | None = None
     params_file: Path | None = None
+    solid: Path | None = None          # fit-solid's JSON: simulate the solid, not the MSM
 
 
 @dataclass(frozen=True)

@@ -18,18 +18,18 @@ import numpy as np
 
 from core.atomic import atomic_outputs
 from core.errors import BadInput
-from core.protocol import STEP_N, THICKNESS_M
+from core.protocol import FOOTPRINT_M, STEP_N, THICKNESS_M
 from core.provenance import make_provenance
 from data_schema.json_docs import MSM_PARAMS, validate_json_doc
 from data_schema.states import STATES
 from sim.msm.msm import MSM, MSMParams
-from sim.msm.msm_dataset import simulate_data, write_states
+from sim.msm.msm_dataset import simulate_data, states_arrays, write_states
 from sim.msm.msm_depth import beyond
 from sim.msm.msm_grid import GRID_KEYS, check_same_grid, grid_params, recorded_grid
 from sim.msm.msm_layout import LabLayout, check_inside, read_layout
 from sim.msm.msm_prior import PRIOR
 from sim.msm.msm_prior_data import PriorRun, simulate_prior
-from sim.msm.msm_protocol import Protocol, parse_shard
+from sim.msm.msm_protocol import Plan, Protocol, draw_plan, parse_shard, shard_locations
 from sim.msm.msm_regions import check_map
 from sim.msm.msm_shards import merge_shards
 from sim.msm.msm_simulate import Simulated
@@ -37,6 +37,10 @@ from sim.msm.msm_static import DEFAULT_TOL
 from sim.msm.simulate_params import SimulateInputs, SimulateParams
 from sim.msm.simulate_view import write_simulate_recording
 from sim.msm.workers import default_workers
+from sim.solid.solid_dataset import candidate_places, simulate_places
+from sim.solid.solid_file import read_solid
+from sim.solid.solid_fit import SolidMaterial
+from sim.solid.solid_model import Attachments
 
 
 @dataclass
@@ -73,6 +77,8 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     inputs, p = inputs or SimulateInputs(), params or SimulateParams()
     if p.prior:
         return _run_prior(inputs, out, p, rrd)
+    if inputs.solid is not None:
+        return _run_solid(inputs, out, p, rrd)
     layout, params_file = inputs.layout, inputs.params_file
     protocol, msm = p.protocol(), MSMParams(k_between=p.k_between, k_fixed=p.k_fixed)
     lab = read_layout(layout) if layout is not None else None
@@ -144,6 +150,58 @@ def _run_prior(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
         _record(tmp_rrd, data.arrays, None, STEP_N, p.rrd_sequences,
                 (PRIOR.side[1], PRIOR.side[1]))
     return Simulation(data.arrays, seconds, data.sim, p.thickness, workers)
+
+
+def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
+               rrd: str | Path | None) -> Simulation:
+    """``simulate --solid S --layout STATES``: the fitted solid (:mod:`sim.solid`) pressed
+    by the protocol at the lab's markers, or one shard of it."""
+    if inputs.layout is None or inputs.params_file is not None:
+        raise BadInput(inputs.solid, "--solid simulates at a lab's markers: give --layout "
+                                     "STATES, and no --params (the MSM's)")
+    solid, lab = read_solid(inputs.solid), read_layout(inputs.layout)
+    protocol = p.protocol()
+    candidates = candidate_places(solid.model, lab.points)
+    plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
+    locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
+    marker_rest = lab.points.copy()
+    at = Attachments(surface=np.c_[marker_rest[:, :2],
+                                   np.full(len(marker_rest), solid.model.block.top_z)],
+                     height=marker_rest[:, 2] - solid.model.block.top_z)
+    used = replace(p, locations=protocol.locations, directions=protocol.directions,
+                   thickness=solid.model.block.thickness)
+    with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
+        started = time.perf_counter()
+        states = simulate_places(solid.model, solid.factorise(), solid.material,
+                                 candidates[plan.nodes[locs]], plan.directions[locs],
+                                 np.arange(protocol.steps + 1) * protocol.step_n, at)
+        sim = Simulated(locs, states.points, states.tips, 0.0, 0.0, 0, 1, 0.0)
+        arrays = {k: v for k, v in states_arrays(plan, sim).items() if k != "states/mass"}
+        prov = make_provenance("simulate", asdict(used),
+                               inputs=[Path(inputs.solid), Path(inputs.layout)],
+                               schema=STATES.name, schema_version=STATES.version)
+        write_states(tmp_out, arrays, {"provenance": json.dumps(prov),
+                                       **solid_attrs(plan, solid.material, lab, p.shard)})
+        seconds = time.perf_counter() - started
+        _record(tmp_rrd, arrays, None, protocol.step_n, p.rrd_sequences, lab.footprint)
+    return Simulation(arrays, seconds, None, solid.model.block.thickness, 1)
+
+
+def solid_attrs(plan: Plan, material: SolidMaterial, lab: LabLayout, shard: str | None
+                ) -> dict:
+    """Root attributes of a solid states file but the provenance (shards add ``shard``)."""
+    attrs = {"source": "solid", "units_length": "m", "units_force": "N",
+             "step_n": plan.protocol.step_n, "frame": "phantom",
+             "session_names": json.dumps(["solid"]),
+             "footprint_m": np.array(lab.footprint or FOOTPRINT_M, dtype=np.float64),
+             "protocol": json.dumps(asdict(plan.protocol)),
+             "solid": json.dumps(asdict(material)),
+             "layout": json.dumps(np.asarray(lab.points, dtype=float).round(9).tolist())}
+    if lab.point_names is not None:
+        attrs["point_names"] = json.dumps(lab.point_names)
+    if shard is not None:
+        attrs["shard"] = shard
+    return attrs
 
 
 def run_merge(inputs: Sequence[str | Path], out: str | Path,

@@ -234,8 +234,14 @@ def _toml_value(v: object) -> str:
 
 def write_session_toml(path: str | Path, top: Mapping[str, object],
                        tables: Mapping[str, Mapping[str, object]]) -> None:
-    """``session.toml``: top-level keys, then one ``[table]`` per entry of ``tables``."""
+    """``session.toml``: top-level keys, then one ``[table]`` per entry of ``tables`` (a
+    value that is itself a mapping: a sub-table ``[table.key]`` after it)."""
     lines = [f"{k} = {_toml_value(v)}" for k, v in top.items()]
     for name, table in tables.items():
-        lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+        plain = {k: v for k, v in table.items() if not isinstance(v, Mapping)}
+        lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in plain.items()]
+        for key, sub in table.items():
+            if isinstance(sub, Mapping):
+                lines += ["", f"[{name}.{key}]"] + [f"{k} = {_toml_value(v)}"
+                                                    for k, v in sub.items()]
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_schema.interior import write_interior
 from data_schema.session import SCHEMA as SESSION_SCHEMA
 from data_schema.session import VERSION as SESSION_VERSION
 from ingest.ati_cal import write_ati_cal
@@ -50,13 +51,14 @@ from sim.twin.lab_writers import (
     write_session_toml,
 )
 from sim.twin.twin import Twin
+from sim.twin.twin_interior import interior_volume
 from sim.twin.twin_plate import PLATE, plate_corners_mm, plate_samples
 from sim.twin.twin_scene import TRIGGER_EVENT
 
 FILES = {"trial": "indentation.tsv", "bodies": "indentation_6D.tsv", "pivot": "pivot.tsv",
          "csv": "force.csv", "mat": "force.mat", "c3d": "indentation.c3d",
          "analog": "indentation_a.tsv", "plate": "indentation_f_1.tsv",
-         "session": "session.toml", "truth": "truth.h5"}
+         "session": "session.toml", "truth": "truth.h5", "interior": "interior.nii.gz"}
 GAUGES = tuple(f"G{k}" for k in range(6))
 TRIGGER_COLUMN = "trigger"
 # the analog route: channel names, the label a C3D export cuts them to (repeated), the board
@@ -70,8 +72,9 @@ RECORDING = "recording.rrd"         # the recording's default name in the folder
 
 def file_keys(twin: Twin) -> tuple[str, ...]:
     """The :data:`FILES` keys a session writes (the force route's own), truth last."""
+    regions = twin.phantom.spec.inclusions or twin.phantom.spec.layer is not None
     return ("trial", "bodies", "pivot", *ROUTE_FILES[twin.params.force_via], "session",
-            "truth")
+            *(("interior",) if regions else ()), "truth")
 
 
 def calibration_name(twin: Twin) -> str | None:
@@ -99,6 +102,9 @@ def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
         _write_logger(twin, out["csv"], out["mat"], mat_date)
     if out.get("cal") is not None:
         write_ati_cal(out["cal"], twin.sensor.calibration)
+    if out.get("interior") is not None:
+        labels, affine, _ = interior_volume(twin.phantom.spec)
+        write_interior(out["interior"], labels, affine)
     write_session_toml(out["session"], *_session_tables(twin, calibration_name(twin)))
 
 
@@ -205,4 +211,6 @@ def phantom_table(twin: Twin) -> dict[str, object]:
                                 round(float(rest[1]) * 1e3 + size[1] / 2, 6)])
     elif layout.rows != layout.cols:
         table["rows"] = layout.rows
+    if spec.inclusions or spec.layer is not None:
+        table.update(interior=FILES["interior"], labels=interior_volume(spec)[2])
     return table

@@ -21,6 +21,7 @@ from pipeline.cli import COMMANDS, cli
 from pipeline.demo_pool import WORKERS
 from sim.msm.fit_msm_params import FitMsmParams
 from sim.msm.simulate_params import SimulateParams
+from sim.solid.fit_solid_params import FitSolidParams
 from sim.twin.synth_params import SynthParams
 from split.split_params import SplitParams
 from sync.sync_params import SyncParams
@@ -42,6 +43,7 @@ SETTINGS: dict[str, tuple[type | Named, ...]] = {
     "split": (SplitParams,),
     "simulate": (SimulateParams,),
     "fit-msm": (FitMsmParams,),
+    "fit-solid": (FitSolidParams,),
     "train": (TrainOptions, CGNNConfig, TrainParams, {"recipe_name": (PAPER.name, None)}),
     "eval": (EvalParams,),
     "export": (ExportParams,),

@@ -76,11 +76,11 @@ class Variant:
                f"{self.train_data}"
 
 
-SOURCE_NAMES = {"msm": "MSM", "lab": "Exp"}
+SOURCE_NAMES = {"msm": "MSM", "solid": "Solid", "lab": "Exp"}
 
 
 def source_name(data: str | Path) -> str:
-    """'MSM' or 'Exp' for a states file; '?' where it cannot be read (a moved file)."""
+    """'MSM', 'Solid' or 'Exp' for a states file; '?' where it cannot be read (a moved file)."""
     try:
         with h5py.File(data, "r") as f:
             source = attr_text(f.attrs["source"])

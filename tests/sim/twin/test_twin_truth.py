@@ -17,6 +17,7 @@ from click.testing import CliRunner
 
 from core.recording import rrd_entities
 from data_schema.hdf5 import validate_h5
+from data_schema.interior import session_interior
 from data_schema.truth import REGIONS, TRUTH, read_regions
 from pipeline.cli import cli
 
@@ -148,3 +149,26 @@ def test_bad_regions_and_places_are_refused_in_one_line(tmp_path: Path, args, op
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {option}"), res.stderr
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_the_interior_volume_shows_the_lump_and_the_layer_where_truth_has_them(sessions
+                                                                                ) -> None:
+    """synth writes interior.nii.gz (1 mm voxels, the states' phantom frame: the silicone's
+    top 1.5 mm below the markers' centres) and names it in session.toml with the true ratios;
+    the uniform session writes none."""
+    lump, plain = sessions
+    spec = session_interior(lump)
+    assert spec is not None and spec.path.name == "interior.nii.gz"
+    assert spec.ratios == {0: 1.0, 1: 2.0, 2: 3.0}             # the skin, then the lump
+    top = -0.0015
+    at = np.array([[0.020, 0.020, top - 0.010],                 # the lump's centre
+                   [0.020, 0.020, top - 0.0235],                # just below it
+                   [0.080, 0.080, top - 0.001],                 # in the skin, far from it
+                   [0.080, 0.080, top - 0.005],                 # under the skin
+                   [0.080, 0.080, top + 0.001]])                # above the silicone
+    assert spec.interior.label_at(at).tolist() == [2, 0, 1, 0, 0]
+    ball, cap = 4 / 3 * np.pi * 12.0**3, np.pi * 2.0**2 * (3 * 12.0 - 2.0) / 3
+    voxels = int((spec.interior.labels == 2).sum())            # 1 mm^3 each
+    assert voxels == pytest.approx(ball - cap, rel=0.03)       # the ball cut by the surface
+    assert session_interior(plain) is None
+    assert not (plain / "interior.nii.gz").exists()

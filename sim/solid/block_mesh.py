@@ -1,0 +1,73 @@
+"""The block as hexahedra: a tensor grid over the footprint and the thickness, finer at the top.
+
+The phantom frame of a states file puts the rest surface at z = 0 through the markers' centres;
+the silicone's top lies a marker's radius below it (``top_z``, where the tip rests). The mesh
+spans ``[0, L] x [0, W] x [top_z - thickness, top_z]``: its bottom face is the table's, held
+fixed. Across, the nodes are ``spacing`` apart (the lattice a 5 mm grid of places lands on);
+through the thickness the layers are thinner at the top, where the presses strain it most.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from skfem import MeshHex
+
+from core.bounds import Bound
+
+SPACING = Bound(0.5e-3, 20e-3, unit="m")       # the nodes' spacing across the footprint
+LAYERS = Bound(2, 40, whole=True)                        # element layers through the thickness
+TOP_SHARE = 0.25                               # the top quarter of the block holds half the
+#                                                layers (graded towards the surface)
+
+
+@dataclass(frozen=True)
+class BlockGeometry:
+    """The block in the phantom frame (m): footprint (L, W), thickness, and its top's height."""
+
+    footprint: tuple[float, float]
+    thickness: float
+    top_z: float = 0.0
+
+    def inside(self, points: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+        """(P,) bool: which (P, 3) points lie in the block."""
+        L, W = self.footprint
+        x, y, z = points[:, 0], points[:, 1], points[:, 2]
+        return ((x >= -tol) & (x <= L + tol) & (y >= -tol) & (y <= W + tol)
+                & (z >= self.top_z - self.thickness - tol) & (z <= self.top_z + tol))
+
+
+def axis_nodes(length: float, spacing: float) -> np.ndarray:
+    """Node coordinates on [0, length], as close to ``spacing`` apart as fits evenly."""
+    n = max(1, int(round(length / spacing)))
+    return np.linspace(0.0, length, n + 1)
+
+
+def depth_nodes(thickness: float, layers: int) -> np.ndarray:
+    """Node depths below the top, 0 .. thickness: half the ``layers`` in the top quarter."""
+    top = max(1, layers // 2)
+    upper = np.linspace(0.0, TOP_SHARE * thickness, top + 1)
+    lower = np.linspace(TOP_SHARE * thickness, thickness, layers - top + 1)[1:]
+    return np.concatenate([upper, lower])
+
+
+def block_mesh(block: BlockGeometry, spacing: float, layers: int) -> MeshHex:
+    """The hexahedral mesh of ``block``: ``spacing`` across, ``layers`` through."""
+    xs = axis_nodes(block.footprint[0], spacing)
+    ys = axis_nodes(block.footprint[1], spacing)
+    zs = np.sort(block.top_z - depth_nodes(block.thickness, layers))
+    return MeshHex.init_tensor(xs, ys, zs)
+
+
+def graded_axis(length: float, fine: float, fine_until: float, growth: float) -> np.ndarray:
+    """Nodes on [0, length]: ``fine`` apart up to ``fine_until``, then each gap ``growth``
+    times the one before (a mesh fine where a contact is, coarse far from it)."""
+    nodes, gap = [0.0], fine
+    while nodes[-1] < length - 1e-12:
+        if nodes[-1] >= fine_until - 1e-12:
+            gap *= growth
+        nodes.append(min(length, nodes[-1] + gap))
+    if len(nodes) > 2 and nodes[-1] - nodes[-2] < 0.3 * gap:
+        del nodes[-2]                                  # no sliver at the far face
+    return np.array(nodes)

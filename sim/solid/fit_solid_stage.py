@@ -1,0 +1,129 @@
+"""The fit-solid stage runner: measured states (and the interior) in, the fitted solid out.
+
+Reads the states (with a fold manifest, only that fold's training presses) and the interior the
+session names (``session.toml``'s ``[phantom] interior`` and ``[phantom.labels]``: without one,
+a uniform block), meshes the block (:mod:`sim.solid.block_mesh`), fits its material
+(:mod:`sim.solid.solid_fit`) and writes the ``phantom.solid_params`` JSON and the recording
+(:mod:`sim.solid.fit_solid_view`) atomically, with the provenance. Its settings:
+:mod:`sim.solid.fit_solid_params`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from core.atomic import atomic_outputs
+from core.errors import BadInput
+from core.provenance import make_provenance
+from data_schema.interior import InteriorSpec, check_covers, session_interior
+from data_schema.json_docs import MSM_PARAMS, SOLID_PARAMS, validate_folds, validate_json_doc
+from sim.solid.block_mesh import BlockGeometry
+from sim.solid.fit_solid_params import FitSolidInputs, FitSolidParams
+from sim.solid.fit_solid_view import write_solid_recording
+from sim.solid.label_shares import label_shares
+from sim.solid.measured_presses import read_presses
+from sim.solid.solid_fit import Responses, SolidFit, SolidMaterial, fit_solid
+from sim.solid.solid_model import SolidModel
+
+PATCH_START = 1.2       # the contact radius starts at this many mesh spacings (the nodes
+#                         beside the place share the load)
+
+
+@dataclass
+class SolidOutcome:
+    """The fit, the MSM fit's distance where one was given (mm), and the seconds it took."""
+
+    fit: SolidFit
+    msm_mm: float | None
+    seconds: float
+    labels: dict[int, float | None]
+
+
+def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
+                  params: FitSolidParams | None = None, rrd: str | Path | None = None
+                  ) -> SolidOutcome:
+    """Fit the solid to ``inputs.states`` (with ``inputs.splits``: fold ``params.fold``'s
+    training presses only) with the interior of ``inputs.session``; write ``out`` and ``rrd``
+    when given."""
+    p = params or FitSolidParams()
+    started = time.perf_counter()
+    only = _training(inputs.splits, p.fold) if inputs.splits else None
+    data = read_presses(inputs.states, only)
+    spec = session_interior(inputs.session) if inputs.session is not None else None
+    block = BlockGeometry(data.footprint, p.thickness, data.top_z)
+    if spec is not None:
+        check_covers(spec.interior, spec.path, block.footprint, block.top_z, block.thickness)
+    ratios = spec.ratios if spec is not None else {0: 1.0}
+    model = SolidModel(block, p.spacing, p.layers)
+    shares = label_shares(model.elasticity, None if spec is None else spec.interior,
+                          max(ratios) + 1)
+    responses = Responses(model, shares)
+    fitted_labels = [k for k, r in ratios.items() if r is None]
+    start = SolidMaterial(modulus=p.modulus, stiffening=p.stiffening, poisson=p.poisson,
+                          ratios=tuple(1.0 if ratios.get(k) is None else ratios[k]
+                                       for k in range(max(ratios) + 1)),
+                          contact_radius=p.contact_radius or PATCH_START * p.spacing,
+                          reach=p.reach)
+    fit = fit_solid(data, responses, fitted_labels, start, fit_poisson=p.fit_poisson)
+    seconds = time.perf_counter() - started
+    msm_mm = _msm_distance(inputs.msm)
+    files = [f for f in (inputs.states, inputs.splits, inputs.msm) if f is not None] + \
+        ([spec.path] if spec is not None else [])
+    with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
+        if tmp_out is not None:
+            doc = _document(fit, block, p, ratios, msm_mm, files, spec,
+                            shares @ np.asarray(fit.material.ratios))
+            tmp_out.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+            validate_json_doc(tmp_out, SOLID_PARAMS)
+        if tmp_rrd is not None:
+            solver = model.factorise(shares @ np.asarray(fit.material.ratios), fit.material.poisson)
+            write_solid_recording(tmp_rrd, model, solver, data,
+                                  responses.at(data, fit.material), fit, shares)
+    return SolidOutcome(fit, msm_mm, seconds, ratios)
+
+
+def _training(splits: Path, fold: int) -> np.ndarray:
+    """The sequence ids of a fold's training presses (a manifest grouped by sequence)."""
+    doc = validate_folds(splits)
+    if doc.get("group_by") != "sequence":
+        raise BadInput(splits, "fit-solid --splits needs a manifest grouped by sequence (press)")
+    if not 0 <= fold < len(doc["folds"]):
+        raise BadInput(splits, f"--fold {fold}: it has {len(doc['folds'])} folds")
+    return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
+
+
+def _msm_distance(path: Path | None) -> float | None:
+    """fit-msm's mean distance (mm) from its JSON, to print beside the solid's."""
+    if path is None:
+        return None
+    return float(validate_json_doc(path, MSM_PARAMS)["mean_distance_m"]) * 1e3
+
+
+def _document(fit: SolidFit, block: BlockGeometry, p: FitSolidParams,
+              ratios: dict[int, float | None], msm_mm: float | None, files: list[Path],
+              spec: InteriorSpec | None, element_ratios: np.ndarray) -> dict:
+    """The ``phantom.solid_params`` document: the material with its sd, the block and mesh,
+    the labels (fitted or given), the distances beside the references, provenance."""
+    m = fit.material
+    return {
+        "schema": SOLID_PARAMS.name, "schema_version": SOLID_PARAMS.version,
+        "material": {"modulus_pa": m.modulus, "stiffening_per_m2": m.stiffening,
+                     "poisson": m.poisson, "contact_radius_m": m.contact_radius,
+                     "reach_m": m.reach,
+                     "ratios": list(m.ratios)},
+        "sd": fit.sd,
+        "block": {"footprint_m": list(block.footprint), "thickness_m": block.thickness,
+                  "top_z_m": block.top_z},
+        "mesh": {"spacing_m": p.spacing, "layers": p.layers, "element": "hex1",
+                 "element_ratios": np.round(element_ratios, 6).tolist()},
+        "labels": {"interior": None if spec is None else spec.path.name,
+                   "fitted": [k for k, r in ratios.items() if r is None]},
+        "distances_mm": {"solid": fit.marker_mm, "tip": fit.tip_mm, "still": fit.still_mm,
+                         "msm": msm_mm, "per_marker": fit.per_marker_mm.tolist()},
+        "provenance": make_provenance("fit-solid", asdict(p), inputs=files),
+    }

@@ -1,0 +1,54 @@
+"""The solid's pre-training set: a plan of presses on the lab's markers, as a states file's
+arrays (``phantom.states``, source ``solid``).
+
+The plan is the MSM's (:mod:`sim.msm.msm_protocol`: places drawn among candidates, directions
+within the cone, 15 steps to 7.5 N, multi-step pairs), drawn by the runner; its candidates
+here are the top face's nodes inside the markers' bounding box, where the lab pressed. Each
+place is three back-substitutions on one factorisation (:meth:`SolidModel.respond`), each
+direction and level a weighted sum of them (:func:`sim.solid.solid_model.predict`). The points
+are the lab's markers then the tip, as the lab's states are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.solid.elasticity import Solver
+from sim.solid.solid_fit import SolidMaterial
+from sim.solid.solid_model import Attachments, SolidModel, predict
+
+
+@dataclass(frozen=True)
+class SolidStates:
+    """The states of a block of places, in file order (place, direction, level)."""
+
+    points: np.ndarray      # (L * D * T, P + 1, 3) float32: the markers, then the tip
+    tips: np.ndarray        # (L * D * T, 3) float32
+
+
+def candidate_places(model: SolidModel, markers: np.ndarray) -> np.ndarray:
+    """(C, 3) the top face's nodes inside the markers' bounding box (x, y)."""
+    rest, _ = model.top_face()
+    lo, hi = markers[:, :2].min(axis=0), markers[:, :2].max(axis=0)
+    inside = np.all((rest[:, :2] >= lo - 1e-9) & (rest[:, :2] <= hi + 1e-9), axis=1)
+    return rest[inside]
+
+
+def simulate_places(model: SolidModel, solver: Solver, material: SolidMaterial,
+                    places: np.ndarray, directions: np.ndarray, forces: np.ndarray,
+                    at: Attachments) -> SolidStates:
+    """The states at ``places`` (L, 3) along ``directions`` (L, D, 3) at ``forces`` (T,) N
+    (ascending from 0)."""
+    responses = model.respond(solver, places, material.contact_radius, model.probes(at))
+    points, tips = [], []
+    for resp, dirs in zip(responses, directions, strict=True):
+        for d in dirs:
+            loads = forces[:, None] * d[None]
+            pts, tip = predict(resp, loads, material.modulus, material.stiffening,
+                               material.reach, at)
+            points.append(np.concatenate([pts, tip[:, None]], axis=1))
+            tips.append(tip)
+    return SolidStates(np.concatenate(points).astype(np.float32),
+                       np.concatenate(tips).astype(np.float32))

@@ -1,0 +1,206 @@
+"""The solid phantom pressed at a place: the response of its markers and of the tip.
+
+A press is the tip's load ``F`` (N, a vector) on the silicone around the place it touches: a
+patch of the top face's nodes within ``contact_radius`` of it, weighted as a Hertz pressure
+(``sqrt(1 - r^2 / a^2)``, at least the nearest node). Linear elasticity makes every press at a
+place a sum of three unit responses (one per axis), each one back-substitution on the
+factorised stiffness, computed at unit modulus and scaled by ``1 / E``.
+
+Silicone stiffens as it is pressed deep, most where it is strained most: under the tip. The
+solid keeps the linear field's shape and maps its size there: a linear tip displacement
+``d_lin`` becomes ``d`` with ``d + stiffening * d^3 = d_lin`` (``stiffening`` in 1/m^2; 0 is
+linear elasticity). Away from the tip the strains are small and the field stays linear in the
+force (the load it carries is the same, however the tip's neighbourhood stiffens): a point at
+rest distance ``r`` from the place takes the factor ``1 + w (d / d_lin - 1)`` with
+``w = exp(-(r / reach)^2)``, ``reach`` the stiffening's reach (m).
+
+A marker sits on the surface, its centre a little above it (the lab's rest positions say how
+far): it moves with the surface point under it and turns with the surface's normal, which the
+displacement's gradient across the top gives (central differences of the field).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import Delaunay
+
+from core.bounds import Bound
+from sim.solid.block_mesh import BlockGeometry, block_mesh
+from sim.solid.elasticity import Elasticity, Material, Solver
+
+CONTACT_RADIUS = Bound(0.5e-3, 20e-3, unit="m")
+REACH = Bound(1e-3, 0.5, unit="m")     # the stiffening's reach: from the tip alone to the block
+SLOPE_STEP = 1e-3          # m: the central differences that give the surface's tangents
+
+
+@dataclass(frozen=True)
+class Attachments:
+    """Where points ride on the top face: the surface point under each, its offset above."""
+
+    surface: np.ndarray     # (P, 3) the surface point under each (on the top face)
+    height: np.ndarray      # (P,) m along the normal, above the surface (a marker's centre)
+
+
+@dataclass(frozen=True)
+class PlaceResponse:
+    """The displacements at one place per unit load along x, y and z (at unit modulus)."""
+
+    place: np.ndarray       # (3,) the contact point at rest (the tip's rest)
+    points: np.ndarray      # (3, P, 3) at each attached point's surface point
+    slope_x: np.ndarray     # (3, P, 3) d/dx of the displacement there
+    slope_y: np.ndarray     # (3, P, 3) d/dy
+    tip: np.ndarray         # (3, 3) the patch's load-weighted displacement
+
+
+@dataclass(frozen=True)
+class Probes:
+    """Interpolation matrices at points and beside them along x and y (lo, hi each)."""
+
+    matrices: tuple[sp.csr_matrix, ...]   # at, x lo, x hi, y lo, y hi: (3P, N) each
+    steps: tuple[np.ndarray, np.ndarray]  # (P,) the x and y differences' widths
+    n_points: int
+
+    def field(self, matrix: sp.csr_matrix, u: np.ndarray) -> np.ndarray:
+        """(3 loads, P, 3) the fields ``u`` (N, 3) through ``matrix`` (component-major)."""
+        return (matrix @ u).reshape(3, self.n_points, 3).transpose(2, 1, 0)
+
+
+class SolidModel:
+    """A block on the table, its mesh and elasticity: factorised per material."""
+
+    def __init__(self, block: BlockGeometry, spacing: float, layers: int) -> None:
+        self.block = block
+        self.spacing = spacing
+        self.elasticity = Elasticity(block_mesh(block, spacing, layers))
+        mesh = self.elasticity.mesh
+        top = np.flatnonzero(np.isclose(mesh.p[2], block.top_z))
+        self._top_nodes = top
+        self._top_xy = mesh.p[:2, top].T
+
+    def factorise(self, modulus: np.ndarray, poisson: float) -> Solver:
+        """The stiffness with ``modulus`` per element (Pa, relative: 1 is the block's)."""
+        return self.elasticity.factorise(Material(np.asarray(modulus, float), poisson))
+
+    def patch(self, place: np.ndarray, contact_radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """Top-face nodes under the tip at ``place`` and their load shares (sum 1)."""
+        r = np.linalg.norm(self._top_xy - np.asarray(place)[:2], axis=1)
+        inside = np.flatnonzero(r < contact_radius)
+        if inside.size == 0:
+            inside = np.array([int(np.argmin(r))])
+        share = np.sqrt(np.clip(1.0 - (r[inside] / contact_radius) ** 2, 1e-6, None))
+        return self._top_nodes[inside], share / share.sum()
+
+    def probes(self, at: Attachments) -> Probes:
+        """The interpolation at the attached points' surface points, and beside them (the
+        central differences of the slopes), built once for many presses."""
+        x = np.clip(at.surface, self._lower, self._upper)
+        matrices, steps = [self._probe_matrix(x)], []
+        for axis in range(2):
+            lo, hi = x.copy(), x.copy()
+            lo[:, axis] = np.maximum(x[:, axis] - SLOPE_STEP, self._lower[axis])
+            hi[:, axis] = np.minimum(x[:, axis] + SLOPE_STEP, self._upper[axis])
+            matrices += [self._probe_matrix(lo), self._probe_matrix(hi)]
+            steps.append(hi[:, axis] - lo[:, axis])
+        return Probes(matrices=tuple(matrices), steps=tuple(steps), n_points=len(x))
+
+    def respond(self, solver: Solver, places: np.ndarray, contact_radius: float,
+                probes: Probes) -> list[PlaceResponse]:
+        """Unit responses at each of ``places`` (P, 3): three back-substitutions a place, all
+        in one call."""
+        basis = self.elasticity.basis
+        patches = [self._unit_loads(p, contact_radius) for p in places]
+        u = solver.solve(np.concatenate([loads for loads, _, _ in patches], axis=1))
+        out = []
+        for i, (place, (_, nodes, share)) in enumerate(zip(places, patches, strict=True)):
+            ui = u[:, 3 * i:3 * i + 3]                            # (N, 3): unit x, y, z
+            tip = np.stack([ui[basis.nodal_dofs[:, nodes], k] @ share for k in range(3)])
+            at, xlo, xhi, ylo, yhi = (probes.field(m, ui) for m in probes.matrices)
+            out.append(PlaceResponse(place=np.asarray(place, float), points=at,
+                                     slope_x=(xhi - xlo) / probes.steps[0][None, :, None],
+                                     slope_y=(yhi - ylo) / probes.steps[1][None, :, None],
+                                     tip=tip))
+        return out
+
+    def surface(self, solver: Solver, place: np.ndarray, contact_radius: float
+                ) -> np.ndarray:
+        """(3 loads, top nodes, 3) the top face's unit responses at ``place`` (for a view)."""
+        u = solver.solve(self._unit_loads(place, contact_radius)[0])
+        basis = self.elasticity.basis
+        return np.stack([u[basis.nodal_dofs[:, self._top_nodes], k].T for k in range(3)])
+
+    def top_face(self) -> tuple[np.ndarray, np.ndarray]:
+        """The top face at rest: its nodes (n, 3) and triangles (m, 3)."""
+        rest = self.elasticity.mesh.p[:, self._top_nodes].T
+        return rest, Delaunay(self._top_xy).simplices
+
+    def _unit_loads(self, place: np.ndarray, contact_radius: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N, 3) the patch's unit loads along x, y and z; its nodes and their shares."""
+        basis = self.elasticity.basis
+        nodes, share = self.patch(place, contact_radius)
+        loads = np.zeros((basis.N, 3))
+        for axis in range(3):
+            loads[basis.nodal_dofs[axis, nodes], axis] = share
+        return loads, nodes, share
+
+    def _probe_matrix(self, x: np.ndarray) -> sp.csr_matrix:
+        return self.elasticity.basis.probes(x.T).tocsr()
+
+    @property
+    def _lower(self) -> np.ndarray:
+        return np.array([0.0, 0.0, self.block.top_z - self.block.thickness])
+
+    @property
+    def _upper(self) -> np.ndarray:
+        return np.array([*self.block.footprint, self.block.top_z])
+
+
+def stiffened(d_lin: np.ndarray, stiffening: float) -> np.ndarray:
+    """``d`` with ``d + stiffening * d**3 = d_lin`` (d_lin >= 0): Newton from ``d_lin``, an
+    upper bound on the convex, rising cubic, so it falls monotonically onto the root."""
+    d_lin = np.asarray(d_lin, dtype=np.float64)
+    if stiffening <= 0.0:
+        return d_lin.copy()
+    d = d_lin.copy()
+    for _ in range(60):
+        step = (d + stiffening * d**3 - d_lin) / (1.0 + 3.0 * stiffening * d**2)
+        d -= step
+        if np.all(np.abs(step) <= 1e-12):
+            break
+    return d
+
+
+def tip_scale(tip_lin: np.ndarray, stiffening: float) -> np.ndarray:
+    """(T,) ``d / d_lin`` for the linear tip displacements (T, 3)."""
+    d_lin = np.linalg.norm(tip_lin, axis=1)
+    return np.divide(stiffened(d_lin, stiffening), d_lin, out=np.ones_like(d_lin),
+                     where=d_lin > 0)
+
+
+def point_scale(tip: np.ndarray, place: np.ndarray, points: np.ndarray, reach: float
+                ) -> np.ndarray:
+    """(T, P) the factor on each point's linear displacement, from the tip's (T,) and each
+    point's rest distance from the place."""
+    r = np.linalg.norm(points[:, :2] - place[None, :2], axis=1)
+    w = np.exp(-((r / reach) ** 2))
+    return 1.0 + w[None, :] * (tip[:, None] - 1.0)
+
+
+def predict(resp: PlaceResponse, loads: np.ndarray, modulus: float, stiffening: float,
+            reach: float, at: Attachments) -> tuple[np.ndarray, np.ndarray]:
+    """The attached points (T, P, 3) and the tip (T, 3) under ``loads`` (T, 3) N."""
+    tip = loads @ resp.tip / modulus                                   # (T, 3) linear
+    s_tip = tip_scale(tip, stiffening)
+    scale = point_scale(s_tip, resp.place, at.surface, reach)[..., None]   # (T, P, 1)
+    disp = np.einsum("tk,kpc->tpc", loads, resp.points) / modulus * scale
+    gx = np.einsum("tk,kpc->tpc", loads, resp.slope_x) / modulus * scale
+    gy = np.einsum("tk,kpc->tpc", loads, resp.slope_y) / modulus * scale
+    tx = gx + np.array([1.0, 0.0, 0.0])
+    ty = gy + np.array([0.0, 1.0, 0.0])
+    normal = np.cross(tx, ty)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    points = at.surface[None] + disp + at.height[None, :, None] * normal
+    return points, resp.place[None] + tip * s_tip[:, None]
