@@ -36,8 +36,8 @@ from pipeline.cli import COMMANDS
 ROOT = Path(__file__).resolve().parents[1]
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
 LAYER = {"core": 0, "data_schema": 1, "ingest": 2, "calib": 2, "sync": 2, "extract": 2, "split": 2,
-         "sim": 2, "sim.twin": 2, "sim.msm": 2, "sim.solid": 2, "train": 2, "live": 2, "live.protocol": 2,
-         "live.session": 2, "live.replay": 2, "pipeline": 3}
+         "sim": 2, "sim.twin": 2, "sim.msm": 2, "sim.solid": 2, "train": 2, "live": 2,
+         "live.protocol": 2, "live.session": 2, "live.replay": 2, "pipeline": 3}
 # narrower than their layer allows: train/ is used without the lab stages; the twin checks
 # sync and extract against its truth, so it must not share their code; live/'s protocol is the
 # ground of its two commands, and the replay uses nothing of the live session
