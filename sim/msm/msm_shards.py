@@ -23,7 +23,8 @@ from data_schema.states import validate_states
 from sim.msm.msm_dataset import RESIDUAL_ATTRS
 from sim.msm.msm_protocol import parse_shard
 
-SAME_ATTRS = ("msm_params", "protocol", "solver")
+SAME_ATTRS = ("msm_params", "protocol", "solver", "solid", "layout")
+SIMULATED = ("msm", "solid")       # the sources a shard may come from (simulate, --solid)
 
 
 @dataclass
@@ -48,12 +49,13 @@ def merge_shards(paths: Sequence[str | Path]) -> Merged:
         validate_states(path)
         with h5py.File(path, "r") as f:
             attrs = {k: attr_text(f.attrs.get(k, "")) for k in (*SAME_ATTRS, "shard", "source")}
-        if attrs["source"] != "msm" or not attrs["shard"]:
-            raise BadInput(path, "not an MSM shard (no 'shard' attribute from simulate --shard)")
+        if attrs["source"] not in SIMULATED or not attrs["shard"]:
+            raise BadInput(path, "not a simulated shard (no 'shard' attribute from simulate "
+                                 "--shard)")
         i, n = parse_shard(attrs["shard"])
         if first is None:
             first, count = attrs, n
-        for key in SAME_ATTRS:
+        for key in (*SAME_ATTRS, "source"):
             if attrs[key] != first[key]:
                 raise BadInput(path, f"shard of a different run: its {key} differs")
         if n != count:

@@ -215,16 +215,19 @@ def run_merge(inputs: Sequence[str | Path], out: str | Path,
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
         merged = merge_shards(inputs)
-        tol = json.loads(merged.attrs["solver"])["tol_N"]
+        solid = merged.attrs["source"] == "solid"
         msm = MSMParams(**json.loads(merged.attrs["msm_params"])) if \
-            "blocks" not in merged.protocol else None
-        if msm is None:                                  # shards of a prior run
+            "blocks" not in merged.protocol and not solid else None
+        if solid:                                        # shards of simulate --solid
+            used = replace(p, **merged.protocol, shard=None)
+        elif msm is None:                                # shards of a prior run
             run = merged.protocol
             used = replace(p, prior=run["blocks"], locations=run["locations"],
-                           directions=run["directions"], seed=run["seed"], tol=tol, shard=None)
+                           directions=run["directions"], seed=run["seed"], shard=None,
+                           tol=json.loads(merged.attrs["solver"])["tol_N"])
         else:
             used = replace(p, **merged.protocol, k_between=msm.k_between, k_fixed=msm.k_fixed,
-                           tol=tol, shard=None)
+                           tol=json.loads(merged.attrs["solver"])["tol_N"], shard=None)
         prov = make_provenance("simulate --merge", asdict(used), inputs=merged.shards,
                                schema=STATES.name, schema_version=STATES.version)
         attrs = {**merged.attrs, "provenance": json.dumps(prov)}

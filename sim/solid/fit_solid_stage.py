@@ -26,7 +26,7 @@ from sim.solid.block_mesh import BlockGeometry
 from sim.solid.fit_solid_params import FitSolidInputs, FitSolidParams
 from sim.solid.fit_solid_view import write_solid_recording
 from sim.solid.label_shares import label_shares
-from sim.solid.measured_presses import read_presses
+from sim.solid.measured_presses import MeasuredSet, read_presses
 from sim.solid.solid_fit import Responses, SolidFit, SolidMaterial, fit_solid
 from sim.solid.solid_model import SolidModel
 
@@ -76,7 +76,7 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
         ([spec.path] if spec is not None else [])
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         if tmp_out is not None:
-            doc = _document(fit, block, p, ratios, msm_mm, files, spec,
+            doc = _document(fit, data, block, p, ratios, msm_mm, files, spec,
                             shares @ np.asarray(fit.material.ratios))
             tmp_out.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
             validate_json_doc(tmp_out, SOLID_PARAMS)
@@ -97,6 +97,13 @@ def _training(splits: Path, fold: int) -> np.ndarray:
     return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
 
 
+def _per_press(data: MeasuredSet, fit: SolidFit) -> list[dict]:
+    """Each press's place (mm) and mean distance (every point, mm): over a lump or away."""
+    return [{"sequence": p.sequence, "place_mm": (p.rest[-1, :2] * 1e3).round(3).tolist(),
+             "all_points": float(d)} for p, d in zip(data.presses, fit.per_press_mm,
+                                                      strict=True)]
+
+
 def _msm_distance(path: Path | None) -> float | None:
     """fit-msm's mean distance (mm) from its JSON, to print beside the solid's."""
     if path is None:
@@ -104,7 +111,7 @@ def _msm_distance(path: Path | None) -> float | None:
     return float(validate_json_doc(path, MSM_PARAMS)["mean_distance_m"]) * 1e3
 
 
-def _document(fit: SolidFit, block: BlockGeometry, p: FitSolidParams,
+def _document(fit: SolidFit, data: MeasuredSet, block: BlockGeometry, p: FitSolidParams,
               ratios: dict[int, float | None], msm_mm: float | None, files: list[Path],
               spec: InteriorSpec | None, element_ratios: np.ndarray) -> dict:
     """The ``phantom.solid_params`` document: the material with its sd, the block and mesh,
@@ -123,7 +130,9 @@ def _document(fit: SolidFit, block: BlockGeometry, p: FitSolidParams,
                  "element_ratios": np.round(element_ratios, 6).tolist()},
         "labels": {"interior": None if spec is None else spec.path.name,
                    "fitted": [k for k, r in ratios.items() if r is None]},
-        "distances_mm": {"solid": fit.marker_mm, "tip": fit.tip_mm, "still": fit.still_mm,
-                         "msm": msm_mm, "per_marker": fit.per_marker_mm.tolist()},
+        "distances_mm": {"solid": fit.marker_mm, "tip": fit.tip_mm, "all_points": fit.all_mm,
+                         "still": fit.still_mm, "msm": msm_mm,
+                         "per_marker": fit.per_marker_mm.tolist(),
+                         "per_press": _per_press(data, fit)},
         "provenance": make_provenance("fit-solid", asdict(p), inputs=files),
     }

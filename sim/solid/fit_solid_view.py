@@ -38,8 +38,9 @@ LABEL_COLOURS = ((214, 39, 40, 150), (44, 160, 44, 150), (148, 103, 189, 150), (
 def write_solid_recording(path: str | Path, model: SolidModel, solver: Solver,
                           data: MeasuredSet, responses: list[PlaceResponse], fit: SolidFit,
                           shares: np.ndarray, count: int = 4) -> None:
-    """Save the recording of ``count`` presses under the fitted material."""
-    shown = list(range(0, len(data.presses), max(1, len(data.presses) // count)))[:count]
+    """Save the recording of ``count`` presses under the fitted material: spread over the
+    file, the first of them the press nearest the interior's inclusions (where a lump is)."""
+    shown = _shown(model, data, shares, count)
     length, width = data.footprint
     size = max(length, width)
     centre = np.array([length / 2, width / 2, -size * 0.05])
@@ -67,6 +68,18 @@ def write_solid_recording(path: str | Path, model: SolidModel, solver: Solver,
             _log_press(rec, data.presses[i], fields[i], per_press[i], (rest, triangles),
                        largest)
         rec.log("residual/per_marker", rr.BarChart(fit.per_marker_mm, color=MODEL), static=True)
+
+
+def _shown(model: SolidModel, data: MeasuredSet, shares: np.ndarray, count: int) -> list[int]:
+    """Which presses to show: the one nearest the elements of labels >= 1, then a spread."""
+    spread = list(range(0, len(data.presses), max(1, len(data.presses) // count)))
+    inside = shares[:, 1:].sum(axis=1) > 0.5
+    if not inside.any():
+        return spread[:count]
+    centre = model.elasticity.element_centres()[inside].mean(axis=0)
+    places = np.array([p.rest[-1, :2] for p in data.presses])
+    nearest = int(np.argmin(np.linalg.norm(places - centre[:2], axis=1)))
+    return [nearest, *[i for i in spread if i != nearest]][:count]
 
 
 def _log_interior(rec: rr.RecordingStream, model: SolidModel, shares: np.ndarray) -> None:

@@ -2,7 +2,8 @@
 and each ``"fit"`` label's stiffness ratio, each with its uncertainty.
 
 The distance minimised is every point's (the markers and the tip) predicted position against
-the measured one, at every loaded state of the presses given. Each press's prediction is its
+the measured one, at every loaded state of the presses given, the tip's squared error
+weighed as much as the markers' together (:func:`weighted`). Each press's prediction is its
 own rest plus the solid's displacement, so a marker's rest noise is not fitted. The modulus
 scales every unit response (no new solve), and the stiffening maps each state's size (no new
 solve); the Poisson ratio and the labels' ratios change the stiffness, so a new one is
@@ -60,6 +61,7 @@ class SolidFit:
     all_mm: float              # of every point, markers and tip (as fit-msm's distance)
     still_mm: float            # the markers' mean distance to their rest: a still surface
     per_marker_mm: np.ndarray  # (P,) each marker's mean distance
+    per_press_mm: np.ndarray   # (presses,) each press's mean distance, every point
     evaluations: int
     factorisations: int
 
@@ -110,6 +112,15 @@ def residuals(data: MeasuredSet, responses: Sequence[PlaceResponse], material: S
     return out
 
 
+def weighted(residual: np.ndarray) -> np.ndarray:
+    """(T, P + 1, 3) a press's residuals as the fit weighs them: the tip's squared error counts
+    as much as the markers' together (where the press's stiffness shows: how deep the tip
+    sinks under its force; fit-msm --map weighs it alike)."""
+    out = residual.copy()
+    out[:, -1] *= np.sqrt(residual.shape[1] - 1)
+    return out
+
+
 def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int],
               start: SolidMaterial, fit_poisson: bool = True) -> SolidFit:
     """Least squares over the modulus, the stiffening, the Poisson ratio (``fit_poisson``)
@@ -132,7 +143,7 @@ def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int]
         nonlocal evaluations
         evaluations += 1
         m = unpack(x)
-        return np.concatenate([r.ravel() for r in
+        return np.concatenate([weighted(r).ravel() for r in
                                residuals(data, responses.at(data, m), m)])
 
     x0 = [np.log(start.modulus), np.log(start.stiffening),
@@ -168,7 +179,7 @@ def _uncertainty(sol: object, per_press: list[np.ndarray], names: list[str],
     start = 0
     for r in per_press:
         n = r.size
-        g = jac[start:start + n].T @ r.ravel()
+        g = jac[start:start + n].T @ weighted(r).ravel()
         meat += np.outer(g, g)
         start += n
     cov = bread @ meat @ bread
@@ -192,8 +203,10 @@ def _scored(data: MeasuredSet, per_press: list[np.ndarray], material: SolidMater
     ok_m, ok_t = ok[:, :-1], ok[:, -1]
     s = np.concatenate(still)
     per_marker = np.array([markers[ok_m[:, j], j].mean() for j in range(markers.shape[1])])
+    per_press = np.array([di[ok_i].mean() for di, ok_i in zip(dist, valid, strict=True)])
     return SolidFit(material=material, sd=sd, marker_mm=float(markers[ok_m].mean() * 1e3),
                     tip_mm=float(tips[ok_t].mean() * 1e3), all_mm=float(d[ok].mean() * 1e3),
                     still_mm=float(np.nanmean(np.where(ok_m, s, np.nan)) * 1e3),
-                    per_marker_mm=per_marker * 1e3, evaluations=evaluations,
+                    per_marker_mm=per_marker * 1e3, per_press_mm=per_press * 1e3,
+                    evaluations=evaluations,
                     factorisations=factorisations)

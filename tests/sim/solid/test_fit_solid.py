@@ -173,3 +173,26 @@ def test_a_volume_short_of_the_block_is_refused(lab: Path, tmp_path: Path) -> No
               tmp_path / "x.json", *MESH)
     assert res.exit_code == 2 and "does not cover the block" in res.stderr
     assert list(tmp_path.glob("x*")) == []
+
+
+def test_solid_shards_merge_into_the_whole_run(lab: Path, fitted: dict, tmp_path: Path
+                                               ) -> None:
+    common = ["--solid", lab / "solid.json", "--layout", lab / "states.h5", "--locations", 4,
+              "--directions", 2, "--no-rrd"]
+    assert run("simulate", *common, "--out", tmp_path / "all.h5").exit_code == 0
+    for i in range(2):
+        res = run("simulate", *common, "--shard", f"{i}/2", "--out", tmp_path / f"p{i}.h5")
+        assert res.exit_code == 0, res.output + res.stderr
+    res = run("simulate", "--merge", tmp_path / "p0.h5", tmp_path / "p1.h5", "--out",
+              tmp_path / "merged.h5", "--no-rrd")
+    assert res.exit_code == 0, res.output + res.stderr
+    with h5py.File(tmp_path / "all.h5") as a, h5py.File(tmp_path / "merged.h5") as m:
+        assert m.attrs["source"] == "solid"
+        for name in ("states/points", "states/sequence", "multi/start", "multi/end"):
+            np.testing.assert_array_equal(a[name][()], m[name][()])
+
+
+def test_simulate_solid_needs_a_layout(lab: Path, fitted: dict, tmp_path: Path) -> None:
+    res = run("simulate", "--solid", lab / "solid.json", "--out", tmp_path / "x.h5")
+    assert res.exit_code == 2 and "--layout" in res.stderr and res.stderr.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []

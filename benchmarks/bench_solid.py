@@ -1,0 +1,175 @@
+"""The solid model of the phantom: how close it fits a lab, how fast, and how fine its mesh must be.
+
+    python benchmarks/bench_solid.py --states STATES.h5 [--session SESSION_DIR] [--msm]
+        [--splits S.json --fold K] [--lump X,Y,R] [--convergence] [--repeats 3]
+
+Prints, beside the host's figure (``core.host_speed``):
+
+1. ``fit-solid`` on the presses given (a fold's training presses with ``--splits``), with the
+   interior the session names (its labels as given, or ``"fit"``): each distance (the markers,
+   the tip, every point) beside a still surface's; with ``--msm`` the peer, ``fit-msm`` on the
+   same presses (every one of them) in the same run: its distance (every point) and time, and
+   the ratios solid / MSM;
+2. ``simulate --solid`` of 16 places x 3 directions at the lab's markers: its time, and the fit
+   and it together in host figures (issue 58's target: <= 30);
+3. with ``--convergence``: each marker's displacement under unit loads at three places (the
+   centre, two off-centre) on the mesh ladder 5 mm / 8 layers -> 3.33 / 12 -> 2.5 / 16 (1.5x
+   the elements along each axis a step), the change from one step to the next (every marker,
+   the markers beyond 15 mm of the press, the tip), with a 10 mm contact patch on every mesh;
+   and the Hertz check's force against Hertz's at 0.9 and 1.2 mm on three meshes.
+
+Times are medians of ``--repeats`` runs, each in a fresh process state (the model rebuilt).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import numpy as np  # noqa: E402
+
+LADDER = ((5.0, 8), (10 / 3, 12), (2.5, 16))       # mm across, layers through
+LADDER_RADIUS = 0.010                             # m: a patch every mesh resolves
+
+
+def _timed(fn, repeats: int):  # noqa: ANN001, ANN202
+    out, times = None, []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - started)
+    return out, statistics.median(times)
+
+
+def fit_and_simulate(a: argparse.Namespace, host: float) -> None:
+    from sim.msm.fit_msm_params import FitMsmInputs, FitMsmParams
+    from sim.msm.fit_msm_stage import run_fit_msm
+    from sim.msm.simulate_params import SimulateInputs, SimulateParams
+    from sim.msm.simulate_stage import run_simulate
+    from sim.solid.fit_solid_params import FitSolidInputs, FitSolidParams
+    from sim.solid.fit_solid_stage import run_fit_solid
+
+    with tempfile.TemporaryDirectory() as tmp:
+        solid_json = Path(tmp) / "solid.json"
+        inputs = FitSolidInputs(a.states, a.splits, a.session)
+        params = FitSolidParams(fold=a.fold)
+        outcome, fit_s = _timed(lambda: run_fit_solid(inputs, solid_json, params), a.repeats)
+        fit = outcome.fit
+        print(f"fit-solid: markers {fit.marker_mm:.3f} mm, tip {fit.tip_mm:.3f}, every point "
+              f"{fit.all_mm:.3f}; still surface (markers) {fit.still_mm:.3f}; ratios "
+              f"{[round(r, 3) for r in fit.material.ratios]} (sd {outcome.fit.sd}); "
+              f"{fit_s:.1f} s ({fit_s / host:.1f} x host), {fit.factorisations} factorisations")
+        if a.lump:
+            over_away(solid_json, a.lump)
+        sim_params = SimulateParams(locations=16, directions=3, max_angle_deg=20.0)
+        sim_inputs = SimulateInputs(layout=a.states, solid=solid_json)
+        _, sim_s = _timed(lambda: run_simulate(sim_inputs, Path(tmp) / "s.h5", sim_params),
+                          a.repeats)
+        print(f"simulate --solid 16 x 3: {sim_s:.1f} s; fit + simulate {fit_s + sim_s:.1f} s "
+              f"= {(fit_s + sim_s) / host:.1f} x the host's figure (target <= 30)")
+        if a.msm:
+            msm_params = FitMsmParams(fold=a.fold, max_sequences=10_000, workers=2)
+            msm, msm_s = _timed(lambda: run_fit_msm(FitMsmInputs(a.states, a.splits), None,
+                                                    msm_params), a.repeats)
+            d = msm.fit.mean_distance_m * 1e3
+            print(f"peer fit-msm (every press, 2 workers): every point {d:.3f} mm in "
+                  f"{msm_s:.1f} s; solid / MSM distance {fit.all_mm / d:.2f}, time "
+                  f"{fit_s / msm_s:.2f}")
+
+
+def over_away(solid_json: Path, lump: str) -> None:
+    """The fit's mean distance (every point) of the presses over the lump (their place within
+    its radius + eval's reach) and away from it, and their ratio (issue 58: <= 1.3)."""
+    import json
+
+    from train.evaluation.lump import REACH_M, parse_lump
+
+    where = parse_lump(lump)
+    rows = json.loads(solid_json.read_text())["distances_mm"]["per_press"]
+    xy = np.array([r["place_mm"] for r in rows]) * 1e-3
+    d = np.array([r["all_points"] for r in rows])
+    over = np.hypot(xy[:, 0] - where.x, xy[:, 1] - where.y) <= where.radius + REACH_M
+    if over.any() and (~over).any():
+        print(f"over the lump ({over.sum()} presses) {d[over].mean():.3f} mm, away "
+              f"({(~over).sum()}) {d[~over].mean():.3f} mm: {d[over].mean() / d[~over].mean():.2f}"
+              " x")
+
+
+def convergence() -> None:
+    from sim.solid.block_mesh import BlockGeometry
+    from sim.solid.solid_model import Attachments, SolidModel
+
+    top = -0.0015
+    grid = 0.010 + 0.020 * np.arange(5)
+    markers = np.array([[x, y, 0.0] for y in grid for x in grid])
+    at = Attachments(np.c_[markers[:, :2], np.full(25, top)], np.full(25, -top))
+    places = np.array([[0.05, 0.05, top], [0.03, 0.07, top], [0.07, 0.03, top]])
+    far = np.linalg.norm(places[:, None, :2] - markers[None, :, :2], axis=-1) > 0.015
+    found = []
+    for spacing, layers in LADDER:
+        started = time.perf_counter()
+        model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, top), spacing * 1e-3, layers)
+        solver = model.factorise(np.ones(model.elasticity.n_elements), 0.3)
+        resp = model.respond(solver, places, LADDER_RADIUS, model.probes(at))
+        found.append((np.array([r.points for r in resp]), np.array([r.tip for r in resp])))
+        print(f"mesh {spacing:.2f} mm / {layers} layers: {model.elasticity.basis.N} unknowns, "
+              f"{time.perf_counter() - started:.1f} s")
+    for (a, ta), (b, tb), (lo, hi) in zip(found, found[1:], zip(LADDER, LADDER[1:],
+                                                                 strict=False), strict=False):
+        change = np.linalg.norm(a - b, axis=-1)                  # (places, 3 loads, P)
+        size = np.linalg.norm(b, axis=-1)
+        mask = np.broadcast_to(far[:, None, :], change.shape)
+        print(f"{lo[0]:.2f} -> {hi[0]:.2f} mm: markers {change.sum() / size.sum():.1%}, beyond "
+              f"15 mm {change[mask].sum() / size[mask].sum():.1%}, tip "
+              f"{np.linalg.norm(ta - tb) / np.linalg.norm(tb):.1%}")
+    hertz()
+
+
+def hertz() -> None:
+    from skfem import MeshHex
+
+    from sim.solid.block_mesh import graded_axis
+    from sim.solid.elasticity import Elasticity, Material
+    from sim.solid.sphere_contact import hertz_force, sphere_forces
+
+    depths = np.array([0.9e-3, 1.2e-3])
+    for fine in (0.5e-3, 0.4e-3, 0.3e-3):
+        axis = graded_axis(0.024, fine, 4.5e-3, 1.5)
+        mesh = MeshHex.init_tensor(axis, axis, -axis[::-1])
+        el = Elasticity(mesh, symmetry=True)
+        solver = el.factorise(Material(np.full(el.n_elements, 1e4), 0.3))
+        forces = sphere_forces(el, solver, 0.010, depths, reach=4.5e-3)
+        ratio = [f / hertz_force(1e4, 0.3, 0.010, d) for f, d in zip(forces, depths, strict=True)]
+        print(f"Hertz, {fine * 1e3:.1f} mm over the contact: force / Hertz at 0.9 and 1.2 mm "
+              f"{ratio[0]:.3f}, {ratio[1]:.3f}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--states", type=Path)
+    ap.add_argument("--session", type=Path)
+    ap.add_argument("--splits", type=Path)
+    ap.add_argument("--fold", type=int, default=0)
+    ap.add_argument("--msm", action="store_true", help="fit-msm beside it (the peer)")
+    ap.add_argument("--lump", help="X,Y,R mm: the fit's distance over the lump and away")
+    ap.add_argument("--convergence", action="store_true")
+    ap.add_argument("--repeats", type=int, default=1)
+    a = ap.parse_args()
+    from core.host_speed import host_speed
+
+    host = host_speed()
+    print(f"host figure {host:.2f} s")
+    if a.states is not None:
+        fit_and_simulate(a, host)
+    if a.convergence:
+        convergence()
+
+
+if __name__ == "__main__":
+    main()
