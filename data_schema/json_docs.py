@@ -120,6 +120,18 @@ def validate_folds(path: str | Path) -> dict[str, Any]:
     return doc
 
 
+
+def training_sequences(splits: str | Path, fold: int, command: str) -> np.ndarray:
+    """The sequence ids of a fold's training presses (a manifest grouped by sequence), for
+    ``command`` (its name in the refusal) that fits a model on them."""
+    doc = validate_folds(splits)
+    if doc.get("group_by") != "sequence":
+        raise BadInput(splits, f"{command} --splits needs a manifest grouped by sequence "
+                               "(press)")
+    if not 0 <= fold < len(doc["folds"]):
+        raise BadInput(splits, f"--fold {fold}: it has {len(doc['folds'])} folds")
+    return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
+
 def _check_fold(path: str | Path, fold: Any, where: str) -> None:
     if not isinstance(fold, dict) or not all(isinstance(fold.get(r), dict) for r in ROLES):
         raise BadInput(path, "a fold needs train, val and test objects", where=where)

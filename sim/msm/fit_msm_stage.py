@@ -13,12 +13,9 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
 from core.atomic import atomic_outputs
-from core.errors import BadInput
 from core.provenance import make_provenance
-from data_schema.json_docs import MSM_PARAMS, validate_folds, validate_json_doc
+from data_schema.json_docs import MSM_PARAMS, training_sequences, validate_json_doc
 from sim.msm.fit_msm_params import FitMsmInputs, FitMsmParams
 from sim.msm.fit_msm_view import write_fit_recording
 from sim.msm.msm import MSMParams
@@ -47,7 +44,7 @@ def run_fit_msm(inputs: FitMsmInputs, out: str | Path | None,
     """
     p = params or FitMsmParams()
     states, splits = inputs.states, inputs.splits
-    only = training_sequences(splits, p.fold) if splits else None
+    only = training_sequences(splits, p.fold, "fit-msm") if splits else None
     sequences, msm = read_measured(states, max_sequences=p.sequences_used(), seed=p.seed,
                                    contact_radius=p.contact_radius, only=only,
                                    spacing=p.spacing)
@@ -68,16 +65,6 @@ def run_fit_msm(inputs: FitMsmInputs, out: str | Path | None,
         if tmp_rrd is not None:
             write_fit_recording(tmp_rrd, msm, result, sequences, found)
     return FitOutcome(result, found)
-
-
-def training_sequences(splits: str | Path, fold: int) -> np.ndarray:
-    """The sequence ids of a fold's training presses (a manifest grouped by sequence)."""
-    doc = validate_folds(splits)
-    if doc.get("group_by") != "sequence":
-        raise BadInput(splits, "fit-msm --splits needs a manifest grouped by sequence (press)")
-    if not 0 <= fold < len(doc["folds"]):
-        raise BadInput(splits, f"--fold {fold}: it has {len(doc['folds'])} folds")
-    return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
 
 
 def _document(result: FitResult, found: MapResult | None, params: MSMParams,

@@ -18,10 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from core.atomic import atomic_outputs
-from core.errors import BadInput
 from core.provenance import make_provenance
 from data_schema.interior import InteriorSpec, check_covers, session_interior
-from data_schema.json_docs import MSM_PARAMS, SOLID_PARAMS, validate_folds, validate_json_doc
+from data_schema.json_docs import MSM_PARAMS, SOLID_PARAMS, training_sequences, validate_json_doc
 from sim.solid.block_mesh import BlockGeometry
 from sim.solid.fit_solid_params import FitSolidInputs, FitSolidParams
 from sim.solid.fit_solid_view import write_solid_recording
@@ -52,7 +51,7 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
     when given."""
     p = params or FitSolidParams()
     started = time.perf_counter()
-    only = _training(inputs.splits, p.fold) if inputs.splits else None
+    only = training_sequences(inputs.splits, p.fold, "fit-solid") if inputs.splits else None
     data = read_presses(inputs.states, only)
     spec = session_interior(inputs.session) if inputs.session is not None else None
     block = BlockGeometry(data.footprint, p.thickness, data.top_z)
@@ -85,16 +84,6 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
             write_solid_recording(tmp_rrd, model, solver, data,
                                   responses.at(data, fit.material), fit, shares)
     return SolidOutcome(fit, msm_mm, seconds, ratios)
-
-
-def _training(splits: Path, fold: int) -> np.ndarray:
-    """The sequence ids of a fold's training presses (a manifest grouped by sequence)."""
-    doc = validate_folds(splits)
-    if doc.get("group_by") != "sequence":
-        raise BadInput(splits, "fit-solid --splits needs a manifest grouped by sequence (press)")
-    if not 0 <= fold < len(doc["folds"]):
-        raise BadInput(splits, f"--fold {fold}: it has {len(doc['folds'])} folds")
-    return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
 
 
 def _per_press(data: MeasuredSet, fit: SolidFit) -> list[dict]:

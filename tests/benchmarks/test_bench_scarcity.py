@@ -10,8 +10,7 @@ from pathlib import Path
 from helpers.cgnn_data import dent_fold
 from helpers.paths import ROOT
 
-from data_schema.json_docs import validate_folds
-from sim.msm.fit_msm_stage import training_sequences
+from data_schema.json_docs import training_sequences, validate_folds
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -27,7 +26,7 @@ def test_the_own_fit_reads_the_runs_first_n_presses_and_nothing_else(tmp_path: P
             cut = tmp_path / f"cut_{fold}_{n}.json"
             cut.write_text(json.dumps(own_presses(splits, fold, n)))
             validate_folds(cut)                              # still a manifest the fit reads
-            assert sorted(training_sequences(cut, fold)) == sorted(subsets[n - 1])
+            assert sorted(training_sequences(cut, fold, "fit-msm")) == sorted(subsets[n - 1])
             other = 1 - fold
             assert json.loads(cut.read_text())["folds"][other] == doc["folds"][other]
     assert json.loads(splits.read_text()) == doc                  # the input is not modified
