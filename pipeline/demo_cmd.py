@@ -31,6 +31,7 @@ from pipeline.demo_plan import (
     RECIPE_NETWORK,
     SHIPPED_MODEL,
     SMOKE,
+    SOLID,
     Lab,
     Step,
     demo_steps,
@@ -74,7 +75,10 @@ from train.training.train_params import DEVICES, TrainParams
                    "model for every lab pre-trained once on MSM data drawn from the prior (the "
                    "same whatever the lab or --seed; the shipped one is the quick settings'); "
                    "per-fold: per fold the MSM fitted on its training presses, simulated at "
-                   "the lab's markers and pre-trained on (five times the work).")
+                   "the lab's markers and pre-trained on (five times the work); solid: the "
+                   "shipped model's runs, and beside them per fold the solid model of the "
+                   "phantom with its interior (fit-solid) pressed at the lab's markers, the "
+                   "shipped model pre-trained further on it and fine-tuned from there.")
 @click.option("--markers", type=MARKERS, default=Lab.markers, show_default=True,
               help="The twin lab's phantom markers: a grid RxC, or scattered:N (synth).")
 @click.option("--marker-pitch", type=MARKER_PITCH_MM,
@@ -103,7 +107,10 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     generic msm/prior.h5 and prior_splits.json (MSM data drawn from the prior) and
     runs/generic (the generic model), or with --pretraining per-fold, per fold msm/foldK/
     (params.json: fit-msm on that fold's training presses only; msm.h5 and splits.json: that
-    MSM, sized to the footprint, sampled at the markers' layout) and runs/msm_foldK;
+    MSM, sized to the footprint, sampled at the markers' layout) and runs/msm_foldK, or with
+    --pretraining solid, per fold solid/foldK/ (solid.json: fit-solid on that fold's training
+    presses with the session's interior; solid.h5: that solid pressed at the markers) and
+    runs/solid_foldK (the shipped model pre-trained on it), fine-tuned into runs/exp_solid_*;
     runs/exp_tl_* and runs/exp_notl_* (fine-tuning per fold with transfer learning from the
     pre-trained model and the same from scratch);
     metrics.json/.md (eval, beside the no-learning references), scarcity/ (the data-scarcity
@@ -114,7 +121,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     from pipeline.demo_targets import summary
 
     settings = SMOKE if smoke else QUICK if quick else PAPER
-    if pretraining == SHIPPED_MODEL and network not in (None, RECIPE_NETWORK):
+    if pretraining in (SHIPPED_MODEL, SOLID) and network not in (None, RECIPE_NETWORK):
         raise BadInput("--network", f"{network}: the shipped generic model is the recipe's "
                        "network; make one of this network with --pretraining generic (or "
                        "per-fold)")

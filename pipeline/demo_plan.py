@@ -17,6 +17,10 @@ The protocol, as a lab with only its presses would run it:
    - ``per-fold``: per fold, ``fit-msm --splits --fold`` (the MSM's constants fitted to this
      phantom on that fold's training presses only), ``simulate --params --layout`` (that MSM
      sized to the lab's footprint, sampled at its markers) and a pre-training on it;
+   - ``solid``: the shipped model's runs, and beside them per fold the solid model of the
+     phantom with its interior (``fit-solid --splits --fold --session``), pressed at the lab's
+     markers (``simulate --solid --layout``), the shipped model pre-trained further on it and
+     fine-tuned from there (:func:`solid_steps`; runs ``exp_solid_foldK``);
 3. per fold, fine-tuning with transfer learning (``--init``) from the pre-trained model, and
    the same training from scratch (the baseline);
 4. eval: Table 2 with the no-learning references, and the data-scarcity study (1..4 training
@@ -79,6 +83,9 @@ class Settings:
     generic_epochs: int = 1           # the generic model's pre-training
     generic_lr: float = 5e-4          # ... its step size: at the fine-tuning's 2e-3 the prior's
     #                                   variety silences the second and third graph layers
+    solid_locations: int = 32         # --pretraining solid: places pressed on the fitted solid
+    solid_directions: int = 3         # ... directions at each (within 20 degrees)
+    solid_epochs: int = 40            # ... the shipped model pre-trained on them
     scarcity_epochs: int | None = None  # the scarcity study's runs (None: finetune_epochs)
 
 
@@ -118,7 +125,7 @@ PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
                  lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2,
                  prior_phantoms=2, prior_locations=3, prior_directions=1, generic_epochs=1,
-                 generic_lr=1e-3)
+                 generic_lr=1e-3, solid_locations=10, solid_directions=1, solid_epochs=1)
 
 
 @dataclass(frozen=True)
@@ -186,10 +193,11 @@ def pretrain_dir(out: Path, fold: int) -> Path:
     return out / "runs" / f"msm_fold{fold}"
 
 
-SHIPPED_MODEL, GENERIC, PER_FOLD = "shipped", "generic", "per-fold"
-# how the demo pre-trains: not at all (the package's generic model), once for every lab, or per
-# fold
-PRETRAINING = (SHIPPED_MODEL, GENERIC, PER_FOLD)
+SHIPPED_MODEL, GENERIC, PER_FOLD, SOLID = "shipped", "generic", "per-fold", "solid"
+# how the demo pre-trains: not at all (the package's generic model), once for every lab, per
+# fold on a fitted MSM, or (beside the shipped model's runs) per fold on the fitted solid
+PRETRAINING = (SHIPPED_MODEL, GENERIC, PER_FOLD, SOLID)
+SOLID_TAG = "solid"                   # the runs fine-tuned from a fold's solid pre-training
 GENERIC_SEED = 0                      # the generic model's seed, whatever the lab's
 
 
@@ -205,9 +213,13 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
-    if pretraining == SHIPPED_MODEL:
+    tags = VARIANTS
+    if pretraining in (SHIPPED_MODEL, SOLID):
         inits = [SHIPPED] * s.folds
         steps = [replace(step, parallel=True, batch=FOLDS) for step in session]
+        if pretraining == SOLID:
+            steps += solid_steps(out, s, states, splits, (*train, *sd))
+            tags = (*VARIANTS, SOLID_TAG)
     elif pretraining == GENERIC:
         pre = generic_steps(out, s, device, recipe)
         inits = [pre[-1].outputs[0]] * s.folds
@@ -217,15 +229,16 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         inits = [pretrain_dir(out, fold) / "best.pt" for fold in range(s.folds)]
         steps = session + pre
     runs = [(fold, tag, out / "runs" / f"exp_{tag}_fold{fold}") for fold in range(s.folds)
-            for tag in VARIANTS]
+            for tag in tags]
     order = runs if pretraining == PER_FOLD else \
         sorted(runs, key=lambda r: r[1] != "notl")      # scratch first: it waits for nothing
     for fold, tag, run in order:
-        init = ("--init", str(inits[fold])) if tag == "tl" else ()
+        start = {"tl": inits[fold], SOLID_TAG: solid_pre_dir(out, fold) / "best.pt"}.get(tag)
+        init = ("--init", str(start)) if start is not None else ()
         steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
                            "--fold", str(fold), "--out", str(run), "--epochs",
                            str(s.finetune_epochs), *init, *train, *sd),
-                          (states, splits) + ((inits[fold],) if init else ()),
+                          (states, splits) + ((start,) if start is not None else ()),
                           (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
                           stage="train (fine-tuning)"))
     scarcity = [_scarcity_step(out, fold, s, device) for fold in range(s.scarcity_folds)]
@@ -233,7 +246,7 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         steps += [replace(step, batch=FOLDS) for step in scarcity]
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
     finetuned = [run for _, _, run in runs]
-    pres = [] if pretraining == SHIPPED_MODEL else \
+    pres = [] if pretraining in (SHIPPED_MODEL, SOLID) else \
         list(dict.fromkeys(init.parent for init in inits))      # the pre-trained run(s)
     truth = ("--truth", str(out / "session" / "truth.h5")) if lab.inclusions else ()
     steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), *truth, "--out",
@@ -274,6 +287,42 @@ def per_fold_steps(out: Path, s: Settings, states: Path, splits: Path,
             + [_simulate_step(out, fold, states, s, sd) for fold in folds]
             + [_msm_split_step(out, fold, sd) for fold in folds]
             + [_pretrain_step(out, fold, s, (*train, *sd)) for fold in folds])
+
+
+def solid_dir(out: Path, fold: int) -> Path:
+    """Where ``--pretraining solid`` keeps a fold's fitted solid and its states."""
+    return out / "solid" / f"fold{fold}"
+
+
+def solid_pre_dir(out: Path, fold: int) -> Path:
+    """The shipped model pre-trained further on a fold's solid states."""
+    return out / "runs" / f"solid_fold{fold}"
+
+
+def solid_steps(out: Path, s: Settings, states: Path, splits: Path,
+                train: tuple[str, ...]) -> list[Step]:
+    """Per fold: the solid fitted on its training presses (with the interior the session
+    names), pressed at the lab's markers, split, and the shipped model pre-trained on it."""
+    steps = []
+    for fold in range(s.folds):
+        d, run = solid_dir(out, fold), solid_pre_dir(out, fold)
+        solid, data, sp = d / "solid.json", d / "solid.h5", d / "splits.json"
+        steps += [
+            Step(("fit-solid", str(states), "--splits", str(splits), "--fold", str(fold),
+                  "--session", str(out / "session"), "--out", str(solid)),
+                 (states, splits, out / "session" / "session.toml"), (solid,), parallel=True,
+                 batch=FOLDS),
+            Step(("simulate", "--solid", str(solid), "--layout", str(states), "--locations",
+                  str(s.solid_locations), "--directions", str(s.solid_directions),
+                  "--max-angle", "20", "--out", str(data)), (solid, states), (data,),
+                 parallel=True, batch=FOLDS, stage="simulate --solid"),
+            Step(("split", str(data), "--out", str(sp), "--folds", "1"), (data,), (sp,),
+                 parallel=True, batch=FOLDS),
+            Step(("train", "--data", str(data), "--splits", str(sp), "--out", str(run),
+                  "--epochs", str(s.solid_epochs), "--init", str(SHIPPED), *train),
+                 (data, sp, SHIPPED), (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
+                 stage="train (pre-training)")]
+    return steps
 
 
 def _scarcity_step(out: Path, fold: int, s: Settings, device: str) -> Step:

@@ -39,11 +39,14 @@ import click
 
 from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, validate_metrics
 from pipeline.demo_plan import msm_dir
+from train.training.variant import SOURCE_NAMES
 
 FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
 TL_CUT = 0.10           # pooled: TL this far below scratch at equal epochs
 SCARCITY_CUT = 0.30     # scarcity study: TL this far below scratch at each size
 FORCE_VS_LINEAR = 0.5   # force error at most this fraction of the linear reference's
+SOLID_OVER_LUMP = 0.15  # TL from the solid: pooled L_d over a lump this far below the shipped
+#                         model's TL on the same examples (issue 58)
 MSM_VS_STILL = 0.5      # MSM model (and the fit) at most this fraction of a still surface's
 RADIUS_VS_LD = 3.0      # the mean 90 % radius at most this times the mean L_d
 QUICK_HOST_UNITS = 85   # the quick demo's time, in host figures
@@ -61,6 +64,7 @@ def summary(out: Path, seconds: float, quick: bool, host_s: float | None = None)
     checks += _msm_model(doc)
     checks += _fine_tuned(doc)
     checks += _over_lump(doc)
+    checks += _solid_over_lump(doc)
     checks += _intervals(doc)
     checks += _scarcity(out)
     if quick:
@@ -117,10 +121,16 @@ def _fit(out: Path) -> list[tuple[str, bool, str]]:
 
 
 def variant_of(run: dict) -> str:
-    """'tl' (fine-tuned), 'msm' (the MSM model) or 'notl' (lab data from scratch), from the
-    variant the run's checkpoint records."""
+    """'tl' (fine-tuned), 'solid' (fine-tuned from a pre-training on the fitted solid), 'msm'
+    (the MSM model) or 'notl' (lab data from scratch), from the variant the run's checkpoint
+    records."""
     v = run["variant"]
-    return "tl" if v["pretrained"] else "msm" if v["train_data"] == "MSM" else "notl"
+    if v["pretrained"]:
+        return "solid" if v["pretrained"].get("train_data") == SOURCE_NAMES["solid"] else "tl"
+    return "msm" if v["train_data"] == "MSM" else "notl"
+
+
+FINE_TUNED = (("tl", "TL"), ("notl", "scratch"), ("solid", "TL from the solid"))
 
 
 def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
@@ -156,7 +166,7 @@ def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
     presses there, over the lump and away from it, beside the best reference there."""
     checks = []
     for part, where in (("over", "over the lump"), ("away", "away from the lump")):
-        for variant, name in (("tl", "TL"), ("notl", "scratch")):
+        for variant, name in FINE_TUNED:
             folds = sorted(((r["fold"], r["lump"][part]) for r in doc["runs"]
                             if variant_of(r) == variant and r.get("lump")),
                            key=lambda fold_rows: fold_rows[0])
@@ -173,11 +183,34 @@ def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
     return checks
 
 
+def _solid_over_lump(doc: dict) -> list[tuple[str, bool, str]]:
+    """With --pretraining solid and a lump: TL from the solid against TL from the shipped
+    model over the lump, pooled over the folds with test presses there (the same examples)."""
+    over = {v: [r["lump"]["over"]["metrics"] for r in doc["runs"] if variant_of(r) == v
+                and r.get("lump") and r["lump"]["over"]] for v in ("tl", "solid")}
+    if not over["tl"] or not over["solid"]:
+        return []
+
+    def pooled(rows: list[dict], key: str) -> float:
+        return sum(m[key] * m["n"] for m in rows) / sum(m["n"] for m in rows)
+
+    ld = {v: pooled(rows, "ld_mean_mm") for v, rows in over.items()}
+    force = {v: pooled(rows, "force_abs_n") for v, rows in over.items()}
+    gain = 1 - ld["solid"] / ld["tl"]
+    return [("TL from the solid over the lump, against TL from the shipped model",
+             gain >= SOLID_OVER_LUMP,
+             f"mean L_d {ld['solid']:.4f} against {ld['tl']:.4f} mm ({gain:+.0%}), force "
+             f"{force['solid']:.3f} against {force['tl']:.3f} N (target "
+             f"{SOLID_OVER_LUMP:.0%} lower L_d)")]
+
+
 def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
     checks = []
     by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
-          for v in ("tl", "notl")}
-    for variant, name in (("tl", "TL"), ("notl", "scratch")):
+          for v, _ in FINE_TUNED}
+    for variant, name in FINE_TUNED:
+        if not by[variant]:
+            continue
         gains = [_ld_gain(r) for r in by[variant]]
         force = [r["metrics"]["all"]["force_abs_n"]
                  / r["references"][FORCE_LINEAR]["force_abs_n"] for r in by[variant]]

@@ -225,3 +225,31 @@ def test_the_quick_demo_fine_tunes_longer_than_its_scarcity_study_retrains(tmp_p
     assert all(a[a.index("--scarcity-epochs") + 1] == str(QUICK.scarcity_epochs)
                for a in studies)
     assert QUICK.scarcity_epochs < QUICK.finetune_epochs
+
+
+def test_the_solid_pretraining_runs_beside_the_shipped_models(tmp_path):
+    """``--pretraining solid``: the shipped model's TL and scratch runs as by default, and per
+    fold the solid fitted on that fold's training presses with the session's interior,
+    pressed at the lab's markers, the shipped model pre-trained on it, and a third run per
+    fold fine-tuned from there; eval scores the three, over the lump too."""
+    lab = Lab(inclusions=("72,23,10,12,3",))
+    steps = demo_steps(tmp_path, 0, QUICK, lab=lab, pretraining="solid")
+    fits = [s.args for s in steps if s.args[0] == "fit-solid"]
+    assert len(fits) == QUICK.folds
+    for k, args in enumerate(fits):
+        assert args[args.index("--fold") + 1] == str(k)
+        assert args[args.index("--session") + 1] == str(tmp_path / "session")
+    sims = [s.args for s in steps if s.args[:2] == ("simulate", "--solid")]
+    assert [a[a.index("--locations") + 1] for a in sims] == [str(QUICK.solid_locations)] * 5
+    pre = {s.outputs[0].parent.name: s for s in steps if s.stage == "train (pre-training)"}
+    assert sorted(pre) == [f"solid_fold{k}" for k in range(QUICK.folds)]
+    assert all(s.args[s.args.index("--init") + 1] == str(SHIPPED) for s in pre.values())
+    solid_tl = {s.outputs[0].parent.name: s.args for s in steps
+                if s.outputs and s.outputs[0].parent.name.startswith("exp_solid_")}
+    assert sorted(solid_tl) == [f"exp_solid_fold{k}" for k in range(QUICK.folds)]
+    args = solid_tl["exp_solid_fold3"]
+    assert args[args.index("--init") + 1] == str(tmp_path / "runs" / "solid_fold3" / "best.pt")
+    ev = [s for s in steps if s.args[0] == "eval" and "--scarcity" not in s.args][0].args
+    assert {Path(a).name for a in ev if "exp_" in a} == {
+        f"exp_{v}_fold{k}" for v in ("tl", "notl", "solid") for k in range(QUICK.folds)}
+    assert "--truth" in ev

@@ -3,7 +3,7 @@ least 30 % below the best reference there; a fold with none is named, not counte
 
 from __future__ import annotations
 
-from pipeline.demo_targets import _over_lump
+from pipeline.demo_targets import _over_lump, _solid_over_lump, variant_of
 
 
 def _part(gain: float | None, n: int = 12) -> dict:
@@ -46,3 +46,30 @@ def test_runs_without_a_lump_add_no_target() -> None:
     plain = _run(0, None, None)
     del plain["lump"]
     assert _over_lump({"runs": [plain]}) == []
+
+
+def _over(ld: float, force: float, n: int) -> dict:
+    return {"metrics": {"n": n, "ld_mean_mm": ld, "force_abs_n": force}, "gain": {"ld_gain": 0.5}}
+
+
+def _from(fold: int, source: str, over: dict | None) -> dict:
+    return {"run": f"runs/exp_{source}_fold{fold}", "fold": fold,
+            "variant": {"pretrained": {"model": "cGNN", "train_data": source},
+                        "train_data": "Exp"},
+            "lump": {"over": over, "away": _over(0.1, 0.1, 50)}}
+
+
+def test_tl_from_the_solid_is_held_to_15_percent_below_the_shipped_models_over_the_lump(
+        ) -> None:
+    """Pooled over the folds with presses there (weighted by their examples)."""
+    runs = [_from(0, "MSM", _over(0.20, 0.3, 10)), _from(1, "MSM", _over(0.10, 0.2, 30)),
+            _from(0, "Solid", _over(0.15, 0.2, 10)), _from(1, "Solid", _over(0.08, 0.1, 30)),
+            _from(2, "Solid", None)]
+    (name, ok, text), = _solid_over_lump({"runs": runs})
+    # generic: (0.2 * 10 + 0.1 * 30) / 40 = 0.125; solid: (0.15 * 10 + 0.08 * 30) / 40 = 0.0975
+    assert ok and "0.0975 against 0.1250 mm (+22%)" in text
+    assert "TL from the solid" in name
+    runs[3] = _from(1, "Solid", _over(0.11, 0.1, 30))          # (1.5 + 3.3) / 40 = 0.12: 4 %
+    assert not _solid_over_lump({"runs": runs})[0][1]
+    assert _solid_over_lump({"runs": runs[:2]}) == []           # no solid runs: no target
+    assert {variant_of(r) for r in runs} == {"tl", "solid"}
