@@ -109,7 +109,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     (params.json: fit-msm on that fold's training presses only; msm.h5 and splits.json: that
     MSM, sized to the footprint, sampled at the markers' layout) and runs/msm_foldK, or with
     --pretraining solid, per fold solid/foldK/ (solid.json: fit-solid on that fold's training
-    presses with the session's interior; solid.h5: that solid pressed at the markers) and
+    presses with the session's interior; states.h5: that solid pressed at the markers) and
     runs/solid_foldK (the shipped model pre-trained on it), fine-tuned into runs/exp_solid_*;
     runs/exp_tl_* and runs/exp_notl_* (fine-tuning per fold with transfer learning from the
     pre-trained model and the same from scratch);

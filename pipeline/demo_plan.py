@@ -306,7 +306,7 @@ def solid_steps(out: Path, s: Settings, states: Path, splits: Path,
     steps = []
     for fold in range(s.folds):
         d, run = solid_dir(out, fold), solid_pre_dir(out, fold)
-        solid, data, sp = d / "solid.json", d / "solid.h5", d / "splits.json"
+        solid, data, sp = d / "solid.json", d / "states.h5", d / "splits.json"   # each .rrd beside
         steps += [
             Step(("fit-solid", str(states), "--splits", str(splits), "--fold", str(fold),
                   "--session", str(out / "session"), "--out", str(solid)),
