@@ -51,6 +51,14 @@ def test_fewer_than_four_markers_are_refused():
         read_layout(Path("session.toml"), None, NAMES[:3])
 
 
+def test_the_interior_keys_are_read_elsewhere_and_leave_the_frame_as_it_was():
+    """``interior`` and ``[phantom.labels]`` belong to fit-solid (data_schema/interior.py):
+    the frame's layout is the same with them as without."""
+    plain = {"size_mm": [150, 80], "x_axis": ["M03", "M07"]}
+    inside = {**plain, "interior": "interior.nii.gz", "labels": {"1": 3.0}}
+    assert read_layout(Path("s.toml"), inside, NAMES) == read_layout(Path("s.toml"), plain, NAMES)
+
+
 def test_layout_round_trips_through_json():
     layout = read_layout(Path("s.toml"), {"size_mm": [150, 80], "x_axis": ["M03", "M07"],
                                           "anchor": "M00", "anchor_mm": [12.5, 10]}, NAMES)
