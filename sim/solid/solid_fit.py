@@ -7,7 +7,8 @@ weighed as much as the markers' together (:func:`weighted`). Each press's predic
 own rest plus the solid's displacement, so a marker's rest noise is not fitted. The modulus
 scales every unit response (no new solve), and the stiffening maps each state's size (no new
 solve); the Poisson ratio and the labels' ratios change the stiffness, so a new one is
-factorised (each distinct material once: a small cache).
+factorised, and the contact radius changes the loads, so each place is solved again (the last
+material's factorisation and responses are kept: :class:`Responses`).
 
 Uncertainty: a sandwich estimate with the presses as clusters (the states of one press are not
 independent), at the optimum, carried to each parameter by its Jacobian.
@@ -68,7 +69,8 @@ class SolidFit:
 
 @dataclass
 class Responses:
-    """Unit responses per place for one material's stiffness (cached by what changes it)."""
+    """Each press's unit responses for the last material asked for, and its factorisation:
+    kept until the Poisson ratio, a label's ratio or the contact radius changes."""
 
     model: SolidModel
     fractions: np.ndarray                   # (E, labels) each element's share of each label
@@ -121,56 +123,74 @@ def weighted(residual: np.ndarray) -> np.ndarray:
     return out
 
 
-def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int],
-              start: SolidMaterial, fit_poisson: bool = True) -> SolidFit:
-    """Least squares over the modulus, the stiffening, the Poisson ratio (``fit_poisson``)
-    and the ratios of ``fit_labels``, from ``start``."""
-    names = ["modulus", "stiffening", "contact_radius", "reach"] + \
-        (["poisson"] if fit_poisson else []) + [f"ratio_{k}" for k in fit_labels]
-    evaluations = 0
+@dataclass(frozen=True)
+class Coordinates:
+    """How a material is laid out for the least squares: the logarithms of the modulus, the
+    stiffening, the contact radius, the reach and the fitted labels' ratios, and the Poisson
+    ratio itself where it is fitted; with their bounds."""
 
-    def unpack(x: np.ndarray) -> SolidMaterial:
-        ratios = list(start.ratios)
-        for k, v in zip(fit_labels, x[len(x) - len(fit_labels):], strict=True):
+    start: SolidMaterial
+    labels: tuple[int, ...]           # the labels whose ratio is fitted
+    poisson: bool                     # whether the Poisson ratio is fitted
+    spacing: float                    # m, the mesh's: the contact radius stays above it
+
+    @property
+    def names(self) -> list[str]:
+        return ["modulus", "stiffening", "contact_radius", "reach"] + \
+            (["poisson"] if self.poisson else []) + [f"ratio_{k}" for k in self.labels]
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high): below the mesh's spacing the patch is one node whatever the radius
+        (a flat objective), so the contact radius stays within :data:`PATCH_SPACINGS`."""
+        radius = (max(CONTACT_RADIUS.min, PATCH_SPACINGS[0] * self.spacing),
+                  max(CONTACT_RADIUS.max, PATCH_SPACINGS[1] * self.spacing))
+        pairs = [(-np.inf, np.inf), tuple(np.log(STIFFENING_FIT)), tuple(np.log(radius)),
+                 (np.log(REACH.min), np.log(REACH.max))] + \
+            ([(POISSON.min, POISSON.max)] if self.poisson else []) + \
+            [tuple(np.log(RATIO_FIT))] * len(self.labels)
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    def pack(self, m: SolidMaterial) -> np.ndarray:
+        x = [np.log(m.modulus), np.log(m.stiffening), np.log(m.contact_radius),
+             np.log(m.reach)] + ([m.poisson] if self.poisson else []) + \
+            [np.log(m.ratios[k]) for k in self.labels]
+        lo, hi = self.bounds()
+        return np.clip(np.array(x, dtype=np.float64), lo + 1e-9, hi - 1e-9)
+
+    def unpack(self, x: np.ndarray) -> SolidMaterial:
+        ratios = list(self.start.ratios)
+        for k, v in zip(self.labels, x[len(x) - len(self.labels):], strict=True):
             ratios[k] = float(np.exp(v))
-        return SolidMaterial(modulus=float(np.exp(x[0])),
-                             stiffening=float(np.exp(x[1])),
+        return SolidMaterial(modulus=float(np.exp(x[0])), stiffening=float(np.exp(x[1])),
                              contact_radius=float(np.exp(x[2])), reach=float(np.exp(x[3])),
-                             poisson=float(x[4]) if fit_poisson else start.poisson,
+                             poisson=float(x[4]) if self.poisson else self.start.poisson,
                              ratios=tuple(ratios))
+
+
+def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int],
+              start: SolidMaterial, fit_poisson: bool = False) -> SolidFit:
+    """Least squares over the modulus, the stiffening, the contact radius, the reach, the
+    Poisson ratio (``fit_poisson``) and the ratios of ``fit_labels``, from ``start``."""
+    coords = Coordinates(start, tuple(fit_labels), fit_poisson, responses.model.spacing)
+    evaluations = 0
 
     def fun(x: np.ndarray) -> np.ndarray:
         nonlocal evaluations
         evaluations += 1
-        m = unpack(x)
+        m = coords.unpack(x)
         return np.concatenate([weighted(r).ravel() for r in
                                residuals(data, responses.at(data, m), m)])
 
-    x0 = [np.log(start.modulus), np.log(start.stiffening),
-          np.log(start.contact_radius), np.log(start.reach)] + \
-        ([start.poisson] if fit_poisson else []) + \
-        [np.log(start.ratios[k]) for k in fit_labels]
-    # below the mesh's spacing the patch is one node whatever the radius: a flat objective
-    radius = [np.log(max(CONTACT_RADIUS.min, PATCH_SPACINGS[0] * responses.model.spacing)),
-              np.log(max(CONTACT_RADIUS.max, PATCH_SPACINGS[1] * responses.model.spacing))]
-    reach = [np.log(REACH.min), np.log(REACH.max)]
-    poisson = ([POISSON.min], [POISSON.max]) if fit_poisson else ([], [])
-    stiff = np.log(STIFFENING_FIT)
-    lo = [-np.inf, stiff[0], radius[0], reach[0]] + poisson[0] + \
-        [np.log(RATIO_FIT[0])] * len(fit_labels)
-    hi = [np.inf, stiff[1], radius[1], reach[1]] + poisson[1] + \
-        [np.log(RATIO_FIT[1])] * len(fit_labels)
-    x0 = np.clip(np.array(x0, dtype=np.float64), np.array(lo) + 1e-9, np.array(hi) - 1e-9)
-    sol = least_squares(fun, x0, bounds=(lo, hi), diff_step=1e-3, x_scale="jac", xtol=1e-6,
-                        ftol=1e-8)
-    material = unpack(sol.x)
+    sol = least_squares(fun, coords.pack(start), bounds=coords.bounds(), diff_step=1e-3,
+                        x_scale="jac", xtol=1e-6, ftol=1e-8)
+    material = coords.unpack(sol.x)
     per_press = residuals(data, responses.at(data, material), material)
-    sd = _uncertainty(sol, per_press, names, material)
+    sd = _uncertainty(sol, per_press, coords.names)
     return _scored(data, per_press, material, sd, evaluations, responses.factorisations)
 
 
-def _uncertainty(sol: object, per_press: list[np.ndarray], names: list[str],
-                 material: SolidMaterial) -> dict[str, float]:
+def _uncertainty(sol: object, per_press: list[np.ndarray], names: list[str]
+                 ) -> dict[str, float]:
     """One sd per parameter: the press-clustered sandwich on the fitted coordinates, carried
     to the parameters (all but the Poisson ratio are fitted as logarithms)."""
     jac = np.asarray(sol.jac)
