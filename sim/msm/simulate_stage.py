@@ -161,7 +161,7 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                                      "STATES, and no --params (the MSM's)")
     solid, lab = read_solid(inputs.solid), read_layout(inputs.layout)
     protocol = p.protocol()
-    candidates = candidate_places(solid.model, lab.points)
+    candidates = candidate_places(solid.model, lab.points, solid.material.contact_radius)
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
     locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
     marker_rest = lab.points.copy()

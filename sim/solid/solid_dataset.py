@@ -15,9 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.errors import BadInput
 from sim.solid.elasticity import Solver
 from sim.solid.solid_fit import SolidMaterial
 from sim.solid.solid_model import Attachments, SolidModel, predict
+
+CLEARANCE_SHARE = 0.25      # a place stays this share of the markers' spacing from each
 
 
 @dataclass(frozen=True)
@@ -28,12 +31,26 @@ class SolidStates:
     tips: np.ndarray        # (L * D * T, 3) float32
 
 
-def candidate_places(model: SolidModel, markers: np.ndarray) -> np.ndarray:
-    """(C, 3) the top face's nodes inside the markers' bounding box (x, y)."""
+def candidate_places(model: SolidModel, markers: np.ndarray, contact_radius: float
+                     ) -> np.ndarray:
+    """(C, 3) the top face's nodes inside the markers' bounding box (x, y), clear of every
+    marker: further than the contact radius, or than a quarter of the markers' typical
+    spacing where that is less. A lab presses beside its markers, never on one (the twin
+    keeps two lattice spacings), and a marker under the tip's patch rides a load no lab
+    applies."""
     rest, _ = model.top_face()
     lo, hi = markers[:, :2].min(axis=0), markers[:, :2].max(axis=0)
     inside = np.all((rest[:, :2] >= lo - 1e-9) & (rest[:, :2] <= hi + 1e-9), axis=1)
-    return rest[inside]
+    between = np.linalg.norm(markers[:, None, :2] - markers[None, :, :2], axis=-1)
+    np.fill_diagonal(between, np.inf)
+    clearance = min(contact_radius, CLEARANCE_SHARE * float(np.median(between.min(axis=1))))
+    gap = np.linalg.norm(rest[:, None, :2] - markers[None, :, :2], axis=-1).min(axis=1)
+    found = rest[inside & (gap > clearance)]
+    if not len(found):
+        raise BadInput(None, f"no node of the solid's top face lies inside the markers' "
+                             f"bounding box and {clearance * 1e3:.1f} mm clear of them: fit "
+                             "the solid on a finer mesh (fit-solid --spacing-mm)")
+    return found
 
 
 def simulate_places(model: SolidModel, solver: Solver, material: SolidMaterial,

@@ -182,7 +182,7 @@ def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int]
                                residuals(data, responses.at(data, m), m)])
 
     sol = least_squares(fun, coords.pack(start), bounds=coords.bounds(), diff_step=1e-3,
-                        x_scale="jac", xtol=1e-6, ftol=1e-8)
+                        x_scale=1.0, xtol=1e-8, ftol=1e-10, gtol=1e-10)
     material = coords.unpack(sol.x)
     per_press = residuals(data, responses.at(data, material), material)
     sd = _uncertainty(sol, per_press, coords.names)

@@ -1,8 +1,11 @@
 """The solid phantom pressed at a place: the response of its markers and of the tip.
 
 A press is the tip's load ``F`` (N, a vector) on the silicone around the place it touches: a
-patch of the top face's nodes within ``contact_radius`` of it, weighted as a Hertz pressure
-(``sqrt(1 - r^2 / a^2)``, at least the nearest node). Linear elasticity makes every press at a
+patch of the top face's nodes within ``contact_radius`` ``a`` of it (at least the nearest
+node), weighted by the bump ``(1 - r^2 / a^2)^2``, which falls to zero with its slope at the
+patch's edge, so that a node entering the patch as the radius grows changes the load smoothly
+(a Hertz pressure, ``sqrt(1 - r^2 / a^2)``, enters with an infinite slope: the fit's radius
+then caught on the mesh's node distances). Linear elasticity makes every press at a
 place a sum of three unit responses (one per axis), each one back-substitution on the
 factorised stiffness, computed at unit modulus and scaled by ``1 / E``.
 
@@ -90,7 +93,7 @@ class SolidModel:
         inside = np.flatnonzero(r < contact_radius)
         if inside.size == 0:
             inside = np.array([int(np.argmin(r))])
-        share = np.sqrt(np.clip(1.0 - (r[inside] / contact_radius) ** 2, 1e-6, None))
+        share = np.clip(1.0 - (r[inside] / contact_radius) ** 2, 1e-12, None) ** 2
         return self._top_nodes[inside], share / share.sum()
 
     def probes(self, at: Attachments) -> Probes:

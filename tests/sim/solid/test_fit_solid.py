@@ -31,7 +31,7 @@ from sim.solid.solid_model import Attachments, SolidModel
 
 TOP, SPACING, LAYERS = -0.0015, 0.010, 4
 TRUE = SolidMaterial(modulus=1.5e4, stiffening=2000.0, poisson=0.3, ratios=(1.0, 2.5),
-                     contact_radius=0.011, reach=0.03)
+                     contact_radius=0.015, reach=0.03)
 MESH = ["--spacing-mm", "10", "--layers", "4"]
 
 

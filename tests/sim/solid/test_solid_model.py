@@ -50,7 +50,7 @@ def centre_press():
     model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, TOP), 0.010, 4)
     solver = model.factorise(np.ones(model.elasticity.n_elements), 0.3)
     place = np.array([[0.05, 0.05, TOP]])
-    return model.respond(solver, place, 0.011, model.probes(at))[0], at, markers
+    return model.respond(solver, place, 0.015, model.probes(at))[0], at, markers
 
 
 def test_no_force_leaves_every_point_at_rest(centre_press) -> None:
@@ -69,7 +69,7 @@ def test_a_normal_press_at_the_centre_moves_mirror_markers_alike(centre_press) -
     np.testing.assert_allclose(moved[:, :, 0], -moved[:, ::-1, 0], atol=1e-9)
     np.testing.assert_allclose(tip[0, :2], [0.05, 0.05], atol=1e-9)
     assert tip[0, 2] < TOP - 0.005                       # it dents
-    assert np.all(moved[:, :, 2] <= 1e-12) and moved[2, 2, 2] < moved[0, 0, 2]
+    assert moved[2, 2, 2] < moved[1, 1, 2] < moved[0, 0, 2]            # deepest at the centre
 
 
 def test_label_shares_follow_the_volume() -> None:
