@@ -133,27 +133,28 @@ class Coordinates:
     labels: tuple[int, ...]           # the labels whose ratio is fitted
     poisson: bool                     # whether the Poisson ratio is fitted
     spacing: float                    # m, the mesh's: the contact radius stays above it
+    reach: bool = True                # whether the reach is fitted (else held at the start's)
 
     @property
     def names(self) -> list[str]:
-        return ["modulus", "stiffening", "contact_radius", "reach"] + \
-            (["poisson"] if self.poisson else []) + [f"ratio_{k}" for k in self.labels]
+        return ["modulus", "stiffening", "contact_radius"] + (["reach"] if self.reach else []) \
+            + (["poisson"] if self.poisson else []) + [f"ratio_{k}" for k in self.labels]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(low, high): below the mesh's spacing the patch is one node whatever the radius
         (a flat objective), so the contact radius stays within :data:`PATCH_SPACINGS`."""
         radius = (max(CONTACT_RADIUS.min, PATCH_SPACINGS[0] * self.spacing),
                   max(CONTACT_RADIUS.max, PATCH_SPACINGS[1] * self.spacing))
-        pairs = [(-np.inf, np.inf), tuple(np.log(STIFFENING_FIT)), tuple(np.log(radius)),
-                 (np.log(REACH.min), np.log(REACH.max))] + \
+        pairs = [(-np.inf, np.inf), tuple(np.log(STIFFENING_FIT)), tuple(np.log(radius))] + \
+            ([(np.log(REACH.min), np.log(REACH.max))] if self.reach else []) + \
             ([(POISSON.min, POISSON.max)] if self.poisson else []) + \
             [tuple(np.log(RATIO_FIT))] * len(self.labels)
         return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
     def pack(self, m: SolidMaterial) -> np.ndarray:
-        x = [np.log(m.modulus), np.log(m.stiffening), np.log(m.contact_radius),
-             np.log(m.reach)] + ([m.poisson] if self.poisson else []) + \
-            [np.log(m.ratios[k]) for k in self.labels]
+        x = [np.log(m.modulus), np.log(m.stiffening), np.log(m.contact_radius)] + \
+            ([np.log(m.reach)] if self.reach else []) + \
+            ([m.poisson] if self.poisson else []) + [np.log(m.ratios[k]) for k in self.labels]
         lo, hi = self.bounds()
         return np.clip(np.array(x, dtype=np.float64), lo + 1e-9, hi - 1e-9)
 
@@ -161,32 +162,44 @@ class Coordinates:
         ratios = list(self.start.ratios)
         for k, v in zip(self.labels, x[len(x) - len(self.labels):], strict=True):
             ratios[k] = float(np.exp(v))
+        rest = list(x[3:])
+        reach = float(np.exp(rest.pop(0))) if self.reach else self.start.reach
+        poisson = float(rest.pop(0)) if self.poisson else self.start.poisson
         return SolidMaterial(modulus=float(np.exp(x[0])), stiffening=float(np.exp(x[1])),
-                             contact_radius=float(np.exp(x[2])), reach=float(np.exp(x[3])),
-                             poisson=float(x[4]) if self.poisson else self.start.poisson,
+                             contact_radius=float(np.exp(x[2])), reach=reach, poisson=poisson,
                              ratios=tuple(ratios))
 
 
 def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int],
               start: SolidMaterial, fit_poisson: bool = False) -> SolidFit:
     """Least squares over the modulus, the stiffening, the contact radius, the reach, the
-    Poisson ratio (``fit_poisson``) and the ratios of ``fit_labels``, from ``start``."""
-    coords = Coordinates(start, tuple(fit_labels), fit_poisson, responses.model.spacing)
-    evaluations = 0
+    Poisson ratio (``fit_poisson``) and the ratios of ``fit_labels``, from ``start``: first
+    with the reach held at the start's, then everything from there (the reach alone, from a
+    material far from the data, wanders to a bound where the tip's stiffening stands in for
+    the rest)."""
+    held = Coordinates(start, tuple(fit_labels), fit_poisson, responses.model.spacing,
+                       reach=False)
+    first = _least_squares(data, responses, held, start)
+    coords = Coordinates(held.unpack(first.x), tuple(fit_labels), fit_poisson,
+                         responses.model.spacing)
+    sol = _least_squares(data, responses, coords, coords.start)
+    material = coords.unpack(sol.x)
+    per_press = residuals(data, responses.at(data, material), material)
+    sd = _uncertainty(sol, per_press, coords.names)
+    return _scored(data, per_press, material, sd, first.nfev + sol.nfev,
+                   responses.factorisations)
 
+
+def _least_squares(data: MeasuredSet, responses: Responses, coords: Coordinates,
+                   start: SolidMaterial) -> object:
+    """One bounded least squares over ``coords`` from ``start`` (scipy's OptimizeResult)."""
     def fun(x: np.ndarray) -> np.ndarray:
-        nonlocal evaluations
-        evaluations += 1
         m = coords.unpack(x)
         return np.concatenate([weighted(r).ravel() for r in
                                residuals(data, responses.at(data, m), m)])
 
-    sol = least_squares(fun, coords.pack(start), bounds=coords.bounds(), diff_step=1e-3,
-                        x_scale=1.0, xtol=1e-8, ftol=1e-10, gtol=1e-10)
-    material = coords.unpack(sol.x)
-    per_press = residuals(data, responses.at(data, material), material)
-    sd = _uncertainty(sol, per_press, coords.names)
-    return _scored(data, per_press, material, sd, evaluations, responses.factorisations)
+    return least_squares(fun, coords.pack(start), bounds=coords.bounds(), diff_step=1e-3,
+                         x_scale=1.0, xtol=1e-8, ftol=1e-10, gtol=1e-10)
 
 
 def _uncertainty(sol: object, per_press: list[np.ndarray], names: list[str]
