@@ -162,6 +162,10 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
     solid, lab = read_solid(inputs.solid), read_layout(inputs.layout)
     protocol = p.protocol()
     candidates = candidate_places(solid.model, lab.points, solid.material.contact_radius)
+    if protocol.locations > len(candidates):
+        raise BadInput(inputs.solid, f"--locations {protocol.locations}: the solid's top face has "
+                                     f"{len(candidates)} nodes inside the markers' bounding box "
+                                     "clear of them (fit it on a finer --spacing-mm for more)")
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
     locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
     marker_rest = lab.points.copy()

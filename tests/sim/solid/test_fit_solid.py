@@ -196,3 +196,11 @@ def test_simulate_solid_needs_a_layout(lab: Path, fitted: dict, tmp_path: Path) 
     res = run("simulate", "--solid", lab / "solid.json", "--out", tmp_path / "x.h5")
     assert res.exit_code == 2 and "--layout" in res.stderr and res.stderr.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def test_more_places_than_the_solid_has_are_refused_in_its_words(lab: Path, fitted: dict,
+                                                                  tmp_path: Path) -> None:
+    res = run("simulate", "--solid", lab / "solid.json", "--layout", lab / "states.h5",
+              "--locations", 500, "--out", tmp_path / "x.h5")
+    assert res.exit_code == 2 and "nodes inside the markers' bounding box" in res.stderr
+    assert list(tmp_path.iterdir()) == []
