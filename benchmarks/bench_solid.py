@@ -108,7 +108,7 @@ def convergence() -> None:
     top = -0.0015
     grid = 0.010 + 0.020 * np.arange(5)
     markers = np.array([[x, y, 0.0] for y in grid for x in grid])
-    at = Attachments(np.c_[markers[:, :2], np.full(25, top)], np.full(25, -top))
+    at = Attachments.riding(markers, top)
     places = np.array([[0.05, 0.05, top], [0.03, 0.07, top], [0.07, 0.03, top]])
     far = np.linalg.norm(places[:, None, :2] - markers[None, :, :2], axis=-1) > 0.015
     found = []

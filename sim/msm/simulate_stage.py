@@ -168,10 +168,7 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                                      "clear of them (fit it on a finer --spacing-mm for more)")
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
     locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
-    marker_rest = lab.points.copy()
-    at = Attachments(surface=np.c_[marker_rest[:, :2],
-                                   np.full(len(marker_rest), solid.model.block.top_z)],
-                     height=marker_rest[:, 2] - solid.model.block.top_z)
+    at = Attachments.riding(lab.points, solid.model.block.top_z)
     used = replace(p, locations=protocol.locations, directions=protocol.directions,
                    thickness=solid.model.block.thickness)
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):

@@ -65,9 +65,7 @@ class MeasuredSet:
 
     def attachments(self) -> Attachments:
         """The markers riding on the top face at their rest (x, y)."""
-        surface = self.markers.copy()
-        surface[:, 2] = self.top_z
-        return Attachments(surface=surface, height=self.markers[:, 2] - self.top_z)
+        return Attachments.riding(self.markers, self.top_z)
 
 
 def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSet:

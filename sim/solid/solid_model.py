@@ -46,6 +46,14 @@ class Attachments:
     surface: np.ndarray     # (P, 3) the surface point under each (on the top face)
     height: np.ndarray      # (P,) m along the normal, above the surface (a marker's centre)
 
+    @classmethod
+    def riding(cls, rest: np.ndarray, top_z: float) -> Attachments:
+        """Markers resting at ``rest`` (P, 3) on a top face at height ``top_z``: each on the
+        surface point below it, as high above it as it rests."""
+        surface = np.array(rest, dtype=np.float64)
+        surface[:, 2] = top_z
+        return cls(surface=surface, height=np.asarray(rest, dtype=np.float64)[:, 2] - top_z)
+
 
 @dataclass(frozen=True)
 class PlaceResponse:

@@ -53,7 +53,7 @@ def _lab_states(path: Path, session: Path) -> None:
     0 .. 4 N, as a lab's states file: 25 markers 1.5 mm above the silicone, then the tip."""
     g = 0.010 + 0.020 * np.arange(5)
     markers = np.array([[x, y, 0.0] for y in g for x in g])
-    at = Attachments(np.c_[markers[:, :2], np.full(25, TOP)], np.full(25, -TOP))
+    at = Attachments.riding(markers, TOP)
     model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, TOP), SPACING, LAYERS)
     shares = label_shares(model.elasticity, read_interior(session / "interior.nii.gz"), 2)
     solver = model.factorise(shares @ np.array(TRUE.ratios), TRUE.poisson)

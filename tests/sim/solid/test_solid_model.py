@@ -46,7 +46,7 @@ def test_mesh_axes() -> None:
 def centre_press():
     grid = 0.010 + 0.020 * np.arange(5)
     markers = np.array([[x, y, 0.0] for y in grid for x in grid])
-    at = Attachments(np.c_[markers[:, :2], np.full(25, TOP)], np.full(25, -TOP))
+    at = Attachments.riding(markers, TOP)
     model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, TOP), 0.010, 4)
     solver = model.factorise(np.ones(model.elasticity.n_elements), 0.3)
     place = np.array([[0.05, 0.05, TOP]])
