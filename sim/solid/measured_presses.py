@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 
 from core.errors import BadInput
+from data_schema.hdf5 import attr_text
 from data_schema.states import footprint, validate_states
 from sim.solid.solid_model import Attachments
 
@@ -72,6 +73,9 @@ def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSe
     """The presses of ``path`` (``only``: these sequence ids, e.g. a fold's training presses)."""
     validate_states(path)
     with h5py.File(path, "r") as f:
+        if attr_text(f.attrs["source"]) == "msm" and "layout" not in f.attrs:
+            raise BadInput(path, "an MSM file of every mass has no tip as its last point: fit "
+                                 "the solid to lab states (or an MSM simulated with --layout)")
         seq, step = f["states/sequence"][()], f["states/step"][()]
         location = f["states/location"][()]
         points = f["states/points"][()].astype(np.float64)
@@ -94,6 +98,10 @@ def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSe
     if not presses:
         raise BadInput(path, "no press with a rest state and a loaded state to fit")
     rests = np.array([p.rest for p in presses])
+    unseen = np.flatnonzero(~np.isfinite(rests[:, :-1]).all(axis=2).any(axis=0))
+    if unseen.size:
+        raise BadInput(path, f"point {int(unseen[0])} is missing from every rest state: no place "
+                             "on the surface to attach it to")
     return MeasuredSet(presses, np.nanmedian(rests[:, :-1], axis=0), size,
                        float(np.median(rests[:, -1, 2])))
 

@@ -204,3 +204,22 @@ def test_more_places_than_the_solid_has_are_refused_in_its_words(lab: Path, fitt
               "--locations", 500, "--out", tmp_path / "x.h5")
     assert res.exit_code == 2 and "nodes inside the markers' bounding box" in res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_marker_never_seen_at_rest_or_a_file_without_a_tip_is_refused(lab: Path,
+                                                                         tmp_path: Path) -> None:
+    blind = tmp_path / "blind.h5"
+    blind.write_bytes((lab / "states.h5").read_bytes())
+    with h5py.File(blind, "r+") as f:
+        pts, valid = f["states/points"][()], f["states/valid"][()]
+        pts[:, 3] = np.nan
+        valid[:, 3] = False
+        f["states/points"][...], f["states/valid"][...] = pts, valid
+    res = run("fit-solid", blind, "--out", tmp_path / "x.json", *MESH)
+    assert res.exit_code == 2 and "point 3 is missing from every rest" in res.stderr
+    msm = tmp_path / "msm.h5"
+    assert run("simulate", "--locations", 2, "--directions", 1, "--out", msm,
+               "--no-rrd").exit_code == 0
+    res = run("fit-solid", msm, "--out", tmp_path / "y.json", *MESH)
+    assert res.exit_code == 2 and "no tip as its last point" in res.stderr
+    assert not list(tmp_path.glob("[xy]*"))
