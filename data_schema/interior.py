@@ -13,9 +13,17 @@ ratio to the block's silicone (label 0), or ``"fit"`` to have ``pipeline fit-sol
 The volume (``.nii`` / ``.nii.gz``, read with nibabel) holds whole labels; its affine maps a
 voxel's indices to millimetres in the phantom frame of the states (the footprint on
 [0, L] x [0, W], the rest surface at z = 0, +z out of the phantom), as a CT registered to the
-markers would. Refused in one line: a file nibabel cannot read, a volume that is not 3-D, NaN
-or a label that is not a whole number >= 0, a label without a ratio (or a ratio for a label the
-volume lacks), a ratio outside :data:`RATIO`, and a volume that does not cover the block.
+markers would. A CT's own intensities may stand in for the labels, with a table that gives each
+label its range of values, [low, high)::
+
+    [phantom.intensities]
+    0 = [-100.0, 150.0]              # the block's silicone
+    1 = [150.0, 600.0]               # the inclusion
+
+Refused in one line: a file nibabel cannot read, a volume that is not 3-D, NaN, a label that is
+not a whole number >= 0 (without a table), a voxel in no range or ranges that overlap (with
+one), a label without a ratio (or a ratio for a label the volume lacks), a ratio outside
+:data:`RATIO`, and a volume that does not cover the block.
 """
 
 from __future__ import annotations
@@ -69,9 +77,54 @@ class Interior:
         return [int(v) for v in np.unique(self.labels)]
 
 
-def read_interior(path: str | Path) -> Interior:
-    """The label volume at ``path``, checked (one line naming it where it is not one)."""
+def read_interior(path: str | Path, intensities: Mapping[str, object] | None = None
+                  ) -> Interior:
+    """The label volume at ``path``, checked (one line naming it where it is not one); with
+    ``intensities`` (``[phantom.intensities]``: label -> [low, high)), a volume of intensities
+    turned into labels by that table."""
     path = Path(path)
+    data, affine = _read_volume(path)
+    if intensities is not None:
+        return Interior(labels=labels_from_intensities(data, intensities, path), affine=affine)
+    if np.any(data < 0) or np.any(data != np.rint(data)):
+        raise BadInput(path, "labels must be whole numbers >= 0 (0 the block's silicone); a "
+                             "CT's intensities need a [phantom.intensities] table")
+    return Interior(labels=data.astype(np.int64), affine=affine)
+
+
+def labels_from_intensities(data: np.ndarray, table: Mapping[str, object], path: str | Path
+                            ) -> np.ndarray:
+    """Each voxel's label from its intensity: the label whose [low, high) holds it. Refused
+    where a range is not two increasing numbers, where two ranges overlap, or where a voxel
+    falls in none (how many, and their lowest and highest value)."""
+    ranges = sorted((_range(value, key, path) + (int(key),) for key, value in table.items()))
+    for (_, high, a), (low, _, b) in zip(ranges, ranges[1:], strict=False):
+        if low < high:
+            raise BadInput(path, f"[phantom.intensities] ranges of labels {a} and {b} overlap")
+    out = np.full(data.shape, -1, dtype=np.int64)
+    for low, high, label in ranges:
+        out[(data >= low) & (data < high)] = label
+    loose = data[out < 0]
+    if loose.size:
+        raise BadInput(path, f"{loose.size} voxel(s) fall in no [phantom.intensities] range "
+                             f"(values {loose.min():g} to {loose.max():g})")
+    return out
+
+
+def _range(value: object, key: object, path: str | Path) -> tuple[float, float]:
+    """A label's intensity range [low, high), checked."""
+    if not (isinstance(key, str) and key.isdigit()):
+        raise BadInput(path, f"[phantom.intensities] key {key!r} is not a label number")
+    ok = isinstance(value, list) and len(value) == 2 and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+    if not ok or not value[0] < value[1]:
+        raise BadInput(path, f"[phantom.intensities] label {key} = {value!r}: a range must be "
+                             "[low, high] with low < high")
+    return float(value[0]), float(value[1])
+
+
+def _read_volume(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A 3-D volume's finite values and its affine (mm), or one line naming the file."""
     try:
         raw = path.read_bytes()
         image = nib.Nifti1Image.from_bytes(gzip.decompress(raw) if raw[:2] == GZIP else raw)
@@ -84,11 +137,9 @@ def read_interior(path: str | Path) -> Interior:
         raise BadInput(path, f"the interior must be a 3-D label volume, not {data.ndim}-D")
     if not np.isfinite(data).all():
         raise BadInput(path, f"{int((~np.isfinite(data)).sum())} voxel(s) are NaN or infinite")
-    if np.any(data < 0) or np.any(data != np.rint(data)):
-        raise BadInput(path, "labels must be whole numbers >= 0 (0 the block's silicone)")
     if not np.isfinite(affine).all() or abs(np.linalg.det(affine[:3, :3])) < 1e-12:
         raise BadInput(path, "its affine is singular or not finite")
-    return Interior(labels=data.astype(np.int64), affine=affine)
+    return data, affine
 
 
 def write_interior(path: str | Path, labels: np.ndarray, affine: np.ndarray) -> None:
@@ -159,15 +210,19 @@ def session_interior(folder: str | Path) -> InteriorSpec | None:
     phantom = raw.get("phantom") or {}
     name = phantom.get("interior")
     if name is None:
-        if "labels" in phantom:
-            raise BadInput(toml, "[phantom.labels] without [phantom] interior")
+        for key in ("labels", "intensities"):
+            if key in phantom:
+                raise BadInput(toml, f"[phantom.{key}] without [phantom] interior")
         return None
     if not isinstance(name, str):
         raise BadInput(toml, f"phantom.interior must name a file, got {name!r}")
     path = Path(folder) / name
     if not path.is_file():
         raise BadInput(toml, f"phantom.interior names {name!r}, which does not exist")
-    interior = read_interior(path)
+    table = phantom.get("intensities")
+    if table is not None and not isinstance(table, dict):
+        raise BadInput(toml, "[phantom.intensities] must be a table of label = [low, high]")
+    interior = read_interior(path, table)
     labels = phantom.get("labels")
     if labels is not None and not isinstance(labels, dict):
         raise BadInput(toml, "[phantom.labels] must be a table of label = ratio")

@@ -10,7 +10,8 @@ session.toml's optional ``[phantom]`` table (lengths in mm, as labs measure them
                                  # (default: a square grid when their number is a square)
     anchor = "P00"               # with anchor_mm: this marker rests at anchor_mm in the
     anchor_mm = [10.0, 12.5]     # footprint; default: the markers' centroid at its centre
-    interior = "interior.nii.gz" # what lies inside, with [phantom.labels]: read by fit-solid
+    interior = "interior.nii.gz" # what lies inside, with [phantom.labels] (and a CT's
+                                 # [phantom.intensities]): read by fit-solid
                                  # (data_schema/interior.py), not by the frame
 
 Ingest keeps it in the MCAP's ``session`` record and sync in the synced file's ``phantom``
@@ -30,7 +31,7 @@ from core.protocol import FOOTPRINT_M
 
 MIN_MARKERS = 4          # a rest plane and an in-plane axis need at least this many markers
 KEYS = ("size_mm", "x_axis", "rows", "anchor", "anchor_mm")
-INTERIOR_KEYS = ("interior", "labels")   # what lies inside: data_schema/interior.py
+INTERIOR_KEYS = ("interior", "labels", "intensities")   # what lies inside: data_schema/interior.py
 
 
 @dataclass(frozen=True)

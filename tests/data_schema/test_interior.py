@@ -117,3 +117,45 @@ def test_session_toml_names_the_volume_and_its_labels(tmp_path: Path) -> None:
     missing = _session(tmp_path / "m", 'interior = "absent.nii.gz"')
     with pytest.raises(BadInput, match="does not exist"):
         session_interior(missing)
+
+
+def _ct(labels: np.ndarray, seed: int = 0) -> np.ndarray:
+    """A CT-like volume of ``labels``: silicone about 60, the inclusion about 300 (HU-like),
+    each voxel with noise."""
+    noise = np.random.default_rng(seed).normal(0.0, 15.0, labels.shape)
+    return np.where(labels == 1, 300.0, 60.0) + noise
+
+
+def test_a_ct_with_an_intensity_table_gives_the_labels_it_was_made_from(tmp_path: Path
+                                                                        ) -> None:
+    labels, affine = _ball()
+    folder = _session(tmp_path / "s", 'interior = "ct.nii.gz"\n[phantom.labels]\n1 = 3.0\n'
+                                      '[phantom.intensities]\n0 = [-1000, 180]\n1 = [180, 3000]')
+    nib.save(nib.Nifti1Image(_ct(labels).astype(np.float32), affine), str(folder / "ct.nii.gz"))
+    spec = session_interior(folder)
+    assert spec is not None and spec.ratios == {0: 1.0, 1: 3.0}
+    assert np.array_equal(spec.interior.labels, labels)
+
+
+@pytest.mark.parametrize(("table", "match"), [
+    ('0 = [-1000, 100]\n1 = [180, 3000]', r"voxel\(s\) fall in no .* range"),
+    ('0 = [-1000, 200]\n1 = [180, 3000]', "ranges of labels 0 and 1 overlap"),
+    ('0 = [180, -1000]\n1 = [180, 3000]', "low < high"),
+    ('x = [0, 1]', "not a label number"),
+])
+def test_an_intensity_table_that_does_not_sort_every_voxel_is_refused(
+        tmp_path: Path, table: str, match: str) -> None:
+    labels, affine = _ball((20, 20, 20))
+    folder = _session(tmp_path / "s", f'interior = "ct.nii"\n[phantom.intensities]\n{table}')
+    nib.save(nib.Nifti1Image(_ct(labels).astype(np.float32), affine), str(folder / "ct.nii"))
+    with pytest.raises(BadInput, match=match) as e:
+        session_interior(folder)
+    assert "\n" not in e.value.line()
+
+
+def test_a_ct_without_its_table_is_refused_as_no_label_map(tmp_path: Path) -> None:
+    labels, affine = _ball((20, 20, 20))
+    path = tmp_path / "ct.nii"
+    nib.save(nib.Nifti1Image(_ct(labels).astype(np.float32), affine), str(path))
+    with pytest.raises(BadInput, match="need a \\[phantom.intensities\\] table"):
+        read_interior(path)
