@@ -3,6 +3,7 @@ folds, and what the intervals cost a prediction (docs/results.md, "How sure the 
 
     python benchmarks/bench_intervals.py DEMO_OUT [--folds 0 1 2 3 4] [--members 4] [--variant tl]
     python benchmarks/bench_intervals.py --latency
+    python benchmarks/bench_intervals.py DEMO_OUT --misses [--variant tl notl solid]
 
 ``DEMO_OUT`` is a ``pipeline demo --quick`` folder. Per fold, the run ``runs/exp_<variant>_foldK``
 (its best.pt keeps the conformal table, calibrated on the fold's validation presses) and
@@ -14,6 +15,12 @@ conformal: a point's radius is q x its members' RMS distance from their mean, q 
 ``ceil((n + 1) level)``-th smallest error / spread over the calibration points; the force
 alike). Printed per fold and pooled, at 80, 90 and 95 %: the share of test points inside
 their radius and the mean radius, the same for the force, for both.
+
+``--misses``: where the force's 90 % interval misses on the folds' test presses (pooled over
+the folds): by the example's end force (thirds), by place (the states' location), and the
+share the fold's stored tables would cover on average had their calibration presses been
+drawn at random among the fold's held-out presses (the same number, 100 draws a fold): a
+rule calibrated on average whose share still falls short was dealt hard test presses.
 
 ``--latency``: the predictor's batch-1 latency on a known mesh (26 and 1024 points, ONNX
 Runtime, head offsets) with and without ``level=0.9``, the press repeated and a moving tip,
@@ -33,14 +40,22 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from train.data import example_pairs, load_manifest, make_batch, role_examples  # noqa: E402
+from train.data import (  # noqa: E402
+    SETS,
+    example_groups,
+    example_pairs,
+    load_manifest,
+    make_batch,
+    role_examples,
+)
 from train.evaluation.coverage import coverage, coverage_doc  # noqa: E402
+from train.evaluation.coverage_band import redrawn_counts  # noqa: E402
 from train.evaluation.evaluate import LoadedRun, load_run  # noqa: E402
-from train.intervals.levels import REPORTED  # noqa: E402
+from train.intervals.levels import REPORTED, level_index  # noqa: E402
 from train.intervals.quantiles import conformal_quantile  # noqa: E402
 from train.model.config import CGNNConfig  # noqa: E402
 from train.model.si_units import distances, predict  # noqa: E402
-from train.training.calibrate import residuals  # noqa: E402
+from train.training.calibrate import Residuals, joined, residuals  # noqa: E402
 from train.training.checkpoint import load_checkpoint  # noqa: E402
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams  # noqa: E402
 from train.training.train_stage import run_train  # noqa: E402
@@ -164,6 +179,46 @@ def _mean_rows(per_fold: list[list[dict]], points: list[int], examples: list[int
     return out
 
 
+def held_out(run: LoadedRun) -> tuple[Residuals, np.ndarray, np.ndarray, np.ndarray]:
+    """A run's residuals on its validation then test examples, each example's press and end
+    state, and which are test examples."""
+    doc = load_manifest(run.splits, Path(run.meta["data"]["file"]))
+    groups = example_groups(run.meta["data"]["file"], doc["group_by"])
+    roles = (role_examples(doc, run.meta["options"]["fold"], "val"), run.test)
+    pairs = [example_pairs(run.states, ids) for ids in roles]
+    r = joined([residuals(run.model, run.norm, run.states, p) for p in pairs])
+    press = np.concatenate([groups[s][ids[s]] for ids in roles for s in SETS])
+    test = np.repeat([False, True], [len(p) for p in pairs])
+    return r, press, torch.cat(pairs)[:, 1].numpy(), test
+
+
+def misses(demo: Path, folds: list[int], variant: str, level: float = 0.9) -> None:
+    """Where the force's ``level`` interval (one of REPORTED) misses on the test presses,
+    pooled over ``folds`` (by end force in thirds and by place), and its share with re-drawn
+    calibration presses (:func:`~train.evaluation.coverage_band.redrawn_counts`)."""
+    i, shown = level_index(level), REPORTED.index(level)
+    miss, force, place, drawn = [], [], [], np.zeros(2)
+    for fold in folds:
+        run = load_run(demo / "runs" / f"exp_{variant}_fold{fold}")
+        r, press, end, test = held_out(run)
+        half = run.intervals.force.widths(i, *r.force_features[test].T)
+        miss.append(np.abs(r.force_error[test]) > half)
+        force.append(run.states.force.numpy()[end[test]])
+        place.append(np.asarray(run.states.location)[end[test]])
+        counts = redrawn_counts(r, press, run.intervals.presses, fold, draws=100)
+        drawn += counts[:, shown, 2:].sum(0)
+    miss, force, place = (np.concatenate(v) for v in (miss, force, place))
+    thirds = np.searchsorted(np.quantile(force, [1 / 3, 2 / 3]), force)
+    print(f"{variant}: force {level:.0%} interval misses {miss.mean():.1%} of {len(miss)} test "
+          f"examples; with the calibration presses re-drawn {1 - drawn[0] / drawn[1]:.1%}")
+    cut = [thirds == k for k in range(3)]
+    print("  by end force, thirds: " + ", ".join(
+        f"{force[k].min():.1f}-{force[k].max():.1f} N {miss[k].mean():.1%}" for k in cut))
+    at = [place == p for p in np.unique(place)]
+    print("  by place: " + ", ".join(f"{int(place[k][0])} {miss[k].mean():.1%} ({k.sum()})"
+                                    for k in at))
+
+
 def latency(repeats: int = 3000) -> None:
     """Known-mesh batch-1 latency with and without intervals: bench_cgnn.py's surfaces, press
     and head-offset network (ONNX Runtime), a table of 24 point bins and 4 force bins; the
@@ -210,14 +265,18 @@ def main() -> None:
     ap.add_argument("demo", nargs="?", type=Path)
     ap.add_argument("--folds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--members", type=int, default=4)
-    ap.add_argument("--variant", choices=("tl", "notl"), default="tl")
+    ap.add_argument("--variant", choices=("tl", "notl", "solid"), nargs="+", default=["tl"])
     ap.add_argument("--latency", action="store_true")
+    ap.add_argument("--misses", action="store_true")
     a = ap.parse_args()
     torch.set_num_threads(1)
     if a.latency:
         latency()
-    if a.demo is not None:
-        compare(a.demo, a.folds, a.members, a.variant)
+    if a.demo is not None and a.misses:
+        for variant in a.variant:
+            misses(a.demo, a.folds, variant)
+    elif a.demo is not None:
+        compare(a.demo, a.folds, a.members, a.variant[0])
 
 
 if __name__ == "__main__":
