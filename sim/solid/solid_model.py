@@ -75,8 +75,8 @@ class Probes:
     n_points: int
 
     def field(self, matrix: sp.csr_matrix, u: np.ndarray) -> np.ndarray:
-        """(3 loads, P, 3) the fields ``u`` (N, 3) through ``matrix`` (component-major)."""
-        return (matrix @ u).reshape(3, self.n_points, 3).transpose(2, 1, 0)
+        """(K, P, 3) the K fields ``u`` (N, K) through ``matrix`` (component-major)."""
+        return (matrix @ u).reshape(3, self.n_points, -1).transpose(2, 1, 0)
 
 
 class SolidModel:
@@ -122,7 +122,7 @@ class SolidModel:
         """Unit responses at each of ``places`` (P, 3): three back-substitutions a place, all
         in one call."""
         basis = self.elasticity.basis
-        patches = [self._unit_loads(p, contact_radius) for p in places]
+        patches = [self.unit_loads(p, contact_radius) for p in places]
         u = solver.solve(np.concatenate([loads for loads, _, _ in patches], axis=1))
         out = []
         for i, (place, (_, nodes, share)) in enumerate(zip(places, patches, strict=True)):
@@ -135,10 +135,22 @@ class SolidModel:
                                      tip=tip))
         return out
 
+    def observe(self, fields: np.ndarray, place: np.ndarray, contact_radius: float,
+                probes: Probes, at: Attachments) -> tuple[np.ndarray, np.ndarray]:
+        """The attached points (T, P, 3) and the tip (T, 3) of the fields (T, N) of a press at
+        ``place`` (the tip: its patch's load-weighted displacement), however they were
+        solved (the neo-Hookean solid's)."""
+        nodes, share = self.patch(place, contact_radius)
+        dofs = self.elasticity.basis.nodal_dofs[:, nodes]                 # (3, nodes)
+        tip = np.asarray(place, float)[None] + fields[:, dofs] @ share    # (T, 3)
+        disp, xlo, xhi, ylo, yhi = (probes.field(m, fields.T) for m in probes.matrices)
+        return ride(at, disp, (xhi - xlo) / probes.steps[0][None, :, None],
+                    (yhi - ylo) / probes.steps[1][None, :, None]), tip
+
     def surface(self, solver: Solver, place: np.ndarray, contact_radius: float
                 ) -> np.ndarray:
         """(3 loads, top nodes, 3) the top face's unit responses at ``place`` (for a view)."""
-        u = solver.solve(self._unit_loads(place, contact_radius)[0])
+        u = solver.solve(self.unit_loads(place, contact_radius)[0])
         basis = self.elasticity.basis
         return np.stack([u[basis.nodal_dofs[:, self._top_nodes], k].T for k in range(3)])
 
@@ -147,7 +159,7 @@ class SolidModel:
         rest = self.elasticity.mesh.p[:, self._top_nodes].T
         return rest, Delaunay(self._top_xy).simplices
 
-    def _unit_loads(self, place: np.ndarray, contact_radius: float
+    def unit_loads(self, place: np.ndarray, contact_radius: float
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(N, 3) the patch's unit loads along x, y and z; its nodes and their shares."""
         basis = self.elasticity.basis
@@ -209,9 +221,13 @@ def predict(resp: PlaceResponse, loads: np.ndarray, modulus: float, stiffening: 
     disp = np.einsum("tk,kpc->tpc", loads, resp.points) / modulus * scale
     gx = np.einsum("tk,kpc->tpc", loads, resp.slope_x) / modulus * scale
     gy = np.einsum("tk,kpc->tpc", loads, resp.slope_y) / modulus * scale
-    tx = gx + np.array([1.0, 0.0, 0.0])
-    ty = gy + np.array([0.0, 1.0, 0.0])
-    normal = np.cross(tx, ty)
+    return ride(at, disp, gx, gy), resp.place[None] + tip * s_tip[:, None]
+
+
+def ride(at: Attachments, disp: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """(T, P, 3) the attached points on a surface moved by ``disp`` (T, P, 3) with slopes
+    ``gx``, ``gy`` (T, P, 3: d disp / dx, dy there): each on its surface point, turned with
+    the surface's normal."""
+    normal = np.cross(gx + np.array([1.0, 0.0, 0.0]), gy + np.array([0.0, 1.0, 0.0]))
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    points = at.surface[None] + disp + at.height[None, :, None] * normal
-    return points, resp.place[None] + tip * s_tip[:, None]
+    return at.surface[None] + disp + at.height[None, :, None] * normal
