@@ -2,6 +2,7 @@
 
     python benchmarks/bench_solid.py --states STATES.h5 [--session SESSION_DIR] [--msm]
         [--splits S.json --fold K] [--lump X,Y,R] [--convergence] [--repeats 3]
+    python benchmarks/bench_solid.py --states STATES.h5 --hyperelastic SOLID.json [--presses 4]
 
 Prints, beside the host's figure (``core.host_speed``):
 
@@ -17,6 +18,13 @@ Prints, beside the host's figure (``core.host_speed``):
    the elements along each axis a step), the change from one step to the next (every marker,
    the markers beyond 15 mm of the press, the tip), with a 10 mm contact patch on every mesh;
    and the Hertz check's force against Hertz's at 0.9 and 1.2 mm on three meshes.
+4. with ``--hyperelastic SOLID.json`` (fit-solid's, on these states): the trade between the
+   candidates on ``--presses`` presses of the states (each at another place): the linear
+   solid as fitted (its stiffening law), linear elasticity alone (the modulus refitted to
+   these presses) and the neo-Hookean solid (``sim/solid/neo_hookean.py``; its modulus
+   refitted to these presses: one Newton path a press, its loads scaled, since a neo-Hookean
+   field under load F at modulus E is the field under F E0 / E at E0): each one's mean
+   distance (every point, mm), seconds a press, Newton steps.
 
 Times are medians of ``--repeats`` runs, each in a fresh process state (the model rebuilt).
 """
@@ -150,6 +158,101 @@ def hertz() -> None:
               f"{ratio[0]:.3f}, {ratio[1]:.3f}")
 
 
+HYPER_GRID = 24            # loads along a press's Newton path
+HYPER_RANGE = (1.0, 20.0)  # the refitted modulus, in the linear fit's (neo-Hookean softens)
+
+
+def hyperelastic(states: Path, solid_json: Path, count: int, host: float) -> None:
+    """The candidates' distance and seconds on ``count`` presses (each at another place)."""
+    from sim.solid.elasticity import Material
+    from sim.solid.measured_presses import read_presses
+    from sim.solid.neo_hookean import NeoHookean
+    from sim.solid.solid_file import read_solid
+    from sim.solid.solid_model import predict
+
+    solid, data = read_solid(solid_json), read_presses(states)
+    m, model = solid.material, solid.model
+    _, first = np.unique([p.location for p in data.presses], return_index=True)
+    presses = [data.presses[i] for i in sorted(first)[:count]]
+    at = data.attachments()
+    probes = model.probes(at)
+    started = time.perf_counter()
+    solver = solid.factorise()
+    resps = model.respond(solver, np.array([p.rest[-1] for p in presses]), m.contact_radius,
+                          probes)
+    lin_s = (time.perf_counter() - started) / len(presses)
+    loads = [np.vstack([np.zeros(3), p.loads(r.tip)]) for p, r in zip(presses, resps,
+                                                                         strict=True)]
+    neo = NeoHookean(model.elasticity, Material(solid.element_ratios * m.modulus, m.poisson))
+    paths, steps, neo_s = [], [], []
+    for press, resp, load in zip(presses, resps, loads, strict=True):
+        tic = time.perf_counter()
+        paths.append(_newton_path(neo, model, resp.place, load, m.contact_radius, probes, at,
+                                  steps))
+        neo_s.append(time.perf_counter() - tic)
+        print(f"  neo-Hookean press {press.sequence}: {neo_s[-1]:.0f} s, "
+              f"{len(paths[-1][0]) - 1} of {HYPER_GRID} loads solved", flush=True)
+
+    def linear(scale: float, stiffening: float) -> float:
+        return _distance(presses, [predict(r, ld, m.modulus * scale, stiffening, m.reach, at)
+                                   for r, ld in zip(resps, loads, strict=True)])
+
+    def hyper(scale: float) -> float:
+        found = [_along(path, ld, scale) for path, ld in zip(paths, loads, strict=True)]
+        return np.inf if any(f is None for f in found) else _distance(presses, found)
+
+    scales = np.geomspace(*HYPER_RANGE, 60)
+    pure = min(scales, key=lambda k: linear(k, 0.0))
+    best = min(scales, key=hyper)
+    print(f"| candidate | distance, every point (mm) | modulus (Pa) | seconds a press "
+          f"| x host a press |\n|---|---|---|---|---|\n"
+          f"| linear, its stiffening law (as fitted) | {linear(1.0, m.stiffening):.3f} | "
+          f"{m.modulus:.0f} | {lin_s:.2f} | {lin_s / host:.2f} |\n"
+          f"| linear elasticity alone | {linear(pure, 0.0):.3f} | {m.modulus * pure:.0f} | "
+          f"{lin_s:.2f} | {lin_s / host:.2f} |\n"
+          f"| neo-Hookean, Newton ({np.median(steps):.0f} steps a load, median) | "
+          f"{hyper(best):.3f} | {m.modulus * best:.0f} | {np.median(neo_s):.0f} | "
+          f"{np.median(neo_s) / host:.0f} |")
+
+
+def _newton_path(neo, model, place, load, radius, probes, at, steps):  # noqa: ANN001, ANN202
+    """A press's points and tip along HYPER_GRID loads up to its deepest (scaled to the
+    lowest modulus of HYPER_RANGE), as far as Newton reaches: (fractions, points, tip, the
+    deepest load's size)."""
+    deepest = load[np.argmax(np.linalg.norm(load, axis=1))] / HYPER_RANGE[0]
+    fractions = np.linspace(0.0, 1.0, HYPER_GRID + 1)
+    unit = model.unit_loads(place, radius)[0] @ deepest                  # (N,)
+    solved = neo.press(fractions[1:, None] * unit[None], partial=True)
+    steps.extend(solved.steps)
+    fields = np.vstack([np.zeros((1, len(unit))), solved.fields])
+    pts, tip = model.observe(fields, place, radius, probes, at)
+    return fractions[:len(fields)], pts, tip, float(np.linalg.norm(deepest))
+
+
+def _along(path, load, scale):  # noqa: ANN001, ANN202
+    """A press's points and tip at its loads (T, 3) for the modulus ``scale`` x the fit's,
+    interpolated along its Newton path; None where a load lies past the path's end."""
+    fractions, pts, tip, deepest = path
+    f = np.linalg.norm(load, axis=1) / (scale * deepest)
+    if f.max() > fractions[-1] + 1e-12:
+        return None
+    i = np.clip(np.searchsorted(fractions, f) - 1, 0, len(fractions) - 2)
+    w = ((f - fractions[i]) / (fractions[i + 1] - fractions[i]))[:, None]
+    return (pts[i] * (1 - w[..., None]) + pts[i + 1] * w[..., None],
+            tip[i] * (1 - w) + tip[i + 1] * w)
+
+
+def _distance(presses, predicted) -> float:  # noqa: ANN001
+    """Mean distance (mm) of every point (the markers and the tip) over the presses' loaded
+    states, each press's prediction moved onto its own rest."""
+    found = []
+    for press, (pts, tip) in zip(presses, predicted, strict=True):
+        moved = np.concatenate([pts, tip[:, None]], axis=1)
+        d = np.linalg.norm(press.rest[None] + moved[1:] - moved[:1] - press.states, axis=-1)
+        found.append(d[np.isfinite(d)])
+    return float(np.concatenate(found).mean() * 1e3)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--states", type=Path)
@@ -160,12 +263,17 @@ def main() -> None:
     ap.add_argument("--lump", help="X,Y,R mm: the fit's distance over the lump and away")
     ap.add_argument("--convergence", action="store_true")
     ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--hyperelastic", type=Path, metavar="SOLID.json",
+                    help="the candidates' trade on --presses presses of --states")
+    ap.add_argument("--presses", type=int, default=4)
     a = ap.parse_args()
     from core.host_speed import host_speed
 
     host = host_speed()
     print(f"host figure {host:.2f} s")
-    if a.states is not None:
+    if a.states is not None and a.hyperelastic is not None:
+        hyperelastic(a.states, a.hyperelastic, a.presses, host)
+    elif a.states is not None:
         fit_and_simulate(a, host)
     if a.convergence:
         convergence()

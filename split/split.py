@@ -3,8 +3,12 @@
 Groups (``states/sequence``: one press or MSM location x direction; or ``states/location``:
 one place) never cross roles within a fold. A ratio train:val:test of the G groups gives
 n_test = round(G c / (a + b + c)), n_val = round(G b / (a + b + c)), the rest train. Groups are
-shuffled once with the seed; fold f tests the n_test groups starting at round(f G / K) of that
-order (cyclically), so test sets are disjoint when K n_test <= G and cover every group when
+shuffled once with the seed; where presses repeat places (each group's place given), they are
+then dealt place by place, so that neighbours in the order lie at different places and every
+fold's test and validation presses spread over the places (a fold that tests most presses of
+one place while calibrating its intervals on none of them covers by chance: docs/results.md,
+"Why the force's interval missed"). Fold f tests the n_test groups starting at round(f G / K)
+of that order (cyclically), so test sets are disjoint when K n_test <= G and cover every group when
 K n_test >= G (the manifest's ``note`` says which held); validation groups are taken from the
 remaining ones, turning with the fold; training subsets 1..n are prefixes of a seeded order of
 the fold's training groups (nested, for the data-scarcity study). An example belongs to the group
@@ -44,9 +48,11 @@ def role_counts(n_groups: int, ratio: tuple[int, int, int]) -> tuple[int, int, i
     return n_train, n_val, n_test
 
 
-def make_folds(groups: np.ndarray, plan: SplitParams) -> tuple[list[dict], str]:
+def make_folds(groups: np.ndarray, plan: SplitParams, places: dict[int, int] | None = None
+               ) -> tuple[list[dict], str]:
     """Per fold the train/val/test group ids and the nested training subsets, and a note;
-    ``plan`` with the data's defaults filled in (its ``ratio`` given)."""
+    ``plan`` with the data's defaults filled in (its ``ratio`` given); ``places``: each
+    group's place, where groups repeat places (:func:`spread_over_places`)."""
     ids = np.unique(groups)
     g = len(ids)
     if plan.folds < 1:
@@ -54,6 +60,8 @@ def make_folds(groups: np.ndarray, plan: SplitParams) -> tuple[list[dict], str]:
     n_train, n_val, n_test = role_counts(g, plan.ratio)
     rng = np.random.default_rng(plan.seed)
     order = ids[rng.permutation(g)]
+    if places is not None and len(set(places.values())) < g:
+        order = spread_over_places(order, places, rng)
     folds = []
     for f in range(plan.folds):
         start = round(f * g / plan.folds)
@@ -66,6 +74,20 @@ def make_folds(groups: np.ndarray, plan: SplitParams) -> tuple[list[dict], str]:
         folds.append({"fold": f, "groups": {"train": train, "val": val, "test": test},
                       "train_subsets": [train[:n] for n in range(1, len(train) + 1)]})
     return folds, _note(g, n_test, plan.folds)
+
+
+def spread_over_places(order: np.ndarray, places: dict[int, int], rng: np.random.Generator
+                       ) -> np.ndarray:
+    """The groups of ``order`` dealt place by place: the places in a seeded order, each turn
+    the next group (in ``order``) of every place that has one left."""
+    by_place: dict[int, list] = {}
+    for group in order:
+        by_place.setdefault(int(places[int(group)]), []).append(group)
+    keys = sorted(by_place)
+    piles = [by_place[keys[i]] for i in rng.permutation(len(keys))]
+    dealt = [pile[turn] for turn in range(max(map(len, piles))) for pile in piles
+             if turn < len(pile)]
+    return np.array(dealt, dtype=order.dtype)
 
 
 def _note(g: int, n_test: int, folds: int) -> str:

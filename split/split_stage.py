@@ -60,7 +60,8 @@ def build_manifest(states: str | Path, plan: SplitParams) -> dict:
     validate_states(states)
     eg = example_groups(states, plan.group_by)
     try:
-        folds, note = make_folds(np.concatenate(list(eg.values())), plan)
+        folds, note = make_folds(np.concatenate(list(eg.values())), plan,
+                                 group_places(states, plan.group_by))
     except BadInput as e:                       # a plan that does not fit: name the file
         raise (BadInput(states, e.what) if e.path is None else e) from None
     out = []
@@ -77,6 +78,16 @@ def build_manifest(states: str | Path, plan: SplitParams) -> dict:
         "provenance": make_provenance("split", asdict(plan), [states], FOLDS.name,
                                       FOLDS.version),
     }
+
+
+def group_places(states: str | Path, group_by: str) -> dict[int, int] | None:
+    """Each group's place (``states/location``) where groups are presses; None where they are
+    places already."""
+    if group_by == "location":
+        return None
+    with h5_reading(states), h5py.File(states, "r") as f:
+        group, place = f[f"states/{group_by}"][()], f["states/location"][()]
+    return {int(g): int(p) for g, p in zip(group, place, strict=True)}
 
 
 def write_manifest(out: str | Path, doc: dict) -> None:

@@ -11,8 +11,9 @@ assembles both forms (trilinear hexahedra, the linear solid's basis), the stress
 computed once per step at the quadrature points.
 
 A press is a sequence of loads (one per state): each is solved from the last one's field by
-full Newton steps, the tangent factorised anew each step; a step that inverts an element
-(``J <= 0``) or a load that does not converge is refused in one line. This is many
+Newton steps, the tangent factorised anew each step and a step halved while it would turn an
+element inside out; a load that still inverts one, or does not converge, is refused in one
+line. This is many
 factorisations a state where the linear solid needs none: ``benchmarks/bench_solid.py
 --hyperelastic`` measures the trade.
 """
@@ -31,6 +32,7 @@ from sim.solid.elasticity import Elasticity, Material
 
 STEP_TOL = 1e-6      # a Newton step below this share of the field's size: converged
 MOST_STEPS = 25      # Newton steps a load may take
+HALVINGS = 12        # a step that inverts an element is halved at most this often
 
 
 @LinearForm
@@ -72,35 +74,62 @@ class NeoHookean:
         """The tangent stiffness (N, N) at the field ``u``."""
         return asm(_tangent, self.elasticity.basis, **self._stress(u)).tocsr()
 
-    def press(self, loads: np.ndarray) -> Solved:
-        """The fields under each of ``loads`` (T, N) N in turn, each from the last."""
+    def press(self, loads: np.ndarray, partial: bool = False) -> Solved:
+        """The fields under each of ``loads`` (T, N) N in turn, each from the last; with
+        ``partial``, those solved before the first load that fails (none refused)."""
         u = np.zeros(self.elasticity.basis.N)
         fields, steps = [], []
         for t, load in enumerate(loads):
-            steps.append(self._newton(u, load, t))
+            try:
+                steps.append(self._newton(u, load, t))
+            except ValueError:
+                if not partial:
+                    raise
+                break
             fields.append(u.copy())
-        return Solved(np.array(fields), np.array(steps))
+        return Solved(np.array(fields).reshape(len(fields), len(u)), np.array(steps, int))
 
     def _newton(self, u: np.ndarray, load: np.ndarray, t: int) -> int:
-        """Full Newton steps on ``u`` (in place) until it carries ``load``; how many it took."""
+        """Newton steps on ``u`` (in place) until it carries ``load``, each step halved while
+        it would turn an element inside out; how many steps it took."""
         free = self.elasticity.free
         for step in range(1, MOST_STEPS + 1):
             residual = self.internal(u) - load
             k = self.tangent(u)[free][:, free].tocsc()
             du = spla.splu(k, permc_spec="COLAMD").solve(-residual[free])
-            u[free] += du
+            u[free] += self._admissible(u, du)
             if np.linalg.norm(du) <= STEP_TOL * np.linalg.norm(u):
                 return step
         raise ValueError(f"load {t}: Newton did not converge in {MOST_STEPS} steps")
 
-    def _stress(self, u: np.ndarray) -> dict[str, np.ndarray]:
-        """P, F^-T, mu - lambda ln J, mu and lambda at the quadrature points of ``u``."""
+    def _admissible(self, u: np.ndarray, du: np.ndarray) -> np.ndarray:
+        """``du`` (on the free unknowns), halved until ``u + du`` turns no element inside out;
+        refused where :data:`HALVINGS` halvings do not do it."""
+        trial = u.copy()
+        for _ in range(HALVINGS):
+            trial[self.elasticity.free] = u[self.elasticity.free] + du
+            if self._least_j(trial) > 0.0:
+                return du
+            du = 0.5 * du
+        raise ValueError("an element turned inside out (J <= 0): the load is too deep for "
+                         "this mesh")
+
+    def _least_j(self, u: np.ndarray) -> float:
+        """The smallest volume ratio J over the quadrature points of ``u``."""
+        return float(det(self._deformation(u)).min())
+
+    def _deformation(self, u: np.ndarray) -> np.ndarray:
+        """F = I + grad u at the quadrature points (3, 3, E, Q)."""
         g = self.elasticity.basis.interpolate(u)
-        f = np.asarray(identity(g) + grad(g))
+        return np.asarray(identity(g) + grad(g))
+
+    def _stress(self, u: np.ndarray) -> dict[str, np.ndarray]:
+        """P, F^-T, mu - lambda ln J, mu and lambda at the quadrature points of ``u`` (an
+        inverted element refused)."""
+        f = self._deformation(u)
         j = det(f)
         if np.any(j <= 0.0):
-            raise ValueError("an element turned inside out (J <= 0): the load is too deep "
-                             "for this mesh")
+            raise ValueError("an element turned inside out (J <= 0)")
         fit = transpose(inv(f))
         ln_j = np.log(j)
         return {"P": self._mu * (f - fit) + self._lam * ln_j * fit, "Fit": fit,

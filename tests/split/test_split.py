@@ -173,3 +173,24 @@ def test_the_readme_reader_loads_a_fold_without_our_code(states, tmp_path) -> No
                                env["dforce"] / 0.5 * 1e-3, atol=1e-6)
     np.testing.assert_allclose(env["inputs"][..., :2], env["targets"][..., :2], atol=1e-7)
     assert (env["targets"][..., 2] <= env["inputs"][..., 2] + 1e-9).all()
+
+
+def test_presses_that_repeat_places_are_held_out_place_by_place() -> None:
+    """5 places pressed 4 times (the quick demo's lab): every fold tests one press of each place
+    and validates on presses at three different places; and every press is tested once."""
+    places = {press: press % 5 for press in range(20)}
+    for seed in range(4):
+        folds, _ = make_folds(np.arange(20), SplitParams("sequence", (12, 3, 5), seed=seed),
+                              places)
+        for f in folds:
+            assert sorted(places[p] for p in f["groups"]["test"]) == [0, 1, 2, 3, 4]
+            val = [places[p] for p in f["groups"]["val"]]
+            assert len(set(val)) == 3
+        assert {p for f in folds for p in f["groups"]["test"]} == set(range(20))
+
+
+def test_one_press_a_place_keeps_the_plain_shuffle() -> None:
+    plan = SplitParams("sequence", (12, 3, 5), seed=3)
+    plain, _ = make_folds(np.arange(20), plan)
+    alone, _ = make_folds(np.arange(20), plan, {p: p for p in range(20)})
+    assert plain == alone
