@@ -60,7 +60,8 @@ def make_folds(groups: np.ndarray, plan: SplitParams, places: dict[int, int] | N
     n_train, n_val, n_test = role_counts(g, plan.ratio)
     rng = np.random.default_rng(plan.seed)
     order = ids[rng.permutation(g)]
-    if places is not None and len(set(places.values())) < g:
+    spread = places is not None and len(set(places.values())) < g
+    if spread:
         order = spread_over_places(order, places, rng)
     folds = []
     for f in range(plan.folds):
@@ -73,7 +74,8 @@ def make_folds(groups: np.ndarray, plan: SplitParams, places: dict[int, int] | N
         train = [train[i] for i in rng.permutation(len(train))]
         folds.append({"fold": f, "groups": {"train": train, "val": val, "test": test},
                       "train_subsets": [train[:n] for n in range(1, len(train) + 1)]})
-    return folds, _note(g, n_test, plan.folds)
+    note = _note(g, n_test, plan.folds)
+    return folds, note + ("; presses dealt place by place" if spread else "")
 
 
 def spread_over_places(order: np.ndarray, places: dict[int, int], rng: np.random.Generator
