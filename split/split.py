@@ -60,9 +60,9 @@ def make_folds(groups: np.ndarray, plan: SplitParams, places: dict[int, int] | N
     n_train, n_val, n_test = role_counts(g, plan.ratio)
     rng = np.random.default_rng(plan.seed)
     order = ids[rng.permutation(g)]
-    spread = places is not None and len(set(places.values())) < g
-    if spread:
-        order = spread_over_places(order, places, rng)
+    spread = False
+    if places is not None and len(set(places.values())) < g:
+        order, spread = spread_over_places(order, places, rng), True
     folds = []
     for f in range(plan.folds):
         start = round(f * g / plan.folds)
