@@ -66,7 +66,9 @@ def binned_quantiles(scores: np.ndarray, features: np.ndarray,
     edges (bin i of a feature holds values in [edge i-1, edge i)), the widths
     (*shape, Q) (inf where nothing bounds them) and the scores each stands on (*shape, Q).
     A bin short of :data:`MIN_COUNT` scores (or unbounded at a level) takes its parent's
-    (the last feature dropped first)."""
+    (the last feature dropped first); a bin's widths never shrink as the level rises (a
+    parent's quantile at a higher level may lie below the bin's own at a lower one: the bin
+    keeps the wider), so its intervals nest."""
     lead = lead or (None,) * len(splits)
     edges = tuple(bin_edges(features[:, k], s, a)
                   for k, (s, a) in enumerate(zip(splits, lead, strict=True)))
@@ -83,7 +85,7 @@ def binned_quantiles(scores: np.ndarray, features: np.ndarray,
             q, n = nodes.get(leaf[:depth], empty)
             todo = (count[leaf] == 0) & ((n >= MIN_COUNT) & np.isfinite(q) | (depth == 0))
             width[leaf][todo], count[leaf][todo] = q[todo], n
-    return edges, width, count
+    return edges, np.maximum.accumulate(width, axis=-1), count
 
 
 def _node_quantiles(scores: np.ndarray, idx: np.ndarray, shape: tuple[int, ...],

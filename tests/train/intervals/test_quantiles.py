@@ -102,3 +102,16 @@ def test_a_thin_bin_takes_its_parents_radius() -> None:
     i = level_index(0.9)
     assert bins.widths(i, feats[thin, 0], 5e-3, 0.0) == pytest.approx(np.ones(5))
     assert (bins.count[..., i] >= MIN_COUNT).all()
+
+
+def test_a_bins_intervals_nest_when_its_parent_takes_over_at_a_high_level() -> None:
+    """A bin of 30 large scores (10-20) among 4000 small ones (0-1): its own quantile bounds
+    it up to level 30/31, above which it takes its parent's, a small score; the interval at a
+    higher level must still hold the lower one's."""
+    depth = np.r_[np.full(30, 9e-3), np.linspace(1e-3, 2e-3, 4000)]
+    scores = np.r_[np.linspace(10.0, 20.0, 30), np.linspace(0.0, 1.0, 4000)]
+    bins = Bins.fit(scores, depth[:, None], ((0.995,),))
+    deep = bins.width[-1]                                     # the bin of the 30 large scores
+    assert deep[level_index(0.95)] == pytest.approx(20.0)     # its own quantile: the largest
+    assert deep[level_index(0.97)] >= deep[level_index(0.95)]
+    assert (np.diff(bins.width, axis=-1) >= 0).all()
