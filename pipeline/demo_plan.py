@@ -224,10 +224,12 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         pre = generic_steps(out, s, device, recipe)
         inits = [pre[-1].outputs[0]] * s.folds
         steps = pre + [replace(step, parallel=True, batch=FOLDS) for step in session]
-    else:
+    elif pretraining == PER_FOLD:
         pre = per_fold_steps(out, s, states, splits, train, sd)
         inits = [pretrain_dir(out, fold) / "best.pt" for fold in range(s.folds)]
         steps = session + pre
+    else:
+        raise ValueError(f"pretraining {pretraining!r} is not one of {', '.join(PRETRAINING)}")
     runs = [(fold, tag, out / "runs" / f"exp_{tag}_fold{fold}") for fold in range(s.folds)
             for tag in tags]
     order = runs if pretraining == PER_FOLD else \

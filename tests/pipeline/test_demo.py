@@ -127,6 +127,11 @@ def test_the_per_fold_pretraining_fits_each_fold_on_another_labs_phantom(tmp_pat
     assert times["stages"]["train (pre-training)"]["ran"] == SMOKE.folds
 
 
+def test_a_pretraining_the_plan_does_not_know_is_refused_not_run_as_another(tmp_path):
+    with pytest.raises(ValueError, match="'per_fold' is not one of shipped, generic"):
+        demo_steps(tmp_path, 0, SMOKE, pretraining="per_fold")
+
+
 @pytest.mark.parametrize("network", list(NETWORKS))
 def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, network):
     """``--network`` adds its flags after the recipe's to every training run (pre-training
