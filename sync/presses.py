@@ -31,8 +31,8 @@ class Press:
 def segment_presses(
     force_magnitude: np.ndarray,
     rate_hz: float,
-    detect_n: float = 0.3,
-    contact_n: float = 0.05,
+    detect_n: float,
+    contact_n: float,
     min_duration_s: float = 0.2,
     merge_s: float = 0.05,
 ) -> tuple[list[Press], int]:

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from sync.presses import assign_locations, segment_presses
+from sync.sync_params import SyncParams
 
 RATE = 500.0
+LEVELS = (SyncParams().detect_n, SyncParams().contact_n)     # sync's press and contact levels
 
 
 def _force(onsets: list[float], lengths: list[float], seed: int = 0) -> np.ndarray:
@@ -22,7 +24,7 @@ def _force(onsets: list[float], lengths: list[float], seed: int = 0) -> np.ndarr
 
 def test_presses_found_from_onset_to_release() -> None:
     onsets, lengths = [2.0, 8.5, 15.0], [2.0, 3.0, 2.5]
-    presses, cut = segment_presses(_force(onsets, lengths), RATE, contact_n=0.05)
+    presses, cut = segment_presses(_force(onsets, lengths), RATE, *LEVELS)
     assert len(presses) == 3 and cut == 0
     for p, on, length in zip(presses, onsets, lengths, strict=True):
         # 6 sin^2(pi s) passes 0.05 N at s = asin(sqrt(0.05/6))/pi ~ 0.029
@@ -36,7 +38,7 @@ def test_noise_spikes_and_short_touches_are_not_presses() -> None:
     f = _force([5.0, 12.0], [0.1, 2.0])            # a 0.1 s touch, then a press
     f[3000] = 1.0                                   # one spike
     f[np.arange(10)] = np.nan                       # unknown frames count as unloaded
-    presses, cut = segment_presses(f, RATE, min_duration_s=0.2)
+    presses, cut = segment_presses(f, RATE, *LEVELS, min_duration_s=0.2)
     assert len(presses) == 1 and abs(presses[0].peak / RATE - 13.0) < 0.05 and cut == 0
 
 
@@ -44,16 +46,16 @@ def test_presses_cut_off_by_the_ends_are_left_out_and_counted() -> None:
     """A press running into either end of the series, or into unknown force, has no known
     onset or release: it is counted, not returned."""
     f = _force([2.0, 8.5, 15.0, 27.0], [2.0, 3.0, 2.5, 2.0])
-    whole, cut = segment_presses(f, RATE)
+    whole, cut = segment_presses(f, RATE, *LEVELS)
     assert len(whole) == 4 and cut == 0
     start = int(3.0 * RATE)                         # the recording starts inside press 0
     end = int(28.0 * RATE)                          # and ends inside press 3
-    presses, cut = segment_presses(f[start:end], RATE)
+    presses, cut = segment_presses(f[start:end], RATE, *LEVELS)
     assert cut == 2 and len(presses) == 2
     assert [p.onset + start for p in presses] == [p.onset for p in whole[1:3]]
     g = f.copy()
     g[int(16.0 * RATE):] = np.nan                   # the force log ends inside press 2
-    presses, cut = segment_presses(g, RATE)
+    presses, cut = segment_presses(g, RATE, *LEVELS)
     assert cut == 1 and [p.onset for p in presses] == [p.onset for p in whole[:2]]
 
 
