@@ -21,7 +21,7 @@ LOST = np.uint8(8)     # quality bit: the frame was never recorded (a hole, :mod
 
 
 def fill_gaps(
-    time_s: np.ndarray, positions: np.ndarray, max_gap_s: float = 0.020, support: int = 16,
+    time_s: np.ndarray, positions: np.ndarray, max_gap_s: float, support: int = 16,
     never: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fill short gaps of each point in ``positions`` (T, P, 3) sampled at ``time_s`` (T,).

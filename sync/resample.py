@@ -17,7 +17,7 @@ from scipy.signal import firwin, kaiserord
 
 
 def antialias_taps(
-    fs_in: float, fs_out: float, passband: float = 0.8, atten_db: float = 80.0
+    fs_in: float, fs_out: float, passband: float, atten_db: float = 80.0
 ) -> np.ndarray:
     """Zero-phase low-pass FIR taps (odd length) for resampling from ``fs_in`` to ``fs_out``.
 
@@ -63,7 +63,7 @@ def _fit_end(x: np.ndarray, degree: int = 2) -> np.ndarray:
 
 
 def antialiased_interpolant(
-    t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float = 0.8,
+    t_src: np.ndarray, x: np.ndarray, fs_out: float, passband: float,
     stretches: list[tuple[int, int]] | None = None,
 ) -> Callable[[np.ndarray], np.ndarray]:
     """A function of time (s) giving ``x`` (N, ...), sampled at uniform ``t_src`` (s), low-passed
@@ -115,7 +115,7 @@ def resample_at(
     x: np.ndarray,
     t_query: np.ndarray,
     fs_out: float,
-    passband: float = 0.8,
+    passband: float,
 ) -> np.ndarray:
     """Values of ``x`` (N, ...) sampled at uniform times ``t_src`` (s), at ``t_query`` (s).
 

@@ -15,6 +15,7 @@ from sync.clock import (
     rising_edges,
 )
 from sync.resample import antialiased_interpolant
+from sync.sync_params import SyncParams
 
 OFFSET, DRIFT = 1.23456, 37.0          # s, ppm: t_f = OFFSET + (1 + DRIFT e-6) t_m
 
@@ -124,7 +125,7 @@ def _session(seed: int, presses: int = 6, depth_noise: float = 0.2e-3
 
 
 def _data_fit(s: dict[str, np.ndarray]) -> ClockFit:
-    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0)
+    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0, SyncParams().passband)
     lag0 = contact_lag(s["t_m"], s["depth"], force_at, (s["t_f"][0], s["t_f"][-1]),
                        max_lag_s=5.0)
     assert abs(lag0 - (OFFSET + DRIFT * 1e-6 * s["t_m"].mean())) < 0.02
@@ -158,7 +159,7 @@ def test_data_driven_clock_walks_from_a_poor_seed() -> None:
     """A seed lag 0.12 s off (more than twice the scan's reach, inside the cost's basin,
     which is a few tenths of the press's rise time wide): each press's scan moves on."""
     s = _session(3, depth_noise=0.0)
-    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0)
+    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0, SyncParams().passband)
     lag = OFFSET + DRIFT * 1e-6 * s["t_m"].mean()
     loaded = force_at(s["t_m"] + lag) > 0.3
     runs = np.flatnonzero(np.diff(loaded.astype(int)))
@@ -170,7 +171,7 @@ def test_data_driven_clock_walks_from_a_poor_seed() -> None:
 
 def test_data_driven_without_tracked_presses_is_bad_input() -> None:
     s = _session(0, presses=2)
-    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0)
+    force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0, SyncParams().passband)
     presses = [(s["t_m"][:10], s["depth"][:10] * np.nan)]
     with pytest.raises(BadInput, match="trial.tsv: clock"):
         clock_from_data(presses, force_at, OFFSET, source="trial.tsv")

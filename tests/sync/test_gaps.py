@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sync.gaps import FILLED, MISSING, fill_gaps, true_runs
+from sync.sync_params import SyncParams
 
 RATE = 500.0
 
@@ -60,6 +61,6 @@ def test_fill_through_noisy_neighbours_stays_at_the_noise_level() -> None:
         obs = truth + rng.normal(0, 0.2e-3, truth.shape)
         a = 100 + 15 * k
         obs[a:a + 10, 0] = np.nan
-        filled, _ = fill_gaps(t, obs)
+        filled, _ = fill_gaps(t, obs, SyncParams().max_gap_s)
         errs.append(filled[a:a + 10, 0] - truth[a:a + 10, 0])
     assert np.sqrt(np.mean(np.square(errs))) < 0.3e-3
