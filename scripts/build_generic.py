@@ -7,7 +7,7 @@ Runs the quick demo's generic pre-training (:mod:`pipeline.generic_build`: ``sim
 unless given), then writes the slimmed checkpoint (:func:`train.generic_model.slim`) to
 ``--out``, whole or not at all. On the same CPU kind and torch build it writes the same bytes
 (compare with ``cmp``); it prints the weights' digest, which the file's provenance records too.
-About 10 minutes on one core.
+About 16 minutes on one core (67 s to simulate the prior, about 14 min to train: docs/results.md).
 """
 
 from __future__ import annotations
