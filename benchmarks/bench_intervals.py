@@ -206,7 +206,8 @@ def misses(demo: Path, folds: list[int], variant: str, level: float = 0.9) -> No
         force.append(run.states.force.numpy()[end[test]])
         place.append(np.asarray(run.states.location)[end[test]])
         counts = redrawn_counts(r, press, run.intervals.presses, fold, draws=100)
-        drawn += counts[:, shown, 2:].sum(0)
+        if counts is not None:                 # None: no press left to score
+            drawn += counts[:, shown, 2:].sum(0)
     miss, force, place = (np.concatenate(v) for v in (miss, force, place))
     thirds = np.searchsorted(np.quantile(force, [1 / 3, 2 / 3]), force)
     print(f"{variant}: force {level:.0%} interval misses {miss.mean():.1%} of {len(miss)} test "

@@ -120,7 +120,6 @@ def validate_folds(path: str | Path) -> dict[str, Any]:
     return doc
 
 
-
 def training_sequences(splits: str | Path, fold: int, command: str) -> np.ndarray:
     """The sequence ids of a fold's training presses (a manifest grouped by sequence), for
     ``command`` (its name in the refusal) that fits a model on them."""
@@ -131,6 +130,7 @@ def training_sequences(splits: str | Path, fold: int, command: str) -> np.ndarra
     if not 0 <= fold < len(doc["folds"]):
         raise BadInput(splits, f"--fold {fold}: it has {len(doc['folds'])} folds")
     return np.asarray(doc["folds"][fold]["train"]["groups"], dtype=np.int64)
+
 
 def _check_fold(path: str | Path, fold: Any, where: str) -> None:
     if not isinstance(fold, dict) or not all(isinstance(fold.get(r), dict) for r in ROLES):

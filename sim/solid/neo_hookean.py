@@ -94,8 +94,9 @@ class NeoHookean:
         it would turn an element inside out; how many steps it took."""
         free = self.elasticity.free
         for step in range(1, MOST_STEPS + 1):
-            residual = self.internal(u) - load
-            k = self.tangent(u)[free][:, free].tocsc()
+            stress = self._stress(u)                  # once a step, for both forms
+            residual = asm(_internal, self.elasticity.basis, P=stress["P"]) - load
+            k = asm(_tangent, self.elasticity.basis, **stress).tocsr()[free][:, free].tocsc()
             du = spla.splu(k, permc_spec="COLAMD").solve(-residual[free])
             u[free] += self._admissible(u, du)
             if np.linalg.norm(du) <= STEP_TOL * np.linalg.norm(u):
