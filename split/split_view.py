@@ -46,9 +46,27 @@ def group_places(states: str | Path, group_by: str) -> dict[int, np.ndarray]:
     return {g: np.mean(v, axis=0) for g, v in places.items()}
 
 
+FAN_MM = 3.0        # groups that share a place are drawn this far around it, each its own dot
+
+
+def fanned(places: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """Each group's place, those that share one (within 1 mm: repeats of a press) set around
+    it on a circle of :data:`FAN_MM`, so that every group's role shows (not the last drawn)."""
+    shared: dict[tuple, list[int]] = {}
+    for g in sorted(places):
+        shared.setdefault(tuple(np.round(places[g]).astype(int)), []).append(g)
+    out = {}
+    for members in shared.values():
+        for k, g in enumerate(members):
+            turn = 2 * np.pi * k / len(members)
+            step = FAN_MM * np.array([np.cos(turn), np.sin(turn)]) if len(members) > 1 else 0.0
+            out[g] = places[g] + step
+    return out
+
+
 def write_split_recording(path: str | Path, states: str | Path, doc: dict) -> None:
     """Save the recording of the manifest ``doc`` over ``states`` to ``path``."""
-    places = group_places(states, doc["group_by"])
+    places = fanned(group_places(states, doc["group_by"]))
     lo = np.min(list(places.values()), axis=0) - 5
     hi = np.max(list(places.values()), axis=0) + 5
     with recording(APP_ID, path, blueprint()) as rec:
@@ -59,7 +77,6 @@ def write_split_recording(path: str | Path, states: str | Path, doc: dict) -> No
             rec.set_time("fold", sequence=fold["fold"])
             for role, color in ROLE_COLORS.items():
                 xy = np.array([places[g] for g in fold[role]["groups"]]).reshape(-1, 2)
-                # jitter groups that share a place (several presses at one location)
                 rec.log(f"footprint/{role}", rr.Points2D(xy, colors=[color], radii=[1.5],
                                                          labels=[str(g) for g in
                                                                  fold[role]["groups"]]))

@@ -194,3 +194,16 @@ def test_one_press_a_place_keeps_the_plain_shuffle() -> None:
     plain, _ = make_folds(np.arange(20), plan)
     alone, _ = make_folds(np.arange(20), plan, {p: p for p in range(20)})
     assert plain == alone
+
+
+def test_the_view_sets_presses_at_one_place_apart_so_each_role_shows() -> None:
+    from split.split_view import FAN_MM, fanned
+
+    places = {0: np.array([10.0, 20.0]), 1: np.array([10.2, 19.9]), 2: np.array([10.0, 20.0]),
+              3: np.array([60.0, 60.0])}
+    drawn = fanned(places)
+    shared = np.array([drawn[g] for g in (0, 1, 2)])
+    apart = np.linalg.norm(shared[:, None] - shared[None], axis=-1)[np.triu_indices(3, 1)]
+    assert (apart > FAN_MM).all()                        # three dots, not one
+    assert np.allclose(np.linalg.norm(shared - [10.07, 19.97], axis=1), FAN_MM, atol=0.3)
+    np.testing.assert_array_equal(drawn[3], places[3])   # a place pressed once stays put
