@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 LABS = {"default": (),
         "6x6": ("--markers", "6x6", "--marker-pitch", "12", "--mocap-rate", "300"),
-        "scattered": ("--markers", "scattered:20", "--size", "150x80")}
+        "scattered": ("--markers", "scattered:20", "--size", "150x80"),
+        "dome": ("--shape", "dome:30")}
 FOLDS = 5
 
 
@@ -43,7 +44,8 @@ def session(out: Path, lab: str, seed: int) -> tuple[Path, Path]:
     spec = Lab(markers=opts.get("--markers", Lab.markers),
                marker_pitch_mm=float(opts.get("--marker-pitch", Lab.marker_pitch_mm)),
                size_mm=opts.get("--size", Lab.size_mm),
-               mocap_rate_hz=float(opts.get("--mocap-rate", Lab.mocap_rate_hz)))
+               mocap_rate_hz=float(opts.get("--mocap-rate", Lab.mocap_rate_hz)),
+               shape=opts.get("--shape", Lab.shape))
     steps = [s.args for s in session_steps(folder, "session", seed, PLACES, REPEATS, spec)]
     steps.append(("split", str(states), "--out", str(splits), "--folds", str(FOLDS),
                   "--seed", str(seed)))

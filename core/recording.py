@@ -127,6 +127,19 @@ def phantom_view(name: str, contents: list[str], centre: np.ndarray, size: float
                              line_grid=rrb.LineGrid3D(visible=False))
 
 
+MOULD_RGBA = (200, 200, 210, 90)     # a curved phantom's mould: light grey, translucent
+
+
+def log_mould(rec: rr.RecordingStream, path: str, vertices: np.ndarray, faces: np.ndarray,
+              to: np.ndarray | None = None) -> None:
+    """A curved phantom's mould (its triangles, ``vertices`` (V, 3) moved by the 4 x 4 ``to``
+    when given) at ``path``, static: the surface its markers rest on."""
+    if to is not None:
+        vertices = vertices @ to[:3, :3].T + to[:3, 3]
+    rec.log(path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces,
+                            albedo_factor=MOULD_RGBA), static=True)
+
+
 def plot(name: str, origin: str, y_range: tuple[float, float] | None = None,
          legend: bool = True) -> rrb.TimeSeriesView:
     """A time-series view of one quantity (its unit in ``name``), legend in the top-left

@@ -170,6 +170,20 @@ def point_names(path: str | Path) -> list[str] | None:
         return None if v is None else json.loads(attr_text(v))
 
 
+FLAT_REST_M = 5e-3    # a flat phantom's markers rest within this of z = 0 in its frame (sync
+                      # refuses 1 mm RMS off their plane)
+
+
+def check_flat_rest(rest: np.ndarray, path: str | Path) -> None:
+    """Refuse the states of a curved phantom where a flat block is simulated (the MSM, the
+    solid model): rest markers (..., 3) lying farther than :data:`FLAT_REST_M` off z = 0."""
+    off = float(np.nanmax(np.abs(rest[..., 2]))) if np.isfinite(rest[..., 2]).any() else 0.0
+    if off > FLAT_REST_M:
+        raise BadInput(path, f"its markers rest up to {off * 1e3:.1f} mm off z = 0: a curved "
+                             "phantom's states (its shape's frame); the MSM and the solid model "
+                             "simulate a flat block")
+
+
 def footprint(path: str | Path) -> tuple[float, float] | None:
     """The footprint [L, W] (m) the file's frame uses (None: a 2.0 file, the paper's square)."""
     with h5_reading(path), h5py.File(path, "r") as f:

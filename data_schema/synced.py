@@ -45,12 +45,21 @@ mocap never recorded the frame (a hole); sync leaves out the presses a hole touc
 press's margins stop at a hole.
 
 Root attribute ``phantom`` (JSON, from session.toml's ``[phantom]`` table) says how extract
-builds the phantom frame: the footprint's size, its in-plane +x axis and anchor.
+builds the phantom frame: the footprint's size, its in-plane +x axis and anchor, and for a
+curved phantom its shape (:mod:`data_schema.shape`).
+
+A curved phantom (1.5) has no rest plane: sync registers the markers to its shape and stores
+``calibration/to_shape`` (4, 4), the lab -> shape frame transform extract uses as the phantom
+frame, and ``calibration/marker_residual`` (N,), each marker's rest distance off the surface
+less its radius (NaN: never seen). ``surface_point`` and ``surface_normal`` are then the shape
+frame's origin and +z in the lab, and each press's ``depth`` runs along the surface's outward
+normal ``touch_normal`` from the point ``touch`` where its tip touched (both lab, (3,)).
 
 Version 1.1 added ``rest_force_n``, ``rest_torque_nm`` and ``presses.cut_off``; 1.2 the
 ``saturated`` force bit (a 1.1 file simply never sets it); 1.3 any number of phantom markers
 and the ``phantom`` attribute (a 1.2 file has 25 markers and the paper's 100 mm square); 1.4
-the holes (``lost``, ``in_hole``, ``presses.in_holes``, ``holes``; absent from older files).
+the holes (``lost``, ``in_hole``, ``presses.in_holes``, ``holes``; absent from older files);
+1.5 a curved phantom's registration (absent for a flat one).
 """
 
 from pathlib import Path
@@ -77,7 +86,7 @@ TORQUE_NM = 100.0
 
 SYNCED = H5Schema(
     name="phantom.synced",
-    version="1.4",
+    version="1.5",
     root_attrs=("provenance", "source", "calibration", "quality_bits", "force_bits",
                 "units_length", "units_force", "units_time", "rate_hz"),
     doc=__doc__ or "",
@@ -96,6 +105,11 @@ SYNCED = H5Schema(
                 doc="a point of the phantom markers' rest plane (depth 0)"),
         Dataset("calibration/surface_normal", "f8", (3,), "1", finite=True,
                 doc="unit normal of the rest plane, out of the phantom"),
+        Dataset("calibration/to_shape", "f8", (4, 4), required=False, finite=True,
+                doc="a curved phantom: lab -> its shape's frame (the phantom frame)"),
+        Dataset("calibration/marker_residual", "f8", ("N",), "m", required=False,
+                limit=LAB_M, doc="a curved phantom: each marker's rest distance off the "
+                                 "registered surface, less its radius; NaN never seen"),
         Dataset("locations/centre", "f8", ("L", 3), "m", finite=True, limit=LAB_M,
                 doc="mean tip contact point of each location"),
         Dataset("presses/*/time_ns", "i8", ("T",), "ns", doc="mocap clock"),
@@ -108,6 +122,10 @@ SYNCED = H5Schema(
         Dataset("presses/*/force_magnitude", "f8", ("T",), "N", finite=True, limit=FORCE_N),
         Dataset("presses/*/depth", "f8", ("T",), "m", limit=LAB_M,
                 doc="tip below the rest plane along its normal (positive into the phantom)"),
+        Dataset("presses/*/touch", "f8", (3,), "m", required=False, limit=LAB_M,
+                doc="a curved phantom: where the tip touched the surface, lab"),
+        Dataset("presses/*/touch_normal", "f8", (3,), "1", required=False,
+                doc="a curved phantom: the surface's outward unit normal there, lab"),
         Dataset("presses/*/quality", "u1", ("T", "P"), doc="bitmask, see QUALITY_BITS"),
         Dataset("presses/*/force_quality", "u1", ("T",), doc="bitmask, see FORCE_BITS"),
     ),
@@ -139,7 +157,9 @@ def validate_synced(path: str | Path) -> None:
                 raise BadInput(path, f"presses/{key}/points holds {press['points'].shape[1]} "
                                      f"points, but point_names names {points}")
             _check_press(path, f"presses/{key}", press, len(f["locations/centre"]))
-            _check_depth(path, f"presses/{key}", press, plane)
+            _check_depth(path, f"presses/{key}", press,
+                         (press["touch"][()], press["touch_normal"][()]) if "touch" in press
+                         else plane)
 
 
 def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int) -> None:
@@ -160,7 +180,8 @@ def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int)
 
 def _check_depth(path: str | Path, name: str, press: h5py.Group,
                  plane: tuple[np.ndarray, np.ndarray]) -> None:
-    """``depth`` is the tip's (the last point's) depth below the rest plane, to 1 um."""
+    """``depth`` is the tip's (the last point's) depth below the rest plane (a curved
+    phantom's: the plane tangent where the press touched), to 1 um."""
     point, normal = plane
     expect = (point - press["points"][:, -1]) @ normal
     depth = press["depth"][()]

@@ -50,7 +50,8 @@ def write_states(ex: Extracted, sessions: Sequence[Session], params: ExtractPara
         write_h5(tmp_out, STATES, ex.arrays, attrs)
         validate_states(tmp_out)
         if tmp_rrd is not None:
-            write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m)
+            write_extract_recording(tmp_rrd, ex.sessions, first.layout.size_m,
+                                    first.layout.shape)
 
 
 def _attrs(ex: Extracted, params: ExtractParams, provenance: dict) -> dict[str, Any]:

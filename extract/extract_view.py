@@ -6,7 +6,9 @@ Entities: ``force/measured`` the force magnitude of every press (N), ``force/lev
 at each extracted state (at the instant it was read, at its force); ``phantom/state`` the
 markers of the latest state (coloured by depth below the rest surface, mm), ``phantom/tip`` the
 tip, ``phantom/rest`` the press's untouched surface (grey), ``phantom/footprint`` the phantom's
-outline at z = 0; ``presses`` a text line per press.
+outline at z = 0, or a curved phantom's ``phantom/shape`` (its mould, translucent: the frame is
+the mould's, and the colour is each marker's displacement from its rest, mm); ``presses`` a
+text line per press.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import declare_up, phantom_view, recording, time_column
+from core.recording import declare_up, log_mould, phantom_view, recording, time_column
+from data_schema.shape import Shape
 from extract.static_states import Press, PressStates
 
 APP_ID = "phantom-extract"
@@ -27,12 +30,14 @@ COLORS = {"force": (90, 90, 90), "levels": (230, 60, 40), "tip": (220, 40, 40),
 DEPTH_RANGE_MM = 15.0
 
 
-def blueprint(size_m: tuple[float, float]) -> rrb.Blueprint:
-    """The states in 3D (framed from above) beside the force curve with the levels marked."""
-    centre = np.array([size_m[0] / 2, size_m[1] / 2, 0.0])
+def blueprint(size_m: tuple[float, float], centre: np.ndarray | None = None) -> rrb.Blueprint:
+    """The states in 3D (framed from above, on ``centre``: the footprint's middle by
+    default) beside the force curve with the levels marked."""
+    colour = "depth" if centre is None else "displacement"
+    centre = np.array([size_m[0] / 2, size_m[1] / 2, 0.0]) if centre is None else centre
     return rrb.Blueprint(
         rrb.Horizontal(
-            phantom_view(f"state in the phantom frame (colour: depth 0..."
+            phantom_view(f"state in the phantom frame (colour: {colour} 0..."
                          f"{DEPTH_RANGE_MM:.0f} mm)", ["+ /phantom/**"], centre,
                          max(size_m), origin="/phantom"),
             rrb.Vertical(
@@ -47,16 +52,21 @@ def blueprint(size_m: tuple[float, float]) -> rrb.Blueprint:
 
 
 def write_extract_recording(path: str | Path, sessions: list[tuple[list[Press], list[PressStates]]],
-                            size_m: tuple[float, float]) -> None:
-    """Save the recording of every session's presses and states to ``path``."""
-    with recording(APP_ID, path, blueprint(size_m)) as rec:
+                            size_m: tuple[float, float], shape: Shape | None = None) -> None:
+    """Save the recording of every session's presses and states to ``path`` (``shape``: a
+    curved phantom's, drawn instead of the flat footprint)."""
+    centre = None if shape is None else shape.vertices.mean(axis=0)
+    with recording(APP_ID, path, blueprint(size_m, centre)) as rec:
         declare_up(rec)
-        _outline(rec, size_m)
+        if shape is None:
+            _outline(rec, size_m)
+        else:
+            log_mould(rec, "phantom/shape", shape.vertices, shape.faces)
         offset, k = 0.0, 0
         for presses, states in sessions:
             start = min(p.time_s[0] for p in presses)
             for press, st in zip(presses, states, strict=True):
-                _press(rec, press, st, offset - start, k)
+                _press(rec, press, st, offset - start, k, shape is not None)
                 k += 1
             offset += max(p.time_s[-1] for p in presses) - start + 1.0
 
@@ -65,7 +75,8 @@ def _ns(t: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t) * 1e9).astype(np.int64)
 
 
-def _press(rec: rr.RecordingStream, press: Press, st: PressStates, shift: float, k: int) -> None:
+def _press(rec: rr.RecordingStream, press: Press, st: PressStates, shift: float, k: int,
+           curved: bool) -> None:
     t = press.time_s + shift
     rec.log("force/measured", rr.SeriesLines(names=["force [N]"], colors=[COLORS["force"]]),
             static=True)
@@ -84,13 +95,18 @@ def _press(rec: rr.RecordingStream, press: Press, st: PressStates, shift: float,
     rest = st.points[0] if st.step[0] == 0 else None
     for i in range(len(st.step)):
         rec.set_time(TIMELINE, duration=np.timedelta64(_ns(st.time_s[i] + shift), "ns"))
-        _state(rec, st.points[i], st.valid[i], rest)
+        _state(rec, st.points[i], st.valid[i], rest, curved)
 
 
 def _state(rec: rr.RecordingStream, points: np.ndarray, valid: np.ndarray,
-           rest: np.ndarray | None) -> None:
+           rest: np.ndarray | None, curved: bool) -> None:
     surface, ok = points[:-1], valid[:-1]
-    depth = np.clip(-surface[ok, 2] * 1e3 / DEPTH_RANGE_MM, 0, 1)
+    if not curved:
+        depth = np.clip(-surface[ok, 2] * 1e3 / DEPTH_RANGE_MM, 0, 1)
+    else:              # no plane to be below: how far each marker moved from its rest
+        moved = np.zeros(len(surface)) if rest is None else np.linalg.norm(surface - rest[:-1],
+                                                                           axis=1)
+        depth = np.clip(np.nan_to_num(moved[ok]) * 1e3 / DEPTH_RANGE_MM, 0, 1)
     colors = (np.array([[40, 120, 230]]) * (1 - depth[:, None])
               + np.array([[240, 200, 30]]) * depth[:, None]).astype(np.uint8)
     rec.log("phantom/state", rr.Points3D(surface[ok], colors=colors, radii=[0.0015]))

@@ -9,8 +9,6 @@ in-plane axis and the origin come from the phantom's layout (session.toml's ``[p
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from core.errors import BadInput
@@ -28,17 +26,9 @@ def x_axis(rest: np.ndarray, names: list[str], normal: np.ndarray,
 
     Fixed by the markers' names and order, never by an SVD's sign.
     """
-    if layout.x_axis is not None:
-        a, b = (names.index(m) for m in layout.x_axis)
-        along, what = (rest[b] - rest[a])[None], f"x_axis {layout.x_axis[0]} -> {layout.x_axis[1]}"
-    else:
-        rows = layout.rows or math.isqrt(len(rest))
-        if rows < 2 or len(rest) % rows or (layout.rows is None and rows * rows != len(rest)):
-            raise BadInput(None, f"{len(rest)} phantom markers form no square grid and the "
-                                 "layout names no x_axis or rows: no in-plane axis")
-        grid = rest.reshape(rows, -1, 3)
-        _check_rows(grid, normal)
-        along, what = grid[:, -1] - grid[:, 0], "the marker grid's rows"
+    along, what = layout.along_x(rest, names)
+    if layout.x_axis is None:
+        _check_rows(rest.reshape(len(along), -1, 3), normal)
     along = along[np.isfinite(along).all(axis=1)]
     if along.size == 0:
         raise BadInput(None, f"{what}: never seen at rest, no in-plane axis")
@@ -90,13 +80,7 @@ def to_phantom_frame(rest: np.ndarray, names: list[str], surface_point: np.ndarr
     z = normal / np.linalg.norm(normal)
     x = x_axis(rest, names, z, layout)
     rot = np.stack([x, np.cross(z, x), z])                         # rows: lab -> phantom
-    if layout.anchor is not None:
-        centre, at = rest[names.index(layout.anchor)], layout.anchor_m
-        if not np.isfinite(centre).all():
-            raise BadInput(None, f"anchor marker {layout.anchor} is never seen at rest")
-    else:
-        centre = rest[np.isfinite(rest).all(axis=1)].mean(axis=0)
-        at = (layout.size_m[0] / 2, layout.size_m[1] / 2)
+    centre, at = layout.origin(rest, names)
     centre = centre - ((centre - surface_point) @ z) * z           # onto the rest plane
     out = np.eye(4)
     out[:3, :3] = rot

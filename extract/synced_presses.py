@@ -60,20 +60,21 @@ def read_synced(path: str | Path, size_m: tuple[float, float] | None = None) -> 
         name = attr_text(f.attrs.get("name", Path(path).stem))
         noise = _force_noise(attr_text(f.attrs["calibration"]))
         point, normal = cal["surface_point"][()], cal["surface_normal"][()]
+        to_shape = cal["to_shape"][()] if "to_shape" in cal else None
     return session_from_presses(Path(path), name, raw, locations, names, point, normal, layout,
-                                noise)
+                                noise, to_shape)
 
 
 def session_from_presses(path: Path, name: str, presses: list[Press], locations: list[int],
                          names: list[str], surface_point: np.ndarray,
-                         surface_normal: np.ndarray, layout: PhantomLayout, noise_n: float
-                         ) -> Session:
+                         surface_normal: np.ndarray, layout: PhantomLayout, noise_n: float,
+                         to_shape: np.ndarray | None = None) -> Session:
     """A session's presses (lab frame) in its phantom frame: fixed by the surface markers' rest
     before the presses and the rest plane sync fitted (``pipeline live`` hands its presses
-    over here too)."""
+    over here too), or a curved phantom's by sync's registration to its shape, ``to_shape``."""
     try:
-        transform = to_phantom_frame(_rest_markers(presses), names[:-1], surface_point,
-                                     surface_normal, layout)
+        transform = to_shape if to_shape is not None else to_phantom_frame(
+            _rest_markers(presses), names[:-1], surface_point, surface_normal, layout)
     except BadInput as e:
         raise BadInput(path, e.what) from None
     for p in presses:

@@ -92,12 +92,14 @@ from train.training.train_params import DEVICES, TrainParams
                    "for more); eval then reports the errors over the first and away from it.")
 @click.option("--layer", type=LAYER, default=Lab.layer,
               help="A top layer in the twin lab's phantom, THICKNESS,RATIO (synth).")
+@click.option("--shape", default=Lab.shape,
+              help="A curved twin lab: dome:HEIGHT (mm) or a mould's STL/OBJ/PLY (synth).")
 @seed_option(SynthParams.seed)
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
          device: str, jobs: int | None, host_speed: bool | None, network: str | None,
          pretraining: str, markers: str, marker_pitch: float, size: str, mocap_rate: float,
-         inclusions: tuple[str, ...], layer: str | None, seed: int) -> None:
+         inclusions: tuple[str, ...], layer: str | None, shape: str | None, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
     Reads nothing. Writes, under --out: session/ (the phantom twin's lab files and truth.h5;
@@ -129,7 +131,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     threads = max(1, _cores() // jobs)
     host = _host_figure(not smoke if host_speed is None else host_speed)
     started = time.perf_counter()
-    lab = Lab(markers, marker_pitch, size, mocap_rate, inclusions, layer)
+    lab = Lab(markers, marker_pitch, size, mocap_rate, inclusions, layer, shape)
     steps = demo_steps(out, seed, settings, device,
                        NETWORKS[network] if network else RECIPE, lab, pretraining)
     times = Times()

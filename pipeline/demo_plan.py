@@ -42,6 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from core.errors import BadInput
 from sim.msm import paper
 from sim.twin.synth_params import SynthParams
 from train import paper as cgnn_paper
@@ -139,13 +140,14 @@ class Lab:
     mocap_rate_hz: float = SynthParams.rate_hz
     inclusions: tuple[str, ...] = SynthParams.inclusions  # X,Y,DEPTH,RADIUS,RATIO each
     layer: str | None = SynthParams.layer                 # THICKNESS,RATIO
+    shape: str | None = SynthParams.shape                 # dome:HEIGHT or a surface file
 
     def __post_init__(self) -> None:
         """Refuse, in synth's words and before any step runs, what synth would refuse (an
         inclusion outside the block, a layer thicker than it, markers the footprint lacks)."""
         SynthParams(markers=self.markers, marker_pitch_mm=self.marker_pitch_mm,
                     size=self.size_mm, rate_hz=self.mocap_rate_hz,
-                    inclusions=tuple(self.inclusions), layer=self.layer)
+                    inclusions=tuple(self.inclusions), layer=self.layer, shape=self.shape)
 
     def synth_args(self) -> tuple[str, ...]:
         """The synth options that make this lab (none for the default one)."""
@@ -154,7 +156,7 @@ class Lab:
                  ("--marker-pitch", f"{self.marker_pitch_mm:g}", f"{default.marker_pitch_mm:g}"),
                  ("--size", self.size_mm, default.size_mm),
                  ("--mocap-rate", f"{self.mocap_rate_hz:g}", f"{default.mocap_rate_hz:g}"),
-                 ("--layer", self.layer, default.layer)]
+                 ("--layer", self.layer, default.layer), ("--shape", self.shape, default.shape)]
         return tuple(a for opt, v, d in pairs if v != d for a in (opt, v)) + \
             tuple(a for inclusion in self.inclusions for a in ("--inclusion", inclusion))
 
@@ -207,6 +209,10 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     """The demo's commands in order; each names what it reads and writes (for skipping).
     ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``);
     ``pretraining``: one of :data:`PRETRAINING`."""
+    if lab.shape is not None and pretraining not in (SHIPPED_MODEL, GENERIC):
+        raise BadInput("--pretraining", f"{pretraining} fits an MSM or a solid to the lab, "
+                       "which simulate a flat block: a curved lab (--shape) fine-tunes the "
+                       f"shipped generic model ({SHIPPED_MODEL}) or a generic one ({GENERIC})")
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
     session = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [

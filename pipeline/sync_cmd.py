@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+import numpy as np
 
 from core.text import count
 from pipeline.options import OneOf, ranged, resolve_rrd, rrd_option
@@ -57,9 +58,12 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     per press the time, the phantom markers + tip, force vector and magnitude, tip depth and
     quality flags; the calibration results and their uncertainty; session.toml's [phantom]
     layout, for extract; provenance) and a rerun recording of the alignment and the tip
-    (--rrd, default beside --out). Any number (>= 4) of phantom markers; a curved phantom
-    (markers more than 1 mm RMS off their rest plane) is refused. Nothing is written on bad
-    input.
+    (--rrd, default beside --out). Any number (>= 4) of phantom markers. A flat phantom's
+    depth is measured from its markers' rest plane, and markers more than 1 mm RMS off it are
+    refused as curved; a phantom whose session.toml names a shape ([phantom] shape) has its
+    markers registered to it (each marker's residual in the summary and the recording; one
+    resting more than 2 mm off it refused by name) and each press's depth measured along the
+    surface normal where its tip touched. Nothing is written on bad input.
     """
     from sync.sync_stage import run_sync
 
@@ -77,8 +81,18 @@ def sync(mcap: Path, out: Path, clock: str, max_gap_ms: float, margin_s: float,
     click.echo(f"{out}: {len(r.presses)} presses{cut} at {locations} locations; clock ({c.method}) "
                f"offset {c.offset_s * 1e3:.3f} +- {c.offset_sd_s * 1e3:.3f} ms, drift "
                f"{c.drift_ppm:.2f} +- {c.drift_sd_ppm:.2f} ppm; tip pivot RMS "
-               f"{r.pivot.rms * 1e3:.3f} mm{_force_flags(r)}"
+               f"{r.pivot.rms * 1e3:.3f} mm{_registration(r)}{_force_flags(r)}"
                + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _registration(r: SyncResult) -> str:
+    """A curved phantom's words: how far its markers rest off the registered shape."""
+    if r.registration is None:
+        return ""
+    res = np.abs(r.registration.residual)
+    k = int(np.nanargmax(res))
+    return (f"; markers registered to the shape within {res[k] * 1e3:.2f} mm (largest "
+            f"{r.point_names[k]}; RMS {np.sqrt(np.nanmean(res ** 2)) * 1e3:.2f} mm)")
 
 
 def _force_flags(r: SyncResult) -> str:

@@ -117,6 +117,12 @@ class Locations(click.ParamType):
                    "down THICKNESS mm (less than the block's {:g}), RATIO its stiffness over "
                    "the block's ({:g} to {:g}; an inclusion in it keeps its own). E.g. 3,2 (a "
                    "stiff skin).".format(THICKNESS_MM, *RATIO_RANGE))
+@click.option("--shape", default=D.shape,
+              help="A curved phantom: dome:HEIGHT (a spherical cap HEIGHT mm high, 1 to 60, "
+                   "over the block, meeting it at the footprint's corners) or an STL/OBJ/PLY "
+                   "surface in mm whose base stands flat on the table (its footprint replaces "
+                   "--size). Writes mould.stl and [phantom] shape; presses go along the local "
+                   "normal. No --inclusion or --layer with it.")
 @click.option("--mocap-rate", "rate_hz", type=MOCAP_RATE, default=D.rate_hz, show_default=True,
               help="Mocap frame rate in Hz (the force logger stays at 1 kHz; --force-via "
                    "analog or plate needs a rate that divides 1000).")
@@ -128,7 +134,8 @@ class Locations(click.ParamType):
 def synth(out_dir: Path, locations: int | str, repeats: int, press_seconds: float | None,
           pivot_seconds: float, trigger: bool, offset_s: float | None, drift_ppm: float | None,
           force_via: str, force_file: str | None, markers: str, marker_pitch_mm: float,
-          size: str, inclusions: tuple[str, ...], layer: str | None, rate_hz: float,
+          size: str, inclusions: tuple[str, ...], layer: str | None, shape: str | None,
+          rate_hz: float,
           view_press: int, seed: int, rrd: Path | None, no_rrd: bool) -> None:
     """Simulate a phantom indentation session and write it as the lab would.
 
@@ -159,13 +166,14 @@ def synth(out_dir: Path, locations: int | str, repeats: int, press_seconds: floa
         pivot_seconds=pivot_seconds, trigger=trigger, offset_s=offset_s, drift_ppm=drift_ppm,
         force_via=force_via, force_file=force_file, rate_hz=rate_hz, markers=markers,
         marker_pitch_mm=marker_pitch_mm, size=size, inclusions=inclusions, layer=layer,
-        view_press=view_press)
+        shape=shape, view_press=view_press)
     folder = run_synth(None, out_dir, params, rrd_path)
     grid = "" if isinstance(locations, int) else f" (a {locations} grid)"
     found, top = params.regions()
     regions = "".join(f", inclusion {i.describe()}" for i in found) + (
         f", layer {top.describe()}" if top else "")
     click.echo(f"{folder}: {params.places * repeats} presses at {params.places} locations"
-               f"{grid}, {markers} markers on {size} mm{regions} at {rate_hz:g} Hz, seed {seed}, "
+               f"{grid}, {markers} markers on {size} mm{regions}"
+               f"{f', shape {shape}' if shape else ''} at {rate_hz:g} Hz, seed {seed}, "
                f"in {time.perf_counter() - start:.1f} s"
                + (f"; recording {rrd_path}" if rrd_path else ""))

@@ -119,6 +119,8 @@ class PressRecord:
     quality: np.ndarray
     force_quality: np.ndarray
     rest: np.ndarray                 # (2, 6) re-tare removed at onset and at release (N, N*m)
+    touch: np.ndarray | None = None  # a curved phantom: where the tip touched (3,) lab, and the
+    touch_normal: np.ndarray | None = None   # surface's outward normal there (3,)
 
 
 def cut_presses(presses: list[Press], series: dict[str, np.ndarray], margin: int

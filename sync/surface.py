@@ -1,11 +1,18 @@
-"""The tip against the phantom's rest plane (:mod:`calib.rest_plane`): its depth below it, and
-where each press touched it."""
+"""The tip against the phantom's rest surface: its depth below it, and where each press touched
+it. A flat phantom's surface is its rest plane (:mod:`calib.rest_plane`); a curved one's is its
+shape, registered to the markers (:mod:`calib.shape_registration`), and there a press's depth
+runs along the surface's normal at the point its tip touched."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from sync.presses import Press
+from calib.shape_registration import Registration
+from core.errors import BadInput
+from data_schema.shape import Shape
+from sync.presses import Press, PressRecord
+
+TOUCH_OFF_M = 3e-3      # a curved press's tip this far outside the shape at onset never touched
 
 
 def tip_depth(tip: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -15,7 +22,13 @@ def tip_depth(tip: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndar
 
 def contact_points(tip: np.ndarray, presses: list[Press], point: np.ndarray,
                    normal: np.ndarray, frames: int = 10) -> np.ndarray:
-    """Where each press touched: the tip over its first loaded frames, on the rest plane.
+    """Where each press touched: the tip over its first loaded frames, on the rest plane."""
+    return np.array([c - ((c - point) @ normal) * normal
+                     for c in onset_tips(tip, presses, frames)]).reshape(-1, 3)
+
+
+def onset_tips(tip: np.ndarray, presses: list[Press], frames: int = 10) -> np.ndarray:
+    """The tip (P, 3) as each press began: its median over the first loaded ``frames`` seen.
 
     The onset, not the peak: a tilted press slides the tip sideways as it sinks in.
     """
@@ -27,6 +40,69 @@ def contact_points(tip: np.ndarray, presses: list[Press], point: np.ndarray,
             seg = tip[pr.onset:pr.release]
             seg = seg[np.isfinite(seg).all(axis=1)][:frames]
         if len(seg):
-            c = np.median(seg, axis=0)
-            out[k] = c - ((c - point) @ normal) * normal
+            out[k] = np.median(seg, axis=0)
     return out
+
+
+def shape_depth(tip: np.ndarray, reg: Registration, shape: Shape) -> np.ndarray:
+    """Depth (T,) of the tip inside the registered shape: minus its signed distance to the
+    surface (NaN where the tip is not seen)."""
+    out = np.full(len(tip), np.nan)
+    seen = np.isfinite(tip).all(axis=1)
+    out[seen] = -shape.closest(_apply(reg.to_shape, tip[seen]))[2]
+    return out
+
+
+def shape_touches(tip: np.ndarray, depth: np.ndarray, presses: list[Press], reg: Registration,
+                  shape: Shape, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """Where each press touched the registered shape (P, 3) and its outward normal there
+    (P, 3), both in the lab: where the tip's ``depth`` (T,) below the surface last crossed 0
+    before the press's onset (between the two frames around it), or, where the tip was not
+    seen outside, its onset position moved onto the surface. A press whose tip stays
+    :data:`TOUCH_OFF_M` outside the surface as its force rises is refused by number.
+
+    The crossing, not the onset: by the onset a tilted tip has slid along the surface, and on
+    a curved one the normal turns with it."""
+    start = onset_tips(tip, presses)
+    seen = np.isfinite(start).all(axis=1)
+    off = np.zeros(len(presses))
+    off[seen] = shape.closest(_apply(reg.to_shape, start[seen]))[2]
+    for k in np.flatnonzero(off > TOUCH_OFF_M):
+        raise BadInput(source, f"press {k} (frame {presses[k].onset}): its tip is "
+                               f"{off[k] * 1e3:.1f} mm outside the registered shape as the "
+                               "force rises: it never touches the phantom")
+    cross = np.array([_crossing(tip, depth, pr.onset) for pr in presses]).reshape(-1, 3)
+    cross = np.where(np.isfinite(cross), cross, start)
+    ok = np.isfinite(cross).all(axis=1)
+    at, normal = np.full_like(cross, np.nan), np.full_like(cross, np.nan)
+    if ok.any():
+        back = np.linalg.inv(reg.to_shape)
+        on, n, _ = shape.closest(_apply(reg.to_shape, cross[ok]))
+        at[ok], normal[ok] = _apply(back, on), n @ back[:3, :3].T
+    return at, normal
+
+
+def _crossing(tip: np.ndarray, depth: np.ndarray, onset: int) -> np.ndarray:
+    """The tip where its depth last rose through 0 up to frame ``onset`` (NaN: not seen)."""
+    outside = np.flatnonzero(depth[:onset + 1] <= 0)
+    if outside.size == 0:
+        return np.full(3, np.nan)
+    i = int(outside[-1])
+    after = i + 1 + np.flatnonzero(np.isfinite(depth[i + 1:onset + 1]))
+    if after.size == 0:
+        return tip[i]
+    j = int(after[0])
+    s = -depth[i] / (depth[j] - depth[i])
+    return tip[i] + s * (tip[j] - tip[i])
+
+
+def along_normals(records: list[PressRecord], touch: np.ndarray, normal: np.ndarray) -> None:
+    """Each press's depth along its own surface normal from where it touched (set on the
+    records, with that point and normal)."""
+    for rec, c, n in zip(records, touch, normal, strict=True):
+        rec.depth = (c - rec.points[:, -1]) @ n
+        rec.touch, rec.touch_normal = c, n
+
+
+def _apply(t: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return p @ t[:3, :3].T + t[:3, 3]

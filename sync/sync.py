@@ -35,11 +35,13 @@ import numpy as np
 
 from calib.force_tare import Tare
 from calib.pivot import PivotResult
-from calib.rest_plane import rest_surface
+from calib.rest_plane import mean_seen, rest_surface
+from calib.shape_registration import Registration, register_markers
 from core.errors import BadInput
 from core.progress import warn
 from core.series import RawSession
 from data_schema.phantom import PhantomLayout
+from data_schema.shape import Shape
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
 from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
@@ -65,7 +67,7 @@ from sync.holes import (
 from sync.presses import Press, PressRecord, assign_locations, cut_presses, segment_presses
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
-from sync.surface import contact_points, tip_depth
+from sync.surface import along_normals, contact_points, shape_depth, shape_touches, tip_depth
 from sync.sync_params import SyncParams
 from sync.tip_track import check_cluster, track_tip
 
@@ -95,6 +97,7 @@ class SyncResult:
     phantom: dict = field(default_factory=dict)   # the phantom's layout (data_schema.phantom)
     session: dict[str, np.ndarray] = field(default_factory=dict)   # full-length series
     holes: list[dict[str, Any]] = field(default_factory=list)   # each hole, as JSON values
+    registration: Registration | None = None   # a curved phantom's markers on its shape
 
 
 def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResult:
@@ -111,8 +114,9 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     pose = track.pose
     points, quality = session_points(t_m, phantom, track.tip, holes.lost, rate, p)
     quality[:, -1] |= np.where(pose.poor, POOR_FIT, 0).astype(np.uint8)
-    surface_point, normal = rest_surface(phantom, cluster, track.tip, mk.source)
-    depth = tip_depth(points[:, -1], surface_point, normal)
+    layout = PhantomLayout.from_json(raw.phantom)
+    surface = rest_of(phantom, cluster, track.tip, raw.phantom_markers, layout, mk.source)
+    depth = surface.depth(points[:, -1])
 
     cf = condition_force(raw, p)
     force_at = antialiased_interpolant(cf.time_s, cf.wrench, rate, p.passband, cf.stretches)
@@ -134,8 +138,8 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     magnitude = on.magnitude
 
     found, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
-    loc_centres = place(found, contact_points(points[:, -1], found, surface_point, normal),
-                        p.location_radius_m)
+    touch, touch_normal = surface.touches(points[:, -1], depth, found)
+    loc_centres = place(found, touch, p.location_radius_m)
     reach = touch_reach(rate, p)
     presses = leave_out_touched(found, on.spans, reach)
     for span in on.spans:
@@ -147,6 +151,9 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
               "torque": torque, "force_magnitude": magnitude, "depth": depth,
               "force_quality": force_q}
     records = cut_presses(presses, series, int(round(p.margin_s * rate)))
+    if surface.registration is not None:
+        kept = [next(k for k, f in enumerate(found) if f is pr) for pr in presses]
+        along_normals(records, touch[kept], touch_normal[kept])
     for rec in records:
         ends = rec.time_ns[[rec.press.onset, rec.press.release - 1]] * 1e-9
         rec.rest = cf.rest.at(clock.to_logger(ends))
@@ -160,9 +167,9 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     return SyncResult(
         name=raw.name, point_names=list(raw.phantom_markers) + [TIP], presses=records,
         clock=clock, pivot=track.pivot, tare=cf.tare, cluster_body=track.cluster_body,
-        surface_point=surface_point, surface_normal=normal, location_centres=loc_centres,
+        surface_point=surface.point, surface_normal=surface.normal, location_centres=loc_centres,
         rate_hz=rate, calibration=calibration, presses_cut_off=cut_off, session=session,
-        rail_samples=int(rail.sum()), phantom=PhantomLayout.from_json(raw.phantom).as_json(),
+        rail_samples=int(rail.sum()), phantom=layout.as_json(), registration=surface.registration,
         holes=[hole_record(span, mk.time_ns) for span in on.spans],
         presses_in_holes=len(found) - len(presses),
     )
@@ -206,6 +213,44 @@ def frame_force(force_at: Callable[[np.ndarray], np.ndarray], cf: ConditionedFor
         if span.stream == "force":
             in_force_hole |= span.frames
     return FrameForce(force_at(t_log), spans, holes.lost | in_force_hole, in_force_hole)
+
+
+@dataclass(frozen=True)
+class RestSurface:
+    """What depth is measured from: the rest plane (``point``, ``normal`` out of the phantom),
+    or a curved phantom's registered shape (then ``point`` and ``normal`` are its frame's
+    origin and +z in the lab)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    registration: Registration | None = None
+    shape: Shape | None = None
+    source: str = ""
+
+    def depth(self, tip: np.ndarray) -> np.ndarray:
+        """The tip's depth (T,) below the surface (into the phantom: +)."""
+        if self.registration is None:
+            return tip_depth(tip, self.point, self.normal)
+        return shape_depth(tip, self.registration, self.shape)
+
+    def touches(self, tip: np.ndarray, depth: np.ndarray, presses: list[Press]
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Where each press touched the surface (P, 3) and its outward normal there (P, 3);
+        ``depth`` (T,) is :meth:`depth` of ``tip``."""
+        if self.registration is None:
+            return (contact_points(tip, presses, self.point, self.normal),
+                    np.tile(self.normal, (len(presses), 1)))
+        return shape_touches(tip, depth, presses, self.registration, self.shape, self.source)
+
+
+def rest_of(phantom: np.ndarray, cluster: np.ndarray, tip: np.ndarray, names: list[str],
+            layout: PhantomLayout, source: str) -> RestSurface:
+    """The phantom's rest surface: its plane, or its shape registered to the markers."""
+    if layout.shape is None:
+        return RestSurface(*rest_surface(phantom, cluster, tip, source))
+    reg = register_markers(phantom, mean_seen(cluster) - tip, list(names), layout, source)
+    to_lab = np.linalg.inv(reg.to_shape)
+    return RestSurface(to_lab[:3, 3], to_lab[:3, 2], reg, layout.shape, str(source))
 
 
 def place(presses: list[Press], centres: np.ndarray, radius_m: float) -> np.ndarray:

@@ -75,6 +75,36 @@ def sync_errors(synced: str | Path, truth: str | Path) -> dict[str, float]:
     }
 
 
+def curved_errors(synced: str | Path, truth: str | Path) -> dict[str, float]:
+    """A curved twin's registration and depth against its truth: each marker's residual off the
+    registered shape (largest), the registered frame against the true one (the shape frame's
+    points within the footprint moved by at most ``frame_mm``; its turn in degrees), and the
+    depth along the normal from onset to release of every press (RMS and largest error; the
+    true depth is the tip's below its true contact point along the true normal)."""
+    s, s_attrs = read_h5(synced, SYNCED)
+    t, t_attrs = read_h5(truth, TRUTH, ("mocap/depth", "phantom/shape_to_lab",
+                                        "phantom/rest_surface"))
+    rate = float(t_attrs["rate_hz"])
+    ours = s["calibration/to_shape"] @ t["phantom/shape_to_lab"]      # true shape -> our shape
+    corners = t["phantom/rest_surface"].reshape(-1, 3)
+    back = np.linalg.inv(t["phantom/shape_to_lab"])
+    surface = corners @ back[:3, :3].T + back[:3, 3]                  # true shape frame
+    moved = surface @ ours[:3, :3].T + ours[:3, 3]
+    turn = np.degrees(np.arccos(np.clip((np.trace(ours[:3, :3]) - 1) / 2, -1.0, 1.0)))
+    err = []
+    for group in sorted({k.rsplit("/", 1)[0] for k in s if k.startswith("presses/")}):
+        idx = np.round(s[f"{group}/time_ns"] * 1e-9 * rate).astype(np.int64)
+        on, off = s_attrs[f"{group}/onset_index"], s_attrs[f"{group}/release_index"]
+        err.append((s[f"{group}/depth"] - t["mocap/depth"][idx])[on:off])
+    depth = np.concatenate(err)
+    depth = depth[np.isfinite(depth)]
+    return {"residual_max_mm": float(np.nanmax(np.abs(s["calibration/marker_residual"]))) * 1e3,
+            "frame_mm": float(np.linalg.norm(moved - surface, axis=1).max()) * 1e3,
+            "frame_deg": float(turn),
+            "depth_rms_mm": float(np.sqrt(np.mean(depth ** 2))) * 1e3,
+            "depth_max_mm": float(np.abs(depth).max()) * 1e3}
+
+
 def _rms(err: np.ndarray) -> float:
     """RMS length of the rows of ``err`` that are finite (NaN when none is)."""
     ok = np.isfinite(err).all(axis=1)

@@ -14,6 +14,9 @@ camera frames the phantom. Entities:
   ``scene/phantom`` (blue) and ``scene/cluster`` (orange) markers, gap-filled samples yellow;
   ``scene/tip`` (large red ball), ``scene/shaft`` (the indenter from the tip to its markers),
   ``scene/tip_path`` (the whole path, faint, static);
+* a curved phantom's ``scene/shape`` (its mould's surface where the markers registered it,
+  translucent, static) and ``scene/residual`` (each marker at rest, labelled with how far it
+  rests off that surface, coloured 0 .. 0.3 mm);
 * ``quality/filled``, ``quality/missing``: points filled or missing per frame;
   ``quality/saturated``, ``quality/over_range``: 1 where the force was read from a gauge on the
   amplifier's rail or lies beyond the sensor's rating (extract leaves those presses out);
@@ -39,6 +42,7 @@ from scipy.spatial import Delaunay
 from core.recording import (
     colormap,
     declare_up,
+    log_mould,
     phantom_view,
     plot,
     recording,
@@ -46,6 +50,7 @@ from core.recording import (
     time_column,
 )
 from core.text import count
+from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS
 from sync.gaps import FILLED, MISSING
 from sync.sync import SyncResult
@@ -61,6 +66,7 @@ COLORS = {"phantom": (60, 140, 230), "tip": (230, 30, 30), "cluster": (245, 140,
           "hole": (0, 200, 255)}
 FLAG_NAMES = {"saturated": "force on the amplifier's rail", "over_range": "force beyond rating"}
 RADIUS_M = 0.0015
+RESIDUAL_SCALE_M = 0.3e-3    # a registration residual coloured at the top of the map
 
 
 def blueprint(centre: np.ndarray, size: float, moved_mm: float) -> rrb.Blueprint:
@@ -125,6 +131,8 @@ def log_sync(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: fl
     send_series(rec, "quality/hole", TIMELINE, t, s["hole"].astype(np.int64),
                 "a hole (frames lost, or force read from a hole's edge)", COLORS["hole"])
     _log_scene(rec, r, rest, scale)
+    if r.registration is not None:
+        _shape(rec, r, rest)
     _presses(rec, r)
     _holes(rec, r)
 
@@ -163,6 +171,20 @@ def _log_scene(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: 
     if len(path) > 1:
         rec.log("scene/tip_path", rr.LineStrips3D([path], colors=[COLORS["path"]],
                                                   radii=[RADIUS_M / 5]), static=True)
+
+
+def _shape(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray) -> None:
+    """The registered mould in the lab, and each marker's residual off it."""
+    layout = PhantomLayout.from_json(r.phantom)
+    log_mould(rec, "scene/shape", layout.shape.vertices, layout.shape.faces,
+              np.linalg.inv(r.registration.to_shape))
+    res = r.registration.residual
+    ok = np.isfinite(rest).all(axis=1) & np.isfinite(res)
+    names = r.point_names[:-1]
+    rec.log("scene/residual", rr.Points3D(
+        rest[ok], radii=RADIUS_M * 1.2, colors=colormap(np.abs(res[ok]) / RESIDUAL_SCALE_M),
+        labels=[f"{names[k]} {res[k] * 1e3:+.2f} mm" for k in np.flatnonzero(ok)]),
+        static=True)
 
 
 def _surface(rec: rr.RecordingStream, t: np.ndarray, markers: np.ndarray, rest: np.ndarray,

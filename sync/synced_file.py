@@ -31,6 +31,9 @@ def write_synced(path: str | Path, result: SyncResult, provenance: dict[str, Any
         "calibration/surface_normal": result.surface_normal,
         "locations/centre": result.location_centres.reshape(-1, 3),
     }
+    if result.registration is not None:
+        arrays.update({"calibration/to_shape": result.registration.to_shape,
+                       "calibration/marker_residual": result.registration.residual})
     attrs: dict[str, Any] = {
         "provenance": provenance, "source": source, "calibration": result.calibration,
         "quality_bits": QUALITY_BITS, "force_bits": FORCE_BITS,
@@ -58,9 +61,12 @@ def _calibration_attrs(result: SyncResult) -> dict[str, Any]:
 
 
 def _press_arrays(rec: PressRecord) -> dict[str, np.ndarray]:
-    return {"time_ns": rec.time_ns, "points": rec.points, "force": rec.force,
-            "torque": rec.torque, "force_magnitude": rec.force_magnitude, "depth": rec.depth,
-            "quality": rec.quality, "force_quality": rec.force_quality}
+    out = {"time_ns": rec.time_ns, "points": rec.points, "force": rec.force,
+           "torque": rec.torque, "force_magnitude": rec.force_magnitude, "depth": rec.depth,
+           "quality": rec.quality, "force_quality": rec.force_quality}
+    if rec.touch is not None:
+        out.update(touch=rec.touch, touch_normal=rec.touch_normal)
+    return out
 
 
 def _press_attrs(rec: PressRecord) -> dict[str, Any]:

@@ -4,7 +4,8 @@ One timeline, ``mocap_time`` (since the first frame received); +z up. Entities:
 
 * ``scene/phantom`` (blue) and ``scene/cluster`` (orange): the session's markers, at most
   :data:`VIEW_HZ` times a second (what a person can see), lost ones left out, framed on the
-  phantom once it is seen; ``scene/tip`` (red ball); ``scene/coverage``: a ball per location
+  phantom once it is seen; ``scene/tip`` (red ball); a curved phantom's ``scene/shape``
+  (its mould where the markers registered it); ``scene/coverage``: a ball per location
   pressed (at its first press's tip), coloured by the highest force level reached there
   (viridis, 0 to :data:`COVERAGE_N` N) and labelled "location: presses x, top level", updated
   as each press ends;
@@ -31,7 +32,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from core.recording import colormap, declare_up, phantom_view, plot, time_column
+from core.recording import colormap, declare_up, log_mould, phantom_view, plot, time_column
+from data_schema.shape import Shape
 from live.session.model import Reading
 from live.session.presses import PressDone
 from live.session.states import LivePress, OnlineStates, coverage
@@ -50,7 +52,8 @@ COLORS = {"phantom": (60, 140, 230), "cluster": (245, 140, 30), "tip": (230, 30,
 def blueprint(centre: np.ndarray | None = None, size: float = 0.1,
               model: bool = False) -> rrb.Blueprint:
     """The scene beside the force and the quality plots (and the model's, with one); the
-    scene framed on the phantom (``centre``, ``size`` m) once its markers are seen."""
+    scene framed on the phantom and the indenter (``centre``, ``size`` m) once both are
+    seen."""
     name = "markers (phantom blue, cluster orange), tip red" + \
         (", model green" if model else "")
     scene = rrb.Spatial3DView(origin="scene", name=name) if centre is None else \
@@ -104,8 +107,8 @@ class LiveView:
         self._next_scene = time_ns + int(1e9 / VIEW_HZ)
         self._at(time_ns)
         seen = ~lost
-        if not self._framed and seen[:self.phantom].sum() >= 3:
-            self._frame_phantom(markers[:self.phantom][seen[:self.phantom]])
+        if not self._framed and seen[:self.phantom].sum() >= 3 and seen[self.phantom:].any():
+            self._frame_scene(markers[seen])
         for name, part in (("phantom", slice(0, self.phantom)),
                            ("cluster", slice(self.phantom, None))):
             pts = markers[part][seen[part]]
@@ -127,12 +130,14 @@ class LiveView:
         self._flags["saturated"] = max(self._flags["saturated"], float(saturated.any()))
         self._flags["over_range"] = max(self._flags["over_range"], float(over_range.any()))
 
-    def _frame_phantom(self, phantom: np.ndarray) -> None:
-        """Frame the scene on the phantom's markers (seen once, at their first drawing)."""
+    def _frame_scene(self, seen: np.ndarray) -> None:
+        """Frame the scene on the phantom and the indenter together (the box round every
+        marker seen, once, at the first frame that shows both): the tip pressing and the
+        cluster above it stay in view."""
         self._framed = True
-        centre = phantom.mean(axis=0)
-        size = float(np.ptp(phantom[:, :2], axis=0).max()) or 0.1
-        self.rec.send_blueprint(blueprint(centre, size, self.with_model))
+        lo, hi = seen.min(axis=0), seen.max(axis=0)
+        size = float((hi - lo).max()) or 0.1
+        self.rec.send_blueprint(blueprint((lo + hi) / 2, size, self.with_model))
 
     def _at(self, time_ns: int) -> None:
         self.rec.set_time(TIMELINE, duration=np.timedelta64(int(time_ns), "ns"))
@@ -171,6 +176,10 @@ class LiveView:
             if text not in self._warned:
                 self._warned.add(text)
                 self.rec.log("status", rr.TextLog(text, level=rr.TextLogLevel.WARN))
+
+    def shape(self, shape: Shape, to_shape: np.ndarray) -> None:
+        """A curved phantom's mould where its markers registered it (lab, translucent)."""
+        log_mould(self.rec, "scene/shape", shape.vertices, shape.faces, np.linalg.inv(to_shape))
 
     def note(self, time_ns: int, text: str, level: str = rr.TextLogLevel.INFO) -> None:
         """A line of the session's status."""

@@ -21,7 +21,6 @@ import warnings
 import numpy as np
 
 from calib.force_tare import Tare
-from calib.rest_plane import rest_surface
 from core.progress import warn
 from data_schema.session import SessionConfig
 from extract.phantom_frame import to_phantom_frame
@@ -33,6 +32,7 @@ from live.session.model import LiveModel, ModelRefusal
 from live.session.presses import PressTracker
 from live.session.states import Conditioning, History, LivePress, OnlineStates, Surface
 from sync.force_conditioning import RAIL_TOLERANCE, contact_level, noise_level, rails
+from sync.sync import rest_of
 from sync.sync_params import SyncParams
 
 
@@ -159,24 +159,30 @@ class Monitor:
                                    Conditioning(self.tare, noise, contact), p)
         if self.model is not None:
             self.model.to_phantom = surface.transform
+        if self.view is not None and surface.rest.registration is not None:
+            self.view.shape(surface.rest.shape, surface.rest.registration.to_shape)
         if self.view is not None:
             self.view.note(time_ns, f"force tared over its first "
                                     f"{self.tare.stop / self.layout.device.rate_hz:.2f} s "
                                     f"(unloaded start; noise {noise * 1e3:.1f} mN)")
 
     def _surface(self) -> Surface:
-        """The phantom's rest plane and frame from the markers at rest before the tare: sync's
-        rest plane (:func:`calib.rest_plane.rest_surface`), extract's axes and origin."""
-        rest = np.stack(self._rest)
+        """The phantom's rest surface and frame from the markers at rest before the tare: sync's
+        rest plane (:func:`sync.sync.rest_of`) with extract's axes and origin, or a curved
+        phantom's shape registered to the markers, its own frame."""
+        frames = np.stack(self._rest)
         self._rest = []
-        phantom, cluster = rest[:, :self.phantom], rest[:, self.phantom:]
+        phantom, cluster = frames[:, :self.phantom], frames[:, self.phantom:]
         tips = self.tip.tips(cluster, self.params)
-        point, normal = rest_surface(phantom, cluster, tips, self.layout.source)
+        names = list(self.cfg.mocap.phantom_markers)
+        rest = rest_of(phantom, cluster, tips, names, self.cfg.phantom, self.layout.source)
+        if rest.registration is not None:          # a curved phantom: its shape's frame
+            return Surface(rest, rest.registration.to_shape)
         with warnings.catch_warnings():          # a marker never seen at rest: NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             still = np.nanmedian(phantom, axis=0)
-        return Surface(point, normal, to_phantom_frame(still, list(self.cfg.mocap.phantom_markers),
-                                                       point, normal, self.cfg.phantom))
+        return Surface(rest, to_phantom_frame(still, names, rest.point, rest.normal,
+                                              self.cfg.phantom))
 
     def _on_rail(self, volts: np.ndarray) -> np.ndarray:
         if self._rails is None:

@@ -44,8 +44,7 @@ from sync.holes import hole_line, leave_out_touched, session_holes, touch_reach
 from sync.presses import Press as Loaded
 from sync.presses import assign_locations, cut_span, segment_presses
 from sync.resample import antialiased_interpolant
-from sync.surface import contact_points
-from sync.sync import frame_force, session_points
+from sync.sync import RestSurface, frame_force, session_points
 from sync.sync_params import SyncParams
 
 BEFORE_S = 1.5      # of the session before a contact its press is read with (re-tare, margins)
@@ -127,11 +126,10 @@ class History:
 
 @dataclass(frozen=True)
 class Surface:
-    """The phantom at rest: its plane in the lab (a point and the normal out of it), and the
-    lab -> phantom frame transform (4, 4) the live view uses."""
+    """The phantom at rest: sync's rest surface (its plane, or a curved phantom's registered
+    shape), and the lab -> phantom frame transform (4, 4) the live view uses."""
 
-    point: np.ndarray
-    normal: np.ndarray
+    rest: RestSurface
     transform: np.ndarray
 
 
@@ -317,8 +315,8 @@ class OnlineStates:
     def _place(self, cut: Cut) -> tuple[np.ndarray, int]:
         """Where a press touched and its location, as sync places it among every whole press
         found so far (those a hole touched too)."""
-        centre = contact_points(cut.points[:, -1], [cut.press], self.surface.point,
-                                self.surface.normal)[0]
+        tip = cut.points[:, -1]
+        centre = self.surface.rest.touches(tip, self.surface.rest.depth(tip), [cut.press])[0][0]
         self.placed.append(centre)
         location = assign_locations(np.array(self.placed), self.sync.location_radius_m)[0][-1]
         return centre, int(location)
@@ -345,8 +343,10 @@ class OnlineStates:
         names = list(self.cfg.mocap.phantom_markers) + ["tip"]
         return session_from_presses(path, self.cfg.name, [replace(t.press) for t in self.taken],
                                     [t.location for t in self.taken], names,
-                                    self.surface.point, self.surface.normal, self.cfg.phantom,
-                                    self.force.noise_n)
+                                    self.surface.rest.point, self.surface.rest.normal,
+                                    self.cfg.phantom, self.force.noise_n,
+                                    None if self.surface.rest.registration is None
+                                    else self.surface.transform)
 
 
 def _press(cut: Cut, untrusted: bool) -> Press:

@@ -17,8 +17,8 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
+from data_schema.states import check_flat_rest, point_names, validate_states
 from data_schema.states import footprint as states_footprint
-from data_schema.states import point_names, validate_states
 from sim.msm.msm import MSM, MSMParams
 
 OUTSIDE_M = 1e-3        # m: a marker resting further outside the MSM's surface is refused
@@ -94,4 +94,6 @@ def lab_layout(path: str | Path) -> np.ndarray:
     if not seen.all():
         raise BadInput(path, f"point {int(np.flatnonzero(~seen)[0])} is never seen at rest: "
                              "no layout for it")
-    return np.nanmedian(points, axis=0)
+    layout = np.nanmedian(points, axis=0)
+    check_flat_rest(layout, path)
+    return layout

@@ -29,7 +29,7 @@ import numpy as np
 from core.errors import BadInput
 from core.progress import warn
 from data_schema.hdf5 import attr_text
-from data_schema.states import footprint, validate_states
+from data_schema.states import check_flat_rest, footprint, validate_states
 from sim.msm.msm import MSM, MSMError, MSMParams
 from sim.msm.msm_grid import grid_params
 from sim.msm.msm_layout import check_inside
@@ -83,6 +83,7 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     if params is None:
         params = _file_grid(path, source, file_params, spacing)
     if source == "lab":              # a marker beyond the surface would be fitted at its edge
+        check_flat_rest(np.array([points[int(r[0])][:-1] for r in rows.values()]), path)
         check_inside(np.vstack([points[int(r[0])][:-1] for r in rows.values()]), params, path)
     if contact_radius is None:
         contact_radius = float(protocol.get("contact_radius", 0.0)) if source == "msm" else 0.0

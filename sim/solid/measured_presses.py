@@ -21,7 +21,7 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
-from data_schema.states import footprint, validate_states
+from data_schema.states import check_flat_rest, footprint, validate_states
 from sim.solid.solid_model import Attachments
 
 
@@ -98,6 +98,7 @@ def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSe
     if not presses:
         raise BadInput(path, "no press with a rest state and a loaded state to fit")
     rests = np.array([p.rest for p in presses])
+    check_flat_rest(rests[:, :-1], path)
     unseen = np.flatnonzero(~np.isfinite(rests[:, :-1]).all(axis=2).any(axis=0))
     if unseen.size:
         raise BadInput(path, f"point {int(unseen[0])} is missing from every rest state: no place "

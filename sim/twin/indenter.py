@@ -301,6 +301,16 @@ def plan_hand(
     )
 
 
+def tilt_to_normals(hand: Hand, normals: list[np.ndarray]) -> None:
+    """On a curved phantom, turn each press's direction (drawn about the lab's -z) about the
+    inward normal of its location (``normals``: outward, lab, by location): a hand presses
+    square to the surface it sees, within the same angles."""
+    down = np.array([0.0, 0.0, -1.0])
+    for press in hand.presses:
+        turn = Rotation.align_vectors(-normals[press.location][None], down[None])[0]
+        press.direction = turn.apply(press.direction)
+
+
 def draw_fmax(rng: np.random.Generator, style: HandStyle) -> float:
     """A peak force from the normal distribution truncated to ``style.fmax_range``."""
     lo, hi = style.fmax_range

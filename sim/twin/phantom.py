@@ -32,7 +32,7 @@ preconditioned with one sparse factorisation of the rest stiffness, shared by ev
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -43,6 +43,7 @@ from scipy.interpolate import PchipInterpolator
 from core.errors import BadInput
 from sim.twin.marker_layout import SPACING_M, MarkerLayout, lattice_axes, marker_nodes
 from sim.twin.material_regions import Inclusion, Layer, check_regions, spring_scale
+from sim.twin.twin_shape import TwinShape
 
 # the 13 lattice directions of a node: 3 edges, 6 face diagonals, 4 body diagonals
 _DIRECTIONS = ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
@@ -67,9 +68,13 @@ class PhantomSpec:
     #                                  (x, y or z; positions ~1 um)
     inclusions: tuple[Inclusion, ...] = ()   # spheres of another silicone
     layer: Layer | None = None       # the top of the block, another silicone
+    shape: TwinShape | None = field(default=None, compare=False)   # a curved top; None: flat
 
     def __post_init__(self) -> None:
         check_regions(self.inclusions, self.layer, self.size)
+        if self.shape is not None and (self.inclusions or self.layer is not None):
+            raise BadInput("--shape", "a curved twin has one silicone: inclusions and a layer "
+                                      "are laid out under a flat top")
 
 
 @dataclass
@@ -103,6 +108,8 @@ class Phantom:
         nx, ny, nz = self.nodes
         self.marker_ij = marker_nodes(self.spec.markers, xs, ys)   # (M, 2) (i, j): P00, P01, ..
         self.rest = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        if self.spec.shape is not None:      # each column stretched from the table to the top
+            self.rest[:, 2] *= self.spec.shape.top(self.rest[:, :2]) / lz
         self.grid = np.arange(nx * ny * nz).reshape(nx, ny, nz)
         self.springs = _springs(self.grid)
         delta = self.rest[self.springs[:, 1]] - self.rest[self.springs[:, 0]]
@@ -231,16 +238,17 @@ class Phantom:
         free = self.dof[:, 0] >= 0
         pos[free] += u.reshape(-1, 3)
         surface = pos[self.grid[:, :, -1]]
-        du = np.gradient(surface, axis=0)
-        dv = np.gradient(surface, axis=1)
-        normal = np.cross(du, dv)
-        normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+        normal = surface_normals(surface)
         mi, mj = self.marker_ij[:, 0], self.marker_ij[:, 1]
         markers = surface[mi, mj] + self.spec.marker_radius * normal[mi, mj]
         tip = np.full(3, np.nan)
         if ij is not None:
             tip = sum(w * pos[node] for node, w in self._patch(ij))
         return tip, markers, surface
+
+    def rest_normal(self, ij: tuple[int, int]) -> np.ndarray:
+        """The top surface's outward unit normal (3,) at a location, at rest."""
+        return surface_normals(self.rest[self.grid[:, :, -1]])[ij]
 
     def _check_above_table(self, ij: tuple[int, int], levels: np.ndarray,
                            tips: np.ndarray) -> None:
@@ -271,6 +279,12 @@ class Phantom:
         share = (1.0 - self.spec.tip_share) / (len(_PATCH) - 1)
         return [(self.top(ij[0] + a, ij[1] + b), self.spec.tip_share if (a, b) == (0, 0)
                  else share) for a, b in _PATCH]
+
+
+def surface_normals(surface: np.ndarray) -> np.ndarray:
+    """Outward unit normals (nx, ny, 3) of a grid of top-surface points (nx, ny, 3)."""
+    normal = np.cross(np.gradient(surface, axis=0), np.gradient(surface, axis=1))
+    return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
 
 
 def _springs(grid: np.ndarray) -> np.ndarray:

@@ -74,6 +74,7 @@ class SynthParams:
     size: str = size_text(PhantomSpec.size)         # LxW mm
     inclusions: tuple[str, ...] = ()                # each "X,Y,DEPTH,RADIUS,RATIO" (mm)
     layer: str | None = None                        # "THICKNESS,RATIO" (mm)
+    shape: str | None = None                        # "dome:HEIGHT" (mm) or a surface file
     view_press: int = 0                             # the press the recording shows
 
     BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({

@@ -17,6 +17,8 @@ import re
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import numpy as np
+
 from core.atomic import atomic_outputs
 from core.errors import BadInput
 from core.provenance import make_provenance
@@ -28,6 +30,7 @@ from sim.twin.synth_view import write_twin_recording
 from sim.twin.twin import Twin, simulate_twin
 from sim.twin.twin_files import FILES, RECORDING, calibration_name, file_keys, write_lab_files
 from sim.twin.twin_scene import TwinParams
+from sim.twin.twin_shape import DOME, parse_shape
 from sim.twin.twin_truth import write_truth
 
 
@@ -43,7 +46,7 @@ def run_synth(inputs: None, out: str | Path, params: SynthParams | None = None,
     """
     s = params or SynthParams()
     inclusions, layer = s.regions()
-    spec = replace(phantom_spec(s.markers, s.marker_pitch_mm, s.size, s.seed),
+    spec = replace(phantom_spec(s.markers, s.marker_pitch_mm, s.size, s.seed, s.shape),
                    inclusions=inclusions, layer=layer)
     p = TwinParams(**s.session_fields(), phantom=spec)
     folder = _output_folder(out)
@@ -57,11 +60,17 @@ def run_synth(inputs: None, out: str | Path, params: SynthParams | None = None,
 
 def phantom_spec(markers: str = SynthParams.markers,
                  marker_pitch_mm: float = SynthParams.marker_pitch_mm,
-                 size: str = SynthParams.size, seed: int = SynthParams.seed) -> PhantomSpec:
-    """The block of ``--markers``, ``--marker-pitch`` and ``--size`` (thickness as default)."""
+                 size: str = SynthParams.size, seed: int = SynthParams.seed,
+                 shape: str | None = SynthParams.shape) -> PhantomSpec:
+    """The block of ``--markers``, ``--marker-pitch``, ``--size`` (thickness as default) and
+    ``--shape`` (a file's footprint is its own: ``--size`` gives way to it)."""
     base = PhantomSpec()
-    footprint = parse_size(size)
-    return replace(base, size=(*footprint, base.size[2]),
+    size_m = (*parse_size(size), base.size[2])
+    top = None if shape is None else parse_shape(shape, size_m)
+    if top is not None and not shape.startswith(DOME):
+        height = float(np.ptp(top.shape.vertices[:, 2]))
+        size_m = (*top.footprint, height)
+    return replace(base, size=size_m, shape=top,
                    markers=parse_layout(markers, marker_pitch_mm, seed))
 
 

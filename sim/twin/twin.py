@@ -18,7 +18,14 @@ from functools import partial
 
 import numpy as np
 
-from sim.twin.indenter import Hand, HandStyle, IndenterGeometry, make_indenter, plan_hand
+from sim.twin.indenter import (
+    Hand,
+    HandStyle,
+    IndenterGeometry,
+    make_indenter,
+    plan_hand,
+    tilt_to_normals,
+)
 from sim.twin.nano17 import Nano17, make_nano17
 from sim.twin.phantom import LoadPath, Phantom
 from sim.twin.twin_force_log import ForceLog, play_force_log
@@ -90,6 +97,8 @@ def simulate_twin(p: TwinParams) -> Twin:
     if p.press_seconds is not None:
         style = replace(style, scale=p.press_seconds / style.mean_press_s)
     hand = plan_hand(g_hand, targets, style, lead_in=_lead_in(p))
+    if phantom.spec.shape is not None:
+        tilt_to_normals(hand, [to_lab[:3, :3] @ phantom.rest_normal(tuple(ij)) for ij in nodes])
     paths = solve_presses(phantom, hand, nodes, to_lab)
     indenter = make_indenter(g_build)
     sensor = make_nano17(g_build, f"FT{21000 + p.seed % 79000:05d}")

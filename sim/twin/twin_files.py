@@ -37,6 +37,7 @@ import numpy as np
 from data_schema.interior import write_interior
 from data_schema.session import SCHEMA as SESSION_SCHEMA
 from data_schema.session import VERSION as SESSION_VERSION
+from data_schema.shape import write_stl
 from ingest.ati_cal import write_ati_cal
 from ingest.qtm_force_plate import WRENCH, corner_keys
 from sim.twin.indenter import BODY_NAME
@@ -58,7 +59,8 @@ from sim.twin.twin_scene import TRIGGER_EVENT
 FILES = {"trial": "indentation.tsv", "bodies": "indentation_6D.tsv", "pivot": "pivot.tsv",
          "csv": "force.csv", "mat": "force.mat", "c3d": "indentation.c3d",
          "analog": "indentation_a.tsv", "plate": "indentation_f_1.tsv",
-         "session": "session.toml", "truth": "truth.h5", "interior": "interior.nii.gz"}
+         "session": "session.toml", "truth": "truth.h5", "interior": "interior.nii.gz",
+         "shape": "mould.stl"}
 GAUGES = tuple(f"G{k}" for k in range(6))
 TRIGGER_COLUMN = "trigger"
 # the analog route: channel names, the label a C3D export cuts them to (repeated), the board
@@ -74,7 +76,8 @@ def file_keys(twin: Twin) -> tuple[str, ...]:
     """The :data:`FILES` keys a session writes (the force route's own), truth last."""
     regions = twin.phantom.spec.inclusions or twin.phantom.spec.layer is not None
     return ("trial", "bodies", "pivot", *ROUTE_FILES[twin.params.force_via], "session",
-            *(("interior",) if regions else ()), "truth")
+            *(("interior",) if regions else ()),
+            *(("shape",) if twin.phantom.spec.shape is not None else ()), "truth")
 
 
 def calibration_name(twin: Twin) -> str | None:
@@ -105,6 +108,8 @@ def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
     if out.get("interior") is not None:
         labels, affine, _ = interior_volume(twin.phantom.spec)
         write_interior(out["interior"], labels, affine)
+    if out.get("shape") is not None:
+        write_stl(out["shape"], twin.phantom.spec.shape.shape)
     write_session_toml(out["session"], *_session_tables(twin, calibration_name(twin)))
 
 
@@ -213,4 +218,7 @@ def phantom_table(twin: Twin) -> dict[str, object]:
         table["rows"] = layout.rows
     if spec.inclusions or spec.layer is not None:
         table.update(interior=FILES["interior"], labels=interior_volume(spec)[2])
+    if spec.shape is not None:
+        table.update(shape=FILES["shape"],
+                     marker_diameter_mm=round(2 * spec.marker_radius * 1e3, 6))
     return table

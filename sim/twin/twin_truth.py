@@ -63,11 +63,30 @@ def truth_arrays(twin: Twin) -> dict[str, Any]:
         "pivot/point": twin.pivot.point, "pivot/time_s": twin.pivot.time_s,
         "pivot/cluster": twin.pivot.cluster, "pivot/rotation": twin.pivot.rotation,
     }
+    if twin.phantom.spec.shape is not None:
+        data.update(shape_arrays(twin))
     if twin.params.trigger:
         scale = 1.0 + log.drift_ppm * 1e-6
         data["trigger/mocap_time_s"] = log.pulses
         data["trigger/logger_time_s"] = log.offset_s + scale * log.pulses
     return data
+
+
+def shape_arrays(twin: Twin) -> dict[str, np.ndarray]:
+    """A curved twin's truth: the shape's frame in the lab, the rest surface, each press's
+    outward normal where it touched (lab), and the tip's depth along it in each frame of the
+    press (NaN outside presses), from the untouched surface point."""
+    ph, m, presses = twin.phantom, twin.mocap, twin.hand.presses
+    normals = np.array([twin.to_lab[:3, :3] @ ph.rest_normal(tuple(twin.nodes[p.location]))
+                        for p in presses])
+    depth = np.full(len(m.time_s), np.nan)
+    for k, press in enumerate(presses):
+        at = m.press == k
+        depth[at] = (twin.contacts[press.location] - m.points[at, -1]) @ normals[k]
+    to_shape = ph.spec.shape.to_shape()
+    return {"phantom/shape_to_lab": twin.to_lab @ np.linalg.inv(to_shape),
+            "phantom/rest_surface": twin.lab(ph.rest[ph.grid[:, :, -1]]),
+            "presses/normal": normals, "mocap/depth": depth}
 
 
 def region_arrays(twin: Twin) -> dict[str, np.ndarray]:

@@ -384,3 +384,23 @@ def test_a_lab_with_another_marker_layout(tmp_path) -> None:
     live, _ = read_h5(tmp_path / "live" / STATES_NAME, STATES)
     assert live["states/points"].shape[1] == 21
     assert_same_states(tmp_path / "live" / STATES_NAME, offline, STATE_KEYS[:3])
+
+
+def test_a_curved_phantom(tmp_path) -> None:
+    """A dome (the twin's ``--shape dome:30``): the live session registers the markers to the
+    mould as sync does, and takes the offline stages' states in the shape's frame."""
+    from sim.twin.synth_params import SynthParams
+    from sim.twin.synth_stage import run_synth
+
+    session = run_synth(None, tmp_path / "session", SynthParams(
+        seed=6, locations=2, repeats=1, force_via="analog", shape="dome:30"))
+    rrd = tmp_path / "live.rrd"
+    with replaying(session) as server:
+        run_live(session, tmp_path / "live", LiveParams(port=server.port, timeout_s=10), rrd)
+    ingested = tmp_path / "ingested.mcap"
+    run_ingest(session, ingested, IngestParams(), None)
+    offline = offline_states(ingested, tmp_path / "offline")
+    assert_same_states(tmp_path / "live" / STATES_NAME, offline, STATE_KEYS[:3])
+    live, _ = read_h5(tmp_path / "live" / STATES_NAME, STATES)
+    assert live["states/points"][:, :, 2].max() > 0.02        # in the shape's frame: the cap
+    assert {"/scene/shape", "/scene/phantom", "/scene/tip"} <= set(rrd_entities(rrd))

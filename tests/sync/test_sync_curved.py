@@ -1,0 +1,114 @@
+"""A curved phantom through sync and extract, against the twin's truth: a dome twin (a cap
+30 mm high on the default block) registered to its mould's STL, the tip's depth along the
+surface normal where each press touched, the states in the shape's frame; and a marker moved
+off the mould refused by name (exit 2, one line, nothing written)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from helpers.truth_checks import check_states_against_truth
+
+from core.recording import rrd_entities
+from data_schema.synced import validate_synced
+from extract.extract_stage import run_extract
+from ingest.ingest_stage import run_ingest
+from pipeline.cli import cli
+from sim.twin.synth_params import SynthParams
+from sim.twin.synth_stage import run_synth
+from sync.sync_accuracy import TARGETS, curved_errors, sync_errors
+from sync.sync_stage import run_sync
+
+
+@pytest.fixture(scope="module")
+def dome(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("dome")
+    run_synth(None, d / "s", SynthParams(seed=3, locations=4, repeats=2, shape="dome:30"))
+    run_ingest(d / "s", d / "s.mcap")
+    run_sync(d / "s.mcap", d / "s.h5", rrd=d / "s.rrd")
+    run_extract([d / "s.h5"], d / "states.h5")
+    return d
+
+
+def test_registration_depth_and_tip_against_truth(dome: Path) -> None:
+    validate_synced(dome / "s.h5")
+    curved = curved_errors(dome / "s.h5", dome / "s" / "truth.h5")
+    assert curved["residual_max_mm"] < 0.3          # each marker on the registered mould
+    assert curved["frame_mm"] < 0.1                 # the shape's frame where the truth has it
+    assert curved["depth_rms_mm"] < 0.2             # along the normal where the tip touched
+    errors = sync_errors(dome / "s.h5", dome / "s" / "truth.h5")
+    assert errors["tip_rms_mm"] < TARGETS["tip_rms_mm"]
+    assert errors["presses_missed"] == errors["presses_extra"] == 0
+
+
+def test_each_press_measures_depth_from_where_it_touched(dome: Path) -> None:
+    """The touch point lies on the true rest surface, near the true contact, and its normal
+    is the true one there."""
+    with h5py.File(dome / "s.h5") as s, h5py.File(dome / "s" / "truth.h5") as t:
+        contact, normal = t["locations/contact"][()], t["presses/normal"][()]
+        where = t["presses/location"][()]
+        for k, key in enumerate(sorted(s["presses"])):
+            g = s["presses"][key]
+            assert np.linalg.norm(g["touch"][()] - contact[where[k]]) < 0.5e-3
+            assert np.degrees(np.arccos(min(1.0, g["touch_normal"][()] @ normal[k]))) < 0.5
+
+
+def test_states_in_the_shape_frame_against_truth(dome: Path) -> None:
+    check_states_against_truth(dome / "states.h5", dome / "s" / "truth.h5")
+    with h5py.File(dome / "states.h5") as s, h5py.File(dome / "s" / "truth.h5") as t:
+        to_shape = s["sessions/transform"][0]
+        true = np.linalg.inv(t["phantom/shape_to_lab"][()])
+        np.testing.assert_allclose(to_shape[:3, :3], true[:3, :3], atol=1e-3)
+        np.testing.assert_allclose(to_shape[:3, 3], true[:3, 3], atol=0.1e-3)
+
+
+def test_recording_shows_the_shape_and_residuals(dome: Path) -> None:
+    entities = rrd_entities(dome / "s.rrd")
+    assert {"/scene/shape", "/scene/residual", "/scene/phantom", "/scene/tip"} <= set(entities)
+
+
+def _lift(tsv: Path, marker: str, mm: float) -> None:
+    """Move one marker of a QTM 3D export ``mm`` up (its Z column) in every frame."""
+    lines = tsv.read_text().splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("Frame\t"))
+    col = lines[head].split("\t").index(f"{marker} Z")
+    for i in range(head + 1, len(lines)):
+        cells = lines[i].split("\t")
+        if cells[col]:
+            cells[col] = f"{float(cells[col]) + mm:.3f}"
+        lines[i] = "\t".join(cells)
+    tsv.write_text("\n".join(lines) + "\n")
+
+
+def test_a_marker_off_the_mould_is_refused(dome: Path, tmp_path: Path) -> None:
+    import shutil
+
+    session = tmp_path / "s"
+    shutil.copytree(dome / "s", session)
+    _lift(session / "indentation.tsv", "P12", 3.0)
+    run_ingest(session, tmp_path / "s.mcap")
+    out = tmp_path / "s.h5"
+    res = CliRunner().invoke(cli, ["-q", "sync", str(tmp_path / "s.mcap"), "--out", str(out)])
+    assert res.exit_code == 2
+    line = res.stderr.strip()
+    assert "\n" not in line and "P12" in line and "off the registered shape" in line
+    assert not out.exists() and not list(tmp_path.glob("s.h5*"))
+
+
+@pytest.mark.parametrize("command", [("fit-msm", "STATES", "--out", "x.json"),
+                                     ("fit-solid", "STATES", "--out", "x.json"),
+                                     ("simulate", "--layout", "STATES", "--out", "x.h5")])
+def test_flat_simulators_refuse_curved_states(dome: Path, tmp_path: Path, command) -> None:
+    """The MSM and the solid model simulate a flat block: a curved phantom's states (in its
+    shape's frame) are refused in one line, nothing written."""
+    args = [str(dome / "states.h5") if a == "STATES" else str(tmp_path / a) if "." in a else a
+            for a in command]
+    res = CliRunner().invoke(cli, ["-q", *args])
+    assert res.exit_code == 2, res.output
+    line = res.stderr.strip()
+    assert "\n" not in line and "curved phantom" in line and "flat block" in line
+    assert not list(tmp_path.iterdir())
