@@ -6,9 +6,12 @@ around) and each seed: synthesise a session (5 x 5 markers, 8 places x 2 presses
 sync and extract it, and compare with ``truth.h5``: the registration (each marker's residual
 off the registered shape, the frame against the true one), the tip, the depth along the
 surface normal where each press touched, and the states (mean distance to the true ones at
-the same level, missing levels). Prints one row per run and the median and worst over seeds.
+the same level, missing levels). Prints one row per run and the median and worst over seeds;
+then sync's wall time on the dome of seed 0 against the flat twin of the same seed (its peer:
+the rest plane instead of the registration and the shape's depth), median of ``--repeats``
+runs of each, interleaved.
 
-Run: ``python benchmarks/bench_curved.py [--seeds 3] [--workdir DIR]``.
+Run: ``python benchmarks/bench_curved.py [--seeds 3] [--repeats 3] [--workdir DIR]``.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
+import time
 from pathlib import Path
 
 import h5py
@@ -94,9 +98,28 @@ def state_errors(states: Path, truth: Path) -> dict[str, float]:
             "states_missing": float(reached - len(seq) - excluded)}
 
 
+def sync_seconds(work: Path, repeats: int) -> None:
+    """Sync's wall time on the dome of seed 0 and on the flat twin of seed 0 (the same places
+    and presses), median of ``repeats`` interleaved runs, and their ratio."""
+    flat = work / "flat_0"
+    flat.mkdir(exist_ok=True)
+    run_synth(None, flat / "s", SynthParams(seed=0, locations=8, repeats=2))
+    run_ingest(flat / "s", flat / "s.mcap", None, None)
+    times: dict[str, list[float]] = {"dome": [], "flat": []}
+    for _ in range(repeats):
+        for name, d in (("dome", work / "dome30_0"), ("flat", flat)):
+            start = time.perf_counter()
+            run_sync(d / "s.mcap", d / "t.h5", SyncParams(), None)
+            times[name].append(time.perf_counter() - start)
+    dome, flat_s = (float(np.median(times[k])) for k in ("dome", "flat"))
+    print(f"sync, 16 presses: dome {dome:.2f} s, flat {flat_s:.2f} s (median of {repeats}); "
+          f"dome / flat {dome / flat_s:.2f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--workdir", type=Path, default=None)
     args = ap.parse_args()
     set_quiet(True)
@@ -118,6 +141,7 @@ def main() -> None:
         med = {k: float(np.median([r[k] for r in rows])) for k in keys}
         print(f"{'median':19s} " + "  ".join(f"{med[k]:15.3f}" for k in keys))
         print(f"{'worst':19s} " + "  ".join(f"{worst[k]:15.3f}" for k in keys))
+    sync_seconds(work, args.repeats)
 
 
 if __name__ == "__main__":

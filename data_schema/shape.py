@@ -28,7 +28,7 @@ from core.errors import BadInput
 SIZE_MM = Bound(5.0, 3000.0, unit="mm", why="metres or micrometres written as mm are a "
                                              "thousand times off")
 SUFFIXES = (".stl", ".obj", ".ply")
-CANDIDATES = 8           # nearest faces (by centroid) of a point's first guess at its closest
+CANDIDATES = 16          # nearest faces (by centroid) of a point's first guess at its closest
 FINE = 1 / 20            # queries cut the surface into triangles this short (of its extent)
 CREASE_DEG = 30.0        # faces meeting at a sharper angle are an edge of the mould
 
@@ -85,30 +85,31 @@ class Shape:
     def _tree(self) -> cKDTree:
         return cKDTree(self._fine[0].mean(axis=1))
 
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def closest(self, points: np.ndarray, exact_within: float = np.inf
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For (P, 3) points: the closest surface points (P, 3), the surface's outward unit
         normal there (P, 3; the face's corner normals blended, so it turns smoothly across a
         curved surface's facets), and the signed distances (P,): positive outside, negative
         inside.
 
-        Exact: after a first guess among the nearest faces, every face whose centroid lies
-        within that distance plus the largest face's reach is searched."""
+        Exact for points within ``exact_within`` (m) of the surface: after a first guess among
+        the :data:`CANDIDATES` faces nearest by centroid, every face whose centroid lies within
+        that distance plus the largest face's reach is searched. Farther out the first guess
+        stands: never more than that reach too far, and on the twin's moulds equal to the exact
+        distance within 0.01 um (``benchmarks/bench_curved.py``), for a tenth of the time."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         tri, normals, reach, index = self._fine
         k = min(CANDIDATES, len(tri))
         first = self._tree.query(p, k=k)[1].reshape(len(p), k)
-        near = trimesh.triangles.closest_point(tri[first.ravel()], np.repeat(p, k, axis=0))
-        guess = np.linalg.norm(near.reshape(len(p), k, 3) - p[:, None], axis=2).min(axis=1)
-        balls = self._tree.query_ball_point(p, guess + reach.max() + 1e-12)
-        owner = np.repeat(np.arange(len(p)), [len(b) for b in balls])
-        face = np.concatenate([np.asarray(b, dtype=np.int64) for b in balls])
-        at = trimesh.triangles.closest_point(tri[face], p[owner])
-        dist = np.linalg.norm(at - p[owner], axis=1)
-        order = np.lexsort((dist, owner))
-        best = order[np.r_[0, np.flatnonzero(np.diff(owner[order])) + 1]]
-        at, face = at[best], face[best]
+        at, face, dist = _nearest(tri, p, np.repeat(np.arange(len(p)), k), first.ravel())
+        near = np.flatnonzero(dist <= exact_within)
+        if near.size:
+            balls = self._tree.query_ball_point(p[near], dist[near] + reach.max() + 1e-12)
+            owner = np.repeat(near, [len(b) for b in balls])
+            found = np.concatenate([np.asarray(b, dtype=np.int64) for b in balls])
+            at[near], face[near], dist[near] = _nearest(tri, p, owner, found)
         side = np.where(np.einsum("ij,ij->i", p - at, normals[face]) < 0, -1.0, 1.0)
-        return at, self._blended_normal(index[face], at), side * dist[best]
+        return at, self._blended_normal(index[face], at), side * dist
 
     def height(self, xy: np.ndarray) -> np.ndarray:
         """(P,) the top surface's z above each (P, 2) point (m): the highest face crossed by
@@ -133,6 +134,17 @@ class Shape:
         bary = trimesh.triangles.points_to_barycentric(self._mesh.triangles[face], at)
         n = np.einsum("ij,ijk->ik", bary, self._corner_normals[face])
         return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _nearest(tri: np.ndarray, p: np.ndarray, owner: np.ndarray, face: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Among the (owner point, face) pairs, each owner's closest face: its point on it (U, 3),
+    the face (U,) and the distance (U,), owners in ascending order (each owner once)."""
+    at = trimesh.triangles.closest_point(tri[face], p[owner])
+    dist = np.linalg.norm(at - p[owner], axis=1)
+    order = np.lexsort((dist, owner))
+    best = order[np.r_[0, np.flatnonzero(np.diff(owner[order])) + 1]]
+    return at[best], face[best], dist[best]
 
 
 def read_shape(path: Path) -> Shape:

@@ -13,6 +13,8 @@ from data_schema.shape import Shape
 from sync.presses import Press, PressRecord
 
 TOUCH_OFF_M = 3e-3      # a curved press's tip this far outside the shape at onset never touched
+EXACT_DEPTH_M = 5e-3    # the depth series is exact this near the surface (the touches, the
+                        # crossings); beyond, the shape's first guess (data_schema/shape.py)
 
 
 def tip_depth(tip: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -46,10 +48,11 @@ def onset_tips(tip: np.ndarray, presses: list[Press], frames: int = 10) -> np.nd
 
 def shape_depth(tip: np.ndarray, reg: Registration, shape: Shape) -> np.ndarray:
     """Depth (T,) of the tip inside the registered shape: minus its signed distance to the
-    surface (NaN where the tip is not seen)."""
+    surface (NaN where the tip is not seen); exact within :data:`EXACT_DEPTH_M` of it, where
+    the touches are found (a press's own depth runs along its normal: :func:`along_normals`)."""
     out = np.full(len(tip), np.nan)
     seen = np.isfinite(tip).all(axis=1)
-    out[seen] = -shape.closest(_apply(reg.to_shape, tip[seen]))[2]
+    out[seen] = -shape.closest(_apply(reg.to_shape, tip[seen]), EXACT_DEPTH_M)[2]
     return out
 
 

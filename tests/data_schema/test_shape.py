@@ -117,3 +117,18 @@ def test_bad_shapes_are_refused_in_one_line(tmp_path: Path, make, name: str, wha
         read_shape(path)
     line = str(e.value)
     assert what in line and "\n" not in line and name in line
+
+
+def test_exact_near_the_surface_and_bounded_beyond(tmp_path: Path) -> None:
+    """With ``exact_within``, points that near are answered exactly; farther ones by the first
+    guess, never farther off than the largest face's reach."""
+    shape = read_shape(_sphere(tmp_path / "ball.stl"))
+    rng = np.random.default_rng(2)
+    p = rng.normal(size=(400, 3)) * 0.04
+    exact = shape.closest(p)[2]
+    banded = shape.closest(p, exact_within=5e-3)[2]
+    near = np.abs(exact) <= 5e-3
+    assert near.any() and (~near).any()
+    np.testing.assert_array_equal(banded[near], exact[near])
+    reach = shape._fine[2].max()
+    assert np.all(np.abs(banded) - np.abs(exact) <= reach + 1e-12)
