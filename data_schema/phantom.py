@@ -29,6 +29,7 @@ footprint on [0, L] x [0, W]. With a ``shape`` the layout carries its surface (i
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -131,6 +132,16 @@ def read_layout(path: Path, t: dict | None, markers: list[str]) -> PhantomLayout
                              "way +x runs ([phantom] x_axis = two markers, or rows = R for a "
                              "grid listed row-major)")
     return layout
+
+
+def session_shape(folder: str | Path) -> Shape | None:
+    """The shape a session folder's ``session.toml`` names (None: a flat phantom)."""
+    toml = Path(folder) / "session.toml"
+    try:
+        raw = tomllib.loads(toml.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise BadInput(toml, f"unreadable session.toml ({e})") from None
+    return _shape(toml, (raw.get("phantom") or {}).get("shape"))
 
 
 def _shape(path: Path, v: object) -> Shape | None:

@@ -209,10 +209,11 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     """The demo's commands in order; each names what it reads and writes (for skipping).
     ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``);
     ``pretraining``: one of :data:`PRETRAINING`."""
-    if lab.shape is not None and pretraining not in (SHIPPED_MODEL, GENERIC):
-        raise BadInput("--pretraining", f"{pretraining} fits an MSM or a solid to the lab, "
-                       "which simulate a flat block: a curved lab (--shape) fine-tunes the "
-                       f"shipped generic model ({SHIPPED_MODEL}) or a generic one ({GENERIC})")
+    if lab.shape is not None and pretraining == PER_FOLD:
+        raise BadInput("--pretraining", f"{pretraining} fits an MSM to the lab, a flat "
+                       "surface: a curved lab (--shape) pre-trains on its solid "
+                       f"({SOLID}), or fine-tunes the shipped generic model ({SHIPPED_MODEL}) "
+                       f"or a generic one ({GENERIC})")
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
     session = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [

@@ -25,7 +25,8 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
               default=None,
               help="The session folder whose session.toml names the interior ([phantom] "
                    "interior, a NIfTI label volume, and [phantom.labels], each label's "
-                   "stiffness ratio or \"fit\") [default: a uniform block].")
+                   "stiffness ratio or \"fit\") and a curved phantom's shape ([phantom] "
+                   "shape) [default: a uniform, flat block].")
 @click.option("--msm", type=IN, default=None,
               help="fit-msm's JSON for the same presses: its distance is printed beside the "
                    "solid's.")
@@ -48,8 +49,9 @@ def fit_solid(states: Path, out: Path | None, splits: Path | None, fold: int,
     measured states.
 
     Reads STATES (a phantom.states file; with --splits, its fold manifest) and, with
-    --session, the interior its session.toml names. Meshes the block (the footprint of the
-    states x --thickness-mm, its top where the tips rest, the bottom fixed to the table) with
+    --session, the interior and the shape its session.toml names. Meshes the block (the
+    footprint of the states x --thickness-mm, its top where the tips rest, the bottom fixed to
+    the table; a curved phantom's: its shape, each column from the table to the top) with
     trilinear hexahedra (scikit-fem) and fits the block's modulus, how it stiffens with the
     dent, the tip's contact radius, every "fit" label's ratio (and with --fit-poisson the
     Poisson ratio), each with its uncertainty, minimising the distance of every point (markers

@@ -38,9 +38,10 @@ class LabLayout:
         return None if self.names is None else [*self.names, "tip"]
 
 
-def read_layout(path: str | Path) -> LabLayout:
-    """The layout of a lab states file (:func:`lab_layout`), its names and footprint."""
-    points = lab_layout(path)
+def read_layout(path: str | Path, curved: bool = False) -> LabLayout:
+    """The layout of a lab states file (:func:`lab_layout`), its names and footprint
+    (``curved``: a curved phantom's, for a solid of its shape)."""
+    points = lab_layout(path, curved)
     names = point_names(path)
     if names is not None and len(names) != len(points) + 1:
         raise BadInput(path, f"point_names names {len(names)} points for {len(points)} "
@@ -72,8 +73,9 @@ def footprint(model: MSM, layout: np.ndarray) -> np.ndarray:
     return np.flatnonzero(((xy >= lo) & (xy <= hi)).all(axis=1))
 
 
-def lab_layout(path: str | Path) -> np.ndarray:
-    """The rest positions (P, 3) of a lab states file's surface points, phantom frame.
+def lab_layout(path: str | Path, curved: bool = False) -> np.ndarray:
+    """The rest positions (P, 3) of a lab states file's surface points, phantom frame (a
+    curved phantom's only where ``curved``: the MSM is a flat surface).
 
     Each point's median over the sequences' rest states (step 0), ignoring the instants it
     was missing; the tip (the last point, which sits at ``states/tip``) is left out.
@@ -95,5 +97,6 @@ def lab_layout(path: str | Path) -> np.ndarray:
         raise BadInput(path, f"point {int(np.flatnonzero(~seen)[0])} is never seen at rest: "
                              "no layout for it")
     layout = np.nanmedian(points, axis=0)
-    check_flat_rest(layout, path)
+    if not curved:
+        check_flat_rest(layout, path)
     return layout

@@ -159,7 +159,8 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
     if inputs.layout is None or inputs.params_file is not None:
         raise BadInput(inputs.solid, "--solid simulates at a lab's markers: give --layout "
                                      "STATES, and no --params (the MSM's)")
-    solid, lab = read_solid(inputs.solid), read_layout(inputs.layout)
+    solid = read_solid(inputs.solid)
+    lab = read_layout(inputs.layout, curved=solid.model.block.shape is not None)
     protocol = p.protocol()
     candidates = candidate_places(solid.model, lab.points, solid.material.contact_radius)
     if protocol.locations > len(candidates):
@@ -168,7 +169,7 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                                      "clear of them (fit it on a finer --spacing-mm for more)")
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
     locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
-    at = Attachments.riding(lab.points, solid.model.block.top_z)
+    at = Attachments.riding(lab.points, solid.model.block.top(lab.points[:, :2]))
     used = replace(p, locations=protocol.locations, directions=protocol.directions,
                    thickness=solid.model.block.thickness)
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):

@@ -2,9 +2,10 @@
 
 Reads the states (with a fold manifest, only that fold's training presses) and the interior the
 session names (``session.toml``'s ``[phantom] interior`` and ``[phantom.labels]``: without one,
-a uniform block), meshes the block (:mod:`sim.solid.block_mesh`), fits its material
-(:mod:`sim.solid.solid_fit`) and writes the ``phantom.solid_params`` JSON and the recording
-(:mod:`sim.solid.fit_solid_view`) atomically, with the provenance. Its settings:
+a uniform block) and its shape (``[phantom] shape``: a curved block in the shape's frame, the
+states' own; without one, a flat block), meshes the block (:mod:`sim.solid.block_mesh`), fits
+its material (:mod:`sim.solid.solid_fit`) and writes the ``phantom.solid_params`` JSON and the
+recording (:mod:`sim.solid.fit_solid_view`) atomically, with the provenance. Its settings:
 :mod:`sim.solid.fit_solid_params`.
 """
 
@@ -21,6 +22,7 @@ from core.atomic import atomic_outputs
 from core.provenance import make_provenance
 from data_schema.interior import InteriorSpec, check_covers, session_interior
 from data_schema.json_docs import MSM_PARAMS, SOLID_PARAMS, training_sequences, validate_json_doc
+from data_schema.phantom import session_shape
 from sim.solid.block_mesh import BlockGeometry
 from sim.solid.fit_solid_params import FitSolidInputs, FitSolidParams
 from sim.solid.fit_solid_view import write_solid_recording
@@ -52,11 +54,13 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
     p = params or FitSolidParams()
     started = time.perf_counter()
     only = training_sequences(inputs.splits, p.fold, "fit-solid") if inputs.splits else None
-    data = read_presses(inputs.states, only)
+    shape = session_shape(inputs.session) if inputs.session is not None else None
+    data = read_presses(inputs.states, only, shape)
     spec = session_interior(inputs.session) if inputs.session is not None else None
-    block = BlockGeometry(data.footprint, p.thickness, data.top_z)
+    block = BlockGeometry(data.footprint, p.thickness, data.top_z, shape)
     if spec is not None:
-        check_covers(spec.interior, spec.path, block.footprint, block.top_z, block.thickness)
+        check_covers(spec.interior, spec.path, tuple(block.upper[:2]), float(block.upper[2]),
+                     float(block.upper[2] - block.lower[2]))
     ratios = spec.ratios if spec is not None else {0: 1.0}
     model = SolidModel(block, p.spacing, p.layers)
     shares = label_shares(model.elasticity, None if spec is None else spec.interior,
@@ -114,7 +118,8 @@ def _document(fit: SolidFit, data: MeasuredSet, block: BlockGeometry, p: FitSoli
                      "ratios": list(m.ratios)},
         "sd": fit.sd,
         "block": {"footprint_m": list(block.footprint), "thickness_m": block.thickness,
-                  "top_z_m": block.top_z},
+                  "top_z_m": block.top_z,
+                  **({} if block.shape is None else {"shape": block.shape.as_json()})},
         "mesh": {"spacing_m": p.spacing, "layers": p.layers, "element": "hex1",
                  "element_ratios": np.round(element_ratios, 6).tolist()},
         "labels": {"interior": None if spec is None else spec.path.name,

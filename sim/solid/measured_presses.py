@@ -21,6 +21,7 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.hdf5 import attr_text
+from data_schema.shape import Shape
 from data_schema.states import check_flat_rest, footprint, validate_states
 from sim.solid.solid_model import Attachments
 
@@ -56,6 +57,7 @@ class MeasuredSet:
     markers: np.ndarray              # (P, 3) the markers' median rest positions
     footprint: tuple[float, float]   # (L, W) m
     top_z: float                     # the silicone's top: where the tips rest
+    shape: Shape | None = None       # a curved phantom's (its frame is the states')
 
     def places(self) -> tuple[np.ndarray, np.ndarray]:
         """(L, 3) each location's place (the mean of its presses' tips at rest), and (presses,)
@@ -66,11 +68,16 @@ class MeasuredSet:
 
     def attachments(self) -> Attachments:
         """The markers riding on the top face at their rest (x, y)."""
-        return Attachments.riding(self.markers, self.top_z)
+        if self.shape is None:
+            return Attachments.riding(self.markers, self.top_z)
+        return Attachments.riding(self.markers, self.shape.height(self.markers[:, :2]))
 
 
-def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSet:
-    """The presses of ``path`` (``only``: these sequence ids, e.g. a fold's training presses)."""
+def read_presses(path: str | Path, only: np.ndarray | None = None,
+                 shape: Shape | None = None) -> MeasuredSet:
+    """The presses of ``path`` (``only``: these sequence ids, e.g. a fold's training presses);
+    a curved phantom's with its ``shape`` (without one, states resting off z = 0 are
+    refused)."""
     validate_states(path)
     with h5py.File(path, "r") as f:
         if attr_text(f.attrs["source"]) == "msm" and "layout" not in f.attrs:
@@ -98,13 +105,14 @@ def read_presses(path: str | Path, only: np.ndarray | None = None) -> MeasuredSe
     if not presses:
         raise BadInput(path, "no press with a rest state and a loaded state to fit")
     rests = np.array([p.rest for p in presses])
-    check_flat_rest(rests[:, :-1], path)
+    if shape is None:
+        check_flat_rest(rests[:, :-1], path)
     unseen = np.flatnonzero(~np.isfinite(rests[:, :-1]).all(axis=2).any(axis=0))
     if unseen.size:
         raise BadInput(path, f"point {int(unseen[0])} is missing from every rest state: no place "
                              "on the surface to attach it to")
     return MeasuredSet(presses, np.nanmedian(rests[:, :-1], axis=0), size,
-                       float(np.median(rests[:, -1, 2])))
+                       float(np.median(rests[:, -1, 2])), shape)
 
 
 def _motion(tips: np.ndarray) -> np.ndarray:

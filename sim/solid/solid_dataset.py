@@ -6,7 +6,8 @@ within the cone, 15 steps to 7.5 N, multi-step pairs), drawn by the runner; its 
 here are the top face's nodes inside the markers' bounding box, where the lab pressed. Each
 place is three back-substitutions on one factorisation (:meth:`SolidModel.respond`), each
 direction and level a weighted sum of them (:func:`sim.solid.solid_model.predict`). The points
-are the lab's markers then the tip, as the lab's states are.
+are the lab's markers then the tip, as the lab's states are. On a curved block the directions
+are drawn about each place's inward normal, as the twin's hand presses.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from core.errors import BadInput
 from sim.solid.elasticity import Solver
@@ -53,6 +55,19 @@ def candidate_places(model: SolidModel, markers: np.ndarray, contact_radius: flo
     return found
 
 
+def square_to_surface(model: SolidModel, places: np.ndarray, directions: np.ndarray
+                      ) -> np.ndarray:
+    """The directions (L, D, 3), drawn about -z, turned about each place's inward normal on a
+    curved block (a hand presses square to the surface it sees); a flat block's as drawn."""
+    shape = model.block.shape
+    if shape is None:
+        return directions
+    normals = shape.closest(places)[1]
+    down = np.array([0.0, 0.0, -1.0])
+    return np.stack([Rotation.align_vectors(-n[None], down[None])[0].apply(d)
+                     for n, d in zip(normals, directions, strict=True)])
+
+
 def simulate_places(model: SolidModel, solver: Solver, material: SolidMaterial,
                     places: np.ndarray, directions: np.ndarray, forces: np.ndarray,
                     at: Attachments) -> SolidStates:
@@ -60,7 +75,8 @@ def simulate_places(model: SolidModel, solver: Solver, material: SolidMaterial,
     (ascending from 0)."""
     responses = model.respond(solver, places, material.contact_radius, model.probes(at))
     points, tips = [], []
-    for resp, dirs in zip(responses, directions, strict=True):
+    for resp, dirs in zip(responses, square_to_surface(model, places, directions),
+                          strict=True):
         for d in dirs:
             loads = forces[:, None] * d[None]
             pts, tip = predict(resp, loads, material.modulus, material.stiffening,

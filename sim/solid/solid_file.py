@@ -14,6 +14,7 @@ import numpy as np
 
 from core.errors import BadInput
 from data_schema.json_docs import SOLID_PARAMS, validate_json_doc
+from data_schema.shape import Shape
 from sim.solid.block_mesh import BlockGeometry
 from sim.solid.elasticity import Solver
 from sim.solid.solid_fit import SolidMaterial
@@ -39,7 +40,8 @@ def read_solid(path: str | Path) -> FittedSolid:
     try:
         m, block, mesh = doc["material"], doc["block"], doc["mesh"]
         geometry = BlockGeometry(tuple(block["footprint_m"]), float(block["thickness_m"]),
-                                 float(block["top_z_m"]))
+                                 float(block["top_z_m"]),
+                                 Shape.from_json(block["shape"]) if "shape" in block else None)
         material = SolidMaterial(modulus=float(m["modulus_pa"]),
                                  stiffening=float(m["stiffening_per_m2"]),
                                  poisson=float(m["poisson"]), ratios=tuple(m["ratios"]),

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.interpolate import RegularGridInterpolator
 from scipy.spatial import Delaunay
 
 from core.bounds import Bound
@@ -37,6 +38,7 @@ from sim.solid.elasticity import Elasticity, Material, Solver
 CONTACT_RADIUS = Bound(0.5e-3, 20e-3, unit="m")
 REACH = Bound(1e-3, 0.5, unit="m")     # the stiffening's reach: from the tip alone to the block
 SLOPE_STEP = 1e-3          # m: the central differences that give the surface's tangents
+UNDER_TOP = 0.1e-3         # m: a curved top's probes sit this far under its mesh's top face
 
 
 @dataclass(frozen=True)
@@ -47,9 +49,10 @@ class Attachments:
     height: np.ndarray      # (P,) m along the normal, above the surface (a marker's centre)
 
     @classmethod
-    def riding(cls, rest: np.ndarray, top_z: float) -> Attachments:
-        """Markers resting at ``rest`` (P, 3) on a top face at height ``top_z``: each on the
-        surface point below it, as high above it as it rests."""
+    def riding(cls, rest: np.ndarray, top_z: float | np.ndarray) -> Attachments:
+        """Markers resting at ``rest`` (P, 3) on a top face at height ``top_z`` (one, or
+        (P,) each's: a curved top's under it): each on the surface point below it, as high
+        above it as it rests."""
         surface = np.array(rest, dtype=np.float64)
         surface[:, 2] = top_z
         return cls(surface=surface, height=np.asarray(rest, dtype=np.float64)[:, 2] - top_z)
@@ -87,7 +90,8 @@ class SolidModel:
         self.spacing = spacing
         self.elasticity = Elasticity(block_mesh(block, spacing, layers))
         mesh = self.elasticity.mesh
-        top = np.flatnonzero(np.isclose(mesh.p[2], block.top_z))
+        top = np.flatnonzero(np.isclose(mesh.p[2], block.top(mesh.p[:2].T), rtol=0,
+                                        atol=1e-9))
         self._top_nodes = top
         self._top_xy = mesh.p[:2, top].T
 
@@ -107,12 +111,16 @@ class SolidModel:
     def probes(self, at: Attachments) -> Probes:
         """The interpolation at the attached points' surface points, and beside them (the
         central differences of the slopes), built once for many presses."""
-        x = np.clip(at.surface, self._lower, self._upper)
+        x = np.clip(at.surface, self.block.lower, self.block.upper)
+        if self.block.shape is not None:           # on the mesh's own top: its facets' chords
+            x[:, 2] = self._mesh_top(x[:, :2])
         matrices, steps = [self._probe_matrix(x)], []
         for axis in range(2):
             lo, hi = x.copy(), x.copy()
-            lo[:, axis] = np.maximum(x[:, axis] - SLOPE_STEP, self._lower[axis])
-            hi[:, axis] = np.minimum(x[:, axis] + SLOPE_STEP, self._upper[axis])
+            lo[:, axis] = np.maximum(x[:, axis] - SLOPE_STEP, self.block.lower[axis])
+            hi[:, axis] = np.minimum(x[:, axis] + SLOPE_STEP, self.block.upper[axis])
+            if self.block.shape is not None:       # beside it on the curved top, not above
+                lo[:, 2], hi[:, 2] = self._mesh_top(lo[:, :2]), self._mesh_top(hi[:, :2])
             matrices += [self._probe_matrix(lo), self._probe_matrix(hi)]
             steps.append(hi[:, axis] - lo[:, axis])
         return Probes(matrices=tuple(matrices), steps=tuple(steps), n_points=len(x))
@@ -169,16 +177,20 @@ class SolidModel:
             loads[basis.nodal_dofs[axis, nodes], axis] = share
         return loads, nodes, share
 
+    def _mesh_top(self, xy: np.ndarray) -> np.ndarray:
+        """(P,) a height just under the mesh's top face over (P, 2) points: bilinear between its
+        top nodes, less :data:`UNDER_TOP` (the element finder splits each hexahedron into
+        tetrahedra, whose top triangles sag below the bilinear face; a curved shape's surface
+        bulges above both by the chords' sag)."""
+        xs, ys = np.unique(self._top_xy[:, 0]), np.unique(self._top_xy[:, 1])
+        z = np.empty((len(xs), len(ys)))
+        z[np.searchsorted(xs, self._top_xy[:, 0]), np.searchsorted(ys, self._top_xy[:, 1])] = \
+            self.elasticity.mesh.p[2, self._top_nodes]
+        below = RegularGridInterpolator((xs, ys), z)(np.clip(xy, [xs[0], ys[0]], [xs[-1], ys[-1]]))
+        return below - UNDER_TOP
+
     def _probe_matrix(self, x: np.ndarray) -> sp.csr_matrix:
         return self.elasticity.basis.probes(x.T).tocsr()
-
-    @property
-    def _lower(self) -> np.ndarray:
-        return np.array([0.0, 0.0, self.block.top_z - self.block.thickness])
-
-    @property
-    def _upper(self) -> np.ndarray:
-        return np.array([*self.block.footprint, self.block.top_z])
 
 
 def stiffened(d_lin: np.ndarray, stiffening: float) -> np.ndarray:

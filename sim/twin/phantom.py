@@ -25,6 +25,12 @@ top layer): the springs through them are scaled, as springs in series along each
 linearised lattice stops a press at the table: a press whose tip would sink below it (softer
 silicone under a strong press) is refused.
 
+A curved block (:mod:`sim.twin.twin_shape`) stretches each column of nodes from the table to
+its top; each spring then stores ``kappa * L0**2 * s * (e**2 / 2 + ...)``, ``L0`` its length
+before the stretch and ``s`` its columns' stretch: the energy of a continuum cell ``s`` times
+as tall (a taller column gives more along it and resists more across it), so the lattice
+still behaves as one silicone whatever the shape.
+
 A press is a dead load ``F * direction`` shared by a contact node (60 %) and its four neighbours
 on the top surface, the rounded tip. Equilibria are found by nonlinear conjugate gradients
 preconditioned with one sparse factorisation of the rest stiffness, shared by every solve.
@@ -108,10 +114,15 @@ class Phantom:
         nx, ny, nz = self.nodes
         self.marker_ij = marker_nodes(self.spec.markers, xs, ys)   # (M, 2) (i, j): P00, P01, ..
         self.rest = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-        if self.spec.shape is not None:      # each column stretched from the table to the top
-            self.rest[:, 2] *= self.spec.shape.top(self.rest[:, :2]) / lz
         self.grid = np.arange(nx * ny * nz).reshape(nx, ny, nz)
         self.springs = _springs(self.grid)
+        stretch = None
+        if self.spec.shape is not None:      # each column stretched from the table to the top
+            flat_length = np.linalg.norm(self.rest[self.springs[:, 1]]
+                                         - self.rest[self.springs[:, 0]], axis=1)
+            column = self.spec.shape.top(self.rest[:, :2]) / lz
+            self.rest[:, 2] *= column
+            stretch = (column[self.springs[:, 0]] + column[self.springs[:, 1]]) / 2
         delta = self.rest[self.springs[:, 1]] - self.rest[self.springs[:, 0]]
         length = np.linalg.norm(delta, axis=1)
         free = self.rest[:, 2] > lz * 1e-9
@@ -132,6 +143,8 @@ class Phantom:
                                          self.rest[self.springs[:, 1]], spec.inclusions,
                                          spec.layer, spec.size, lz / (spec.layers - 1))
         self._energy = self.kappa * length**2 * self.spring_scale   # kappa * L^2 per spring
+        if stretch is not None:   # a continuum's cells: volume x stretch, strain along L
+            self._energy = self.kappa * flat_length**2 * stretch * self.spring_scale
         self._rest_k = (self._AT @ sp.diags(self._energy) @ self._A).tocsc()
         self.solves = 0
         self.iterations = 0

@@ -25,6 +25,7 @@ from helpers.session_holes import (
 from core.holes import Hole, Timing
 from core.recording import rrd_entities
 from core.series import ForceSeries, MarkerSeries
+from data_schema.synced import SYNCED
 from pipeline.cli import cli
 from sync.holes import BRIDGED, HoleSpan, bridge, bridgeable, leave_out_touched, regular_frames
 from sync.presses import Press
@@ -203,7 +204,7 @@ def test_a_session_with_holes_keeps_every_press_away_from_them(
         assert sum(f"/{name}: " in line and " lost (" in line for line in lines) == 1, lines
     _compare(clean, folder, spans, holes_s)
     with h5py.File(folder / "synced.h5") as f:
-        assert f.attrs["schema_version"] == "1.4"
+        assert f.attrs["schema_version"] == SYNCED.version      # 1.4 brought the holes
         recorded = json.loads(f.attrs["holes"])
         assert sorted(h["stream"] for h in recorded) == sorted(
             "force" if n == "force.csv" else "mocap" for n in files)

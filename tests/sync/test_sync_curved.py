@@ -5,6 +5,7 @@ off the mould refused by name (exit 2, one line, nothing written)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import h5py
@@ -127,3 +128,24 @@ def test_a_mould_file_the_twin_was_not_built_around(tmp_path: Path) -> None:
     curved = curved_errors(tmp_path / "s.h5", tmp_path / "s" / "truth.h5")
     assert curved["residual_max_mm"] < 0.3 and curved["frame_mm"] < 0.1
     assert curved["depth_rms_mm"] < 0.2
+
+
+def test_the_solid_of_the_mould_fits_and_presses_the_dome(dome: Path, tmp_path: Path) -> None:
+    """fit-solid with the session (its shape) meshes the dome and fits its presses closer than
+    a still surface; simulate --solid presses it at the lab's markers, in the shape's frame."""
+    solid, out = tmp_path / "solid.json", tmp_path / "solid_states.h5"
+    fit = CliRunner().invoke(cli, ["-q", "fit-solid", str(dome / "states.h5"), "--session",
+                                   str(dome / "s"), "--spacing-mm", "10", "--layers", "4",
+                                   "--out", str(solid), "--no-rrd"])
+    assert fit.exit_code == 0, fit.output
+    doc = json.loads(solid.read_text())
+    assert "shape" in doc["block"]
+    assert doc["distances_mm"]["solid"] < 0.8 * doc["distances_mm"]["still"]
+    sim = CliRunner().invoke(cli, ["-q", "simulate", "--solid", str(solid), "--layout",
+                                   str(dome / "states.h5"), "--locations", "2", "--directions",
+                                   "2", "--out", str(out), "--no-rrd"])
+    assert sim.exit_code == 0, sim.output
+    with h5py.File(out) as f, h5py.File(dome / "states.h5") as lab:
+        rest = f["states/points"][0][:-1]
+        np.testing.assert_allclose(rest, np.nanmedian(
+            lab["states/points"][()][lab["states/step"][()] == 0][:, :-1], axis=0), atol=1e-6)
