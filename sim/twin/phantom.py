@@ -49,7 +49,7 @@ from scipy.interpolate import PchipInterpolator
 from core.errors import BadInput
 from sim.twin.marker_layout import SPACING_M, MarkerLayout, lattice_axes, marker_nodes
 from sim.twin.material_regions import Inclusion, Layer, check_regions, spring_scale
-from sim.twin.twin_shape import TwinShape
+from sim.twin.twin_shape import TwinShape, check_one_silicone
 
 # the 13 lattice directions of a node: 3 edges, 6 face diagonals, 4 body diagonals
 _DIRECTIONS = ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
@@ -78,9 +78,7 @@ class PhantomSpec:
 
     def __post_init__(self) -> None:
         check_regions(self.inclusions, self.layer, self.size)
-        if self.shape is not None and (self.inclusions or self.layer is not None):
-            raise BadInput("--shape", "a curved twin has one silicone: inclusions and a layer "
-                                      "are laid out under a flat top")
+        check_one_silicone(self.shape, self.inclusions, self.layer)
 
 
 @dataclass

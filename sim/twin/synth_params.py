@@ -46,6 +46,7 @@ from sim.twin.twin_scene import (
     parse_locations,
     place_count,
 )
+from sim.twin.twin_shape import check_one_silicone, parse_shape
 
 T = TwinParams
 RANDOM_PLACES = Bound(1, 10, whole=True, why="places are drawn 15 mm apart: more rarely fit")
@@ -99,6 +100,9 @@ class SynthParams:
         check_params(TwinParams(**self.session_fields()))
         inclusions, layer = self.regions()
         check_regions(inclusions, layer, self.block_size())
+        if self.shape is not None:
+            parse_shape(self.shape, self.block_size())
+        check_one_silicone(self.shape, inclusions, layer)
 
     @property
     def places(self) -> int:

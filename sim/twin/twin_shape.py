@@ -57,6 +57,14 @@ class TwinShape:
         return out
 
 
+def check_one_silicone(shape: object, inclusions: tuple, layer: object) -> None:
+    """Refuse a curved twin with other silicones: its inclusions and layers are laid out
+    under a flat top."""
+    if shape is not None and (inclusions or layer is not None):
+        raise BadInput("--shape", "a curved twin has one silicone: inclusions and a layer "
+                                  "are laid out under a flat top")
+
+
 def parse_shape(text: str, size: tuple[float, float, float]) -> TwinShape:
     """``dome:HEIGHT`` (mm) over a block of ``size`` (m), or a surface file (mm)."""
     if text.startswith(DOME):

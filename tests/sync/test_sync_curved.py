@@ -149,3 +149,39 @@ def test_the_solid_of_the_mould_fits_and_presses_the_dome(dome: Path, tmp_path: 
         rest = f["states/points"][0][:-1]
         np.testing.assert_allclose(rest, np.nanmedian(
             lab["states/points"][()][lab["states/step"][()] == 0][:, :-1], axis=0), atol=1e-6)
+
+
+@pytest.mark.parametrize("mould, what", [(b"solid junk\nnot a facet\n", "not a surface mesh"),
+                                         (None, "does not exist")])
+def test_a_bad_mould_is_refused_at_ingest(dome: Path, tmp_path: Path, mould, what) -> None:
+    import shutil
+
+    session = tmp_path / "s"
+    shutil.copytree(dome / "s", session)
+    if mould is None:
+        (session / "mould.stl").unlink()
+    else:
+        (session / "mould.stl").write_bytes(mould)
+    out = tmp_path / "s.mcap"
+    res = CliRunner().invoke(cli, ["-q", "ingest", str(session), "--out", str(out)])
+    assert res.exit_code == 2
+    line = res.stderr.strip()
+    assert "\n" not in line and what in line and "mould.stl" in line
+    assert not list(tmp_path.glob("s.mcap*"))
+
+
+def test_a_press_that_never_touches_the_mould_is_refused() -> None:
+    """A tip that stays 10 mm above the dome while the force rises (a press on something
+    else) is refused by its number."""
+    from calib.shape_registration import Registration
+    from core.errors import BadInput
+    from sim.twin.twin_shape import dome as dome_shape
+    from sync.presses import Press
+    from sync.surface import shape_depth, shape_touches
+
+    shape = dome_shape((0.1, 0.1, 0.032), 0.03, "dome:30").shape
+    reg = Registration(np.eye(4), np.zeros(25))
+    tip = np.tile([0.05, 0.05, 0.04], (40, 1))              # the apex is at z = 30 mm
+    press = Press(onset=10, peak=20, release=30)
+    with pytest.raises(BadInput, match="press 0 .*never touches"):
+        shape_touches(tip, shape_depth(tip, reg, shape), [press], reg, shape, "s.tsv")

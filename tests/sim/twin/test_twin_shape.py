@@ -79,3 +79,19 @@ def test_a_shape_with_inclusions_or_a_bad_dome_is_refused() -> None:
     for bad in ("dome:0.2", "dome:high"):
         with pytest.raises(BadInput, match="dome"):
             parse_shape(bad, SIZE)
+
+
+@pytest.mark.parametrize("args, what", [(["--shape", "dome:100"], "dome's height"),
+                                        (["--shape", "dome:30", "--layer", "3,2"],
+                                         "one silicone"),
+                                        (["--shape", "absent.stl"], "does not exist")])
+def test_synth_refuses_a_bad_shape_in_one_line(tmp_path: Path, args, what) -> None:
+    from click.testing import CliRunner
+
+    from pipeline.cli import cli
+
+    res = CliRunner().invoke(cli, ["-q", "synth", str(tmp_path / "s"), *args])
+    assert res.exit_code == 2
+    line = res.stderr.strip()
+    assert "\n" not in line and what in line
+    assert not (tmp_path / "s").exists()
