@@ -59,7 +59,7 @@ from train.inference.predictor import Predictor
 from train.inference.si_model import SIModel
 from train.model.cgnn import CGNN
 from train.model.config import CGNNConfig
-from train.model.si_units import Prediction, predict
+from train.model.si_units import BatchPrediction, predict
 from train.training.augment import about_normal, move_batch, tilt
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
@@ -145,7 +145,7 @@ def train_seconds_per_epoch(name: str, out: Path) -> float:
 
 
 def accuracy(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
-             predictor: Callable[[Batch], Prediction] | None = None) -> dict[str, float]:
+             predictor: Callable[[Batch], BatchPrediction] | None = None) -> dict[str, float]:
     """Mean L_d, mean max L_d (mm) and force absolute error (N) on the fold's test set."""
     m = metrics(example_errors(run, transform, predictor)[0])["all"]
     return {"ld_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
@@ -226,27 +226,27 @@ def model_in(run: LoadedRun, dtype: torch.dtype) -> CGNN:
     return model.to(dtype).eval()
 
 
-def cast_predictor(model: CGNN, run: LoadedRun) -> Callable[[Batch], Prediction]:
+def cast_predictor(model: CGNN, run: LoadedRun) -> Callable[[Batch], BatchPrediction]:
     """Predict with ``model`` in its precision (inputs cast, outputs back to float32)."""
     dtype = next(model.parameters()).dtype
 
-    def fn(b: Batch) -> Prediction:
+    def fn(b: Batch) -> BatchPrediction:
         cast = Batch(*(t.to(dtype) if t.is_floating_point() else t for t in
                        (b.points, b.target, b.mask, b.cond, b.dforce)))
         p = predict(model, run.norm, cast)
-        return Prediction(p.deformed.float(), p.dforce.float())
+        return BatchPrediction(p.deformed.float(), p.dforce.float())
 
     return fn
 
 
-def autocast_predictor(run: LoadedRun) -> Callable[[Batch], Prediction]:
+def autocast_predictor(run: LoadedRun) -> Callable[[Batch], BatchPrediction]:
     """Predict under bfloat16 autocast (matrix products in bfloat16, sums in float32)."""
     device = run.states.points.device.type
 
-    def fn(b: Batch) -> Prediction:
+    def fn(b: Batch) -> BatchPrediction:
         with torch.autocast(device, torch.bfloat16):
             p = predict(run.model, run.norm, b)
-        return Prediction(p.deformed.float(), p.dforce.float())
+        return BatchPrediction(p.deformed.float(), p.dforce.float())
 
     return fn
 

@@ -24,7 +24,7 @@ from core.errors import BadInput
 from core.progress import progress
 from core.protocol import STEP_N
 from extract.extract_params import ExtractParams
-from extract.static_states import Press, PressStates, example_pairs, press_states
+from extract.static_states import PressSeries, PressStates, example_pairs, press_states
 from extract.synced_presses import Session
 
 
@@ -36,7 +36,7 @@ class Extracted:
     session_names: list[str]
     excluded: dict[str, int] = field(default_factory=dict)
     # per session, its presses and their states (empty for an excluded press): for the view
-    sessions: list[tuple[list[Press], list[PressStates]]] = field(default_factory=list)
+    sessions: list[tuple[list[PressSeries], list[PressStates]]] = field(default_factory=list)
     untrusted_presses: int = 0     # presses left out: force saturated or beyond rated range
 
 

@@ -21,7 +21,7 @@ import rerun.blueprint as rrb
 
 from core.recording import declare_up, log_mould, phantom_view, recording, time_column
 from data_schema.shape import Shape
-from extract.static_states import Press, PressStates
+from extract.static_states import PressSeries, PressStates
 
 APP_ID = "phantom-extract"
 TIMELINE = "session_time"
@@ -51,7 +51,8 @@ def blueprint(size_m: tuple[float, float], centre: np.ndarray | None = None) -> 
     )
 
 
-def write_extract_recording(path: str | Path, sessions: list[tuple[list[Press], list[PressStates]]],
+def write_extract_recording(path: str | Path,
+                            sessions: list[tuple[list[PressSeries], list[PressStates]]],
                             size_m: tuple[float, float], shape: Shape | None = None) -> None:
     """Save the recording of every session's presses and states to ``path`` (``shape``: a
     curved phantom's, drawn instead of the flat footprint)."""
@@ -75,7 +76,7 @@ def _ns(t: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(t) * 1e9).astype(np.int64)
 
 
-def _press(rec: rr.RecordingStream, press: Press, st: PressStates, shift: float, k: int,
+def _press(rec: rr.RecordingStream, press: PressSeries, st: PressStates, shift: float, k: int,
            curved: bool) -> None:
     t = press.time_s + shift
     rec.log("force/measured", rr.SeriesLines(names=["force [N]"], colors=[COLORS["force"]]),

@@ -25,7 +25,7 @@ from extract.extract_params import ExtractParams
 
 
 @dataclass
-class Press:
+class PressSeries:
     """What extraction needs of one synced press."""
 
     time_s: np.ndarray         # (T,) mocap clock, s
@@ -96,7 +96,7 @@ def line_at(t: np.ndarray, values: np.ndarray, at: float, min_samples: int
             np.where(enough, slope, np.nan).reshape(shape))
 
 
-def press_states(press: Press, p: ExtractParams, levels: bool = True) -> PressStates:
+def press_states(press: PressSeries, p: ExtractParams, levels: bool = True) -> PressStates:
     """Every level the loading phase of ``press`` reached, as static states (none when
     ``levels`` is False: a press with no loading phase)."""
     t, f = press.time_s, press.force

@@ -21,7 +21,7 @@ from data_schema.hdf5 import attr_text, h5_reading, read_schema_id
 from data_schema.phantom import PhantomLayout
 from data_schema.synced import FORCE_BITS, SYNCED, validate_synced
 from extract.phantom_frame import apply_transform, to_phantom_frame
-from extract.static_states import Press
+from extract.static_states import PressSeries
 
 UNTRUSTED = FORCE_BITS["saturated"] | FORCE_BITS["over_range"]
 
@@ -33,7 +33,7 @@ class Session:
     path: Path
     name: str
     transform: np.ndarray                  # (4, 4) lab -> phantom
-    presses: list[Press]
+    presses: list[PressSeries]
     locations: list[int]                   # per press, the file's own location id
     point_names: list[str]                 # the phantom markers, then "tip"
     layout: PhantomLayout                  # the footprint and what fixed the frame
@@ -65,7 +65,7 @@ def read_synced(path: str | Path, size_m: tuple[float, float] | None = None) -> 
                                 noise, to_shape)
 
 
-def session_from_presses(path: Path, name: str, presses: list[Press], locations: list[int],
+def session_from_presses(path: Path, name: str, presses: list[PressSeries], locations: list[int],
                          names: list[str], surface_point: np.ndarray,
                          surface_normal: np.ndarray, layout: PhantomLayout, noise_n: float,
                          to_shape: np.ndarray | None = None) -> Session:
@@ -98,17 +98,17 @@ def _force_noise(calibration: str) -> float:
     return value if np.isfinite(value) and value >= 0 else 0.0
 
 
-def _press(g: h5py.Group) -> Press:
+def _press(g: h5py.Group) -> PressSeries:
     """One press; its force is untrusted when sync flagged a frame from onset to release as
     saturated or beyond the rated range (bits of every 1.x file; 1.1 never sets saturated)."""
     onset, release = int(g.attrs["onset_index"]), int(g.attrs["release_index"])
     flags = g["force_quality"][onset:release]
-    return Press(time_s=g["time_ns"][()].astype(np.int64) * 1e-9, points=g["points"][()],
+    return PressSeries(time_s=g["time_ns"][()].astype(np.int64) * 1e-9, points=g["points"][()],
                  force=g["force_magnitude"][()], onset=onset, peak=int(g.attrs["peak_index"]),
                  untrusted_force=bool((flags & UNTRUSTED).any()))
 
 
-def _rest_markers(presses: list[Press]) -> np.ndarray:
+def _rest_markers(presses: list[PressSeries]) -> np.ndarray:
     """Each surface marker's rest position: its median over the frames before every onset."""
     before = np.concatenate([p.points[: p.onset, :-1] for p in presses])
     with warnings.catch_warnings():                # a marker never seen at rest: NaN

@@ -47,7 +47,7 @@ from live.session.live_view import LiveView
 from live.session.model import LiveModel
 from live.session.monitor import Monitor
 from live.session.recorder import FLUSH_S, Counts, Recorder
-from live.session.states import Coverage, OnlineStates, coverage
+from live.session.states import OnlineStates, PlaceCoverage, coverage
 from live.session.streaming import Link, Streamed, Streaming
 from sync.sync_params import SyncParams
 
@@ -68,7 +68,7 @@ class LiveSummary:
     rrd: Path | None
     seconds: float
     latency_ms: np.ndarray
-    locations: list[Coverage]             # pressed, as seen live
+    locations: list[PlaceCoverage]             # pressed, as seen live
     presses: int
     states: str                           # what became of the session's states
     model_refused: int                    # presses the model gave no answer for

@@ -34,7 +34,7 @@ from core.series import ForceSeries, MarkerSeries, RawSession
 from data_schema.session import SessionConfig
 from extract.extract_params import ExtractParams
 from extract.phantom_frame import apply_transform
-from extract.static_states import Press, PressStates, press_states
+from extract.static_states import PressSeries, PressStates, press_states
 from extract.synced_presses import Session, session_from_presses
 from live.session.calibration import TipModel, wrench
 from live.session.layout import LiveLayout
@@ -169,14 +169,14 @@ class LivePress:
     id, and its states in the phantom frame (empty for a press whose force is untrusted)."""
 
     number: int
-    press: Press
+    press: PressSeries
     centre: np.ndarray
     location: int
     states: PressStates
 
 
 @dataclass
-class Coverage:
+class PlaceCoverage:
     """A location pressed: where (its presses' mean contact point, lab frame), how many
     presses, and its states per force level (index k: k x the level spacing)."""
 
@@ -190,7 +190,7 @@ class Coverage:
         return float(seen[-1]) * step_n if seen.size else 0.0
 
 
-def coverage(taken: list[LivePress]) -> list[Coverage]:
+def coverage(taken: list[LivePress]) -> list[PlaceCoverage]:
     """Every location pressed so far, in the order they were first pressed."""
     out: dict[int, list[LivePress]] = {}
     for t in taken:
@@ -199,7 +199,7 @@ def coverage(taken: list[LivePress]) -> list[Coverage]:
     for loc in sorted(out):
         here = out[loc]
         steps = np.concatenate([t.states.step for t in here]).astype(int)
-        result.append(Coverage(np.mean([t.centre for t in here], axis=0), len(here),
+        result.append(PlaceCoverage(np.mean([t.centre for t in here], axis=0), len(here),
                                np.bincount(steps, minlength=1)))
     return result
 
@@ -349,9 +349,9 @@ class OnlineStates:
                                     else self.surface.transform)
 
 
-def _press(cut: Cut, untrusted: bool) -> Press:
+def _press(cut: Cut, untrusted: bool) -> PressSeries:
     """Extract's press of a cut (lab frame)."""
-    return Press(time_s=cut.time_ns * 1e-9, points=cut.points, force=cut.force_magnitude,
+    return PressSeries(time_s=cut.time_ns * 1e-9, points=cut.points, force=cut.force_magnitude,
                  onset=cut.press.onset, peak=cut.press.peak, untrusted_force=untrusted)
 
 

@@ -87,7 +87,7 @@ PRIOR = Prior()
 
 
 @dataclass(frozen=True)
-class Phantom:
+class PriorPhantom:
     """One block's phantom: its MSM, its markers at rest (n, 3) and how it is pressed."""
 
     params: MSMParams
@@ -99,7 +99,7 @@ class Phantom:
 
 
 def draw_phantom(prior: Prior, seed: int, block: int, locations: int, directions: int
-                 ) -> Phantom:
+                 ) -> PriorPhantom:
     """Block ``block``'s phantom, drawn from ``(seed, block)`` until its centre press lies in
     the prior's depth range."""
     rng = np.random.default_rng([seed, block])
@@ -112,7 +112,7 @@ def draw_phantom(prior: Prior, seed: int, block: int, locations: int, directions
 
 
 def _draw_once(prior: Prior, rng: np.random.Generator, locations: int, directions: int
-               ) -> Phantom | None:
+               ) -> PriorPhantom | None:
     """One draw (None: its markers do not fit its footprint, or too few of them)."""
     size = tuple(rng.uniform(*prior.side, size=2))
     spacing = max(PAPER_SPACING_M, max(size) / (prior.masses - 1))
@@ -129,7 +129,7 @@ def _draw_once(prior: Prior, rng: np.random.Generator, locations: int, direction
                         max_angle_deg=rng.uniform(*prior.max_angle_deg),
                         seed=int(rng.integers(2**31)),
                         contact_radius=rng.uniform(*prior.contact_radius))
-    return Phantom(params, layout, protocol, rng.uniform(*prior.missing), scattered, pitch)
+    return PriorPhantom(params, layout, protocol, rng.uniform(*prior.missing), scattered, pitch)
 
 
 def _grid(prior: Prior, rng: np.random.Generator, size: np.ndarray, pitch: float
@@ -169,7 +169,7 @@ def _scattered(prior: Prior, rng: np.random.Generator, size: np.ndarray, pitch: 
     return np.column_stack([xy, np.zeros(len(xy))])
 
 
-def _depth_ok(prior: Prior, phantom: Phantom) -> bool:
+def _depth_ok(prior: Prior, phantom: PriorPhantom) -> bool:
     """Whether the normal press at 7.5 N on the mass nearest the markers' centre goes as deep
     as the prior allows."""
     model = MSM(phantom.params)

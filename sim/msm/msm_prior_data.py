@@ -21,7 +21,7 @@ from core.errors import BadInput
 from core.progress import progress
 from core.protocol import STEP_N
 from sim.msm.msm_dataset import MSMData, simulate_data
-from sim.msm.msm_prior import Phantom, Prior, draw_phantom, prior_record
+from sim.msm.msm_prior import Prior, PriorPhantom, draw_phantom, prior_record
 from sim.msm.msm_protocol import shard_locations
 from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL, check_tol
@@ -95,7 +95,7 @@ def _simulate_block(args: tuple[PriorRun, int, float]) -> tuple[dict[str, np.nda
     return arrays, data.sim.max_residual, data.sim.stored_residual
 
 
-def padded(a: dict[str, np.ndarray], phantom: Phantom, block: int, width: int,
+def padded(a: dict[str, np.ndarray], phantom: PriorPhantom, block: int, width: int,
            rng: np.random.Generator) -> dict[str, np.ndarray]:
     """A block's arrays with ``width`` marker slots then the tip (the slots it lacks, and the
     markers ``rng`` occludes, ``valid`` False and NaN), its sequences and locations numbered
@@ -115,7 +115,7 @@ def padded(a: dict[str, np.ndarray], phantom: Phantom, block: int, width: int,
             "states/phantom": np.full(states, block, np.int32)}
 
 
-def phantom_row(phantom: Phantom) -> dict[str, np.ndarray]:
+def phantom_row(phantom: PriorPhantom) -> dict[str, np.ndarray]:
     """A block's phantom as its row of the ``phantoms/*`` datasets."""
     p, q = phantom.params, phantom.protocol
     return {"k_between": np.float64(p.k_between), "k_fixed": np.float64(p.k_fixed),

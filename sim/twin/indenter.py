@@ -98,7 +98,7 @@ class Tremor:
 
 
 @dataclass
-class Press:
+class HandPress:
     """One press of the hand: where, along which direction, how hard, and when (mocap s)."""
 
     location: int              # index into the session's locations
@@ -148,7 +148,7 @@ class HandState:
 class Hand:
     """A whole session of presses with tremor; evaluate it at any times."""
 
-    presses: list[Press]
+    presses: list[HandPress]
     rest: np.ndarray                # (3,) lab: where the hand waits before and after
     start: float                    # s: first move starts
     end: float                      # s: the recording ends
@@ -280,7 +280,7 @@ def plan_hand(
     for loc, rep, contact in targets:
         direction = cone_directions(rng, style.max_tilt_deg)
         fmax = draw_fmax(rng, style)
-        p = Press(location=loc, repeat=rep, contact=np.asarray(contact, dtype=np.float64),
+        p = HandPress(location=loc, repeat=rep, contact=np.asarray(contact, dtype=np.float64),
                   direction=direction, fmax=fmax, roll=float(rng.uniform(-0.4, 0.4)),
                   hover_height=float(rng.uniform(0.02, 0.035)),
                   warp=float(rng.uniform(-0.4, 0.4)))

@@ -24,7 +24,7 @@ from train.data import Batch
 from train.intervals.levels import REPORTED, level_index
 from train.intervals.table import IntervalTable
 from train.model.normalise import TIP_POINT
-from train.model.si_units import Prediction
+from train.model.si_units import BatchPrediction
 from train.training.calibrate import Residuals, batch_residuals
 
 NEAR_MM = (10.0, 20.0, 40.0)     # the distance bins' edges of the near/far report, mm
@@ -111,7 +111,7 @@ def absent(run: str) -> None:
          "validation presses): no coverage reported; retrain it to have them")
 
 
-def error_ratios(table: IntervalTable, b: Batch, p: Prediction, level: float = SHOWN
+def error_ratios(table: IntervalTable, b: Batch, p: BatchPrediction, level: float = SHOWN
                  ) -> np.ndarray:
     """Each point's error over its radius at ``level`` (B, N): at most 1 inside, above 1
     outside (NaN where the point is not valid)."""

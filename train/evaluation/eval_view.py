@@ -23,7 +23,7 @@ import rerun.blueprint as rrb
 from core.recording import colormap, declare_up, phantom_view, recording
 from train.data import Batch
 from train.evaluation.lump import REACH_M
-from train.model.si_units import Prediction
+from train.model.si_units import BatchPrediction
 
 APP_ID = "phantom-eval"
 ERROR_MM = 2.0
@@ -68,7 +68,7 @@ def ratio_colors(ratio: np.ndarray) -> np.ndarray:
     return np.where(t <= 1, inside, yellow * (2 - t) + red * (t - 1)).astype(np.uint8)
 
 
-def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]], name: str,
+def write_eval_recording(path: str | Path, shown: list[tuple[Batch, BatchPrediction]], name: str,
                          table: str, ratios: list[np.ndarray] | None = None,
                          footprint: tuple | None = None) -> None:
     """Log the examples in ``shown`` (the test batches of the run ``name``), with
@@ -102,7 +102,7 @@ def write_eval_recording(path: str | Path, shown: list[tuple[Batch, Prediction]]
                 i += 1
 
 
-def _interval(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int, ratio: np.ndarray
+def _interval(rec: rr.RecordingStream, b: Batch, p: BatchPrediction, j: int, ratio: np.ndarray
               ) -> None:
     """One example's predicted points coloured by error over radius, and its tip."""
     m = b.mask[j].cpu().numpy()
@@ -112,7 +112,7 @@ def _interval(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int, ratio: n
                                         colors=[(250, 200, 40), (220, 40, 40)], radii=[0.0015]))
 
 
-def _example(rec: rr.RecordingStream, b: Batch, p: Prediction, j: int) -> None:
+def _example(rec: rr.RecordingStream, b: Batch, p: BatchPrediction, j: int) -> None:
     m = b.mask[j].cpu().numpy()
     true, pred = b.target[j].cpu().numpy()[m], p.deformed[j].cpu().numpy()[m]
     err = np.linalg.norm(pred - true, axis=1) * 1e3

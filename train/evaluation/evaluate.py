@@ -38,7 +38,7 @@ from train.evaluation.lump import PARTS, Lump, press_xy
 from train.evaluation.references import DISPLACEMENT, FORCE, NAMES, References, best_reference
 from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
-from train.model.si_units import Prediction, distances, predict
+from train.model.si_units import BatchPrediction, distances, predict
 from train.training.calibrate import Residuals, joined, residuals
 from train.training.checkpoint import load_checkpoint, model_from
 from train.training.variant import Variant, recorded_variant, source_name
@@ -102,14 +102,14 @@ def on_lab(state: dict, data: Path, splits: Path, fold: int,
 
 @torch.no_grad()
 def example_errors(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
-                   predictor: Callable[[Batch], Prediction] | None = None, batch: int = 64
-                   ) -> tuple[ExampleErrors, list[tuple[Batch, Prediction]]]:
+                   predictor: Callable[[Batch], BatchPrediction] | None = None, batch: int = 64
+                   ) -> tuple[ExampleErrors, list[tuple[Batch, BatchPrediction]]]:
     """Errors on the test examples, each batch first moved by ``transform`` (a robustness
     test) and predicted by ``predictor`` (another precision; default: the model as it is);
     and a few (batch, prediction) pairs for the recording."""
     predictor = predictor or (lambda b: predict(run.model, run.norm, b))
     cols: dict[str, list] = {"set": [], "ld_mean": [], "ld_max": [], "force_err": []}
-    shown: list[tuple[Batch, Prediction]] = []
+    shown: list[tuple[Batch, BatchPrediction]] = []
     for name in SETS:
         pairs = run.states.pairs[name][torch.as_tensor(run.test[name], dtype=torch.long)]
         for rows in pairs.split(batch):
@@ -139,7 +139,7 @@ def reference_errors(run: LoadedRun) -> dict[str, ExampleErrors]:
 
 
 def test_errors(run_dir: Path, device: str = "cpu"
-                ) -> tuple[ExampleErrors, LoadedRun, list[tuple[Batch, Prediction]]]:
+                ) -> tuple[ExampleErrors, LoadedRun, list[tuple[Batch, BatchPrediction]]]:
     """Errors of a run's best model on its fold's test examples, the run, and a few
     (batch, prediction) pairs for the recording."""
     run = load_run(run_dir, device)

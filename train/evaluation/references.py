@@ -21,7 +21,7 @@ import torch
 
 from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, REFERENCES
 from train.data import Batch, StateTensors, make_batch
-from train.model.si_units import Prediction
+from train.model.si_units import BatchPrediction
 
 NAMES = REFERENCES                                       # each reference's name, as shown
 DISPLACEMENT = (NOTHING_MOVES, NEAREST_PRESS)            # the references that move points
@@ -55,17 +55,17 @@ class References:
         coef = np.linalg.lstsq(lhs, train.dforce.double().cpu().numpy(), rcond=None)[0]
         self.coef = torch.from_numpy(coef).to(self.cond.device)
 
-    def predict(self, name: str, b: Batch) -> Prediction:
+    def predict(self, name: str, b: Batch) -> BatchPrediction:
         """One reference's prediction for a batch (points NaN for :data:`FORCE_LINEAR`)."""
         if name == NOTHING_MOVES:
-            return Prediction(with_tip(b, b.points), torch.zeros_like(b.dforce))
+            return BatchPrediction(with_tip(b, b.points), torch.zeros_like(b.dforce))
         if name == NEAREST_PRESS:
             near = torch.cdist(b.cond.double(), self.cond).argmin(dim=1)     # (B,)
-            return Prediction(with_tip(b, b.points + self.disp[near]), self.dforce[near])
+            return BatchPrediction(with_tip(b, b.points + self.disp[near]), self.dforce[near])
         if name == FORCE_LINEAR:
             step = (b.cond[:, 3:] - b.cond[:, :3]).double()
             df = step @ self.coef[:3] + self.coef[3]
-            return Prediction(torch.full_like(b.points, float("nan")), df.to(b.dforce.dtype))
+            return BatchPrediction(torch.full_like(b.points, float("nan")), df.to(b.dforce.dtype))
         raise KeyError(name)
 
 

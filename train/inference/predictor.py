@@ -77,7 +77,7 @@ class Scene:
 
 
 @dataclass
-class Press:
+class CheckedPress:
     """One call's press, checked: its scene, C (1, 6) float32, the radius of region mode
     (None: the whole scene), whether the tip stands still, and the reasons to flag the call
     found before the network runs."""
@@ -111,7 +111,7 @@ class Predictor:
         self.point_names: list[str] | None = None   # the points it was trained on (load)
         # how a press runs, by whether a region is asked: the heads alone on a known scene
         # (a press-independent network), else the whole network on the scene or the region
-        self._ways: dict[bool, Callable[[Press, bool], Answer]] = \
+        self._ways: dict[bool, Callable[[CheckedPress, bool], Answer]] = \
             {False: self._known, True: self._known} if self.offsets.press_independent \
             else {False: self._whole, True: self._in_region}
 
@@ -186,7 +186,7 @@ class Predictor:
                              "predict without level")
         return index
 
-    def _known(self, press: Press, force_only: bool) -> Answer:
+    def _known(self, press: CheckedPress, force_only: bool) -> Answer:
         """A press-independent network: a new scene runs the network once and keeps its head
         terms; a known one runs the heads alone (in a region on the core's points only; the
         force is the whole surface's)."""
@@ -210,12 +210,12 @@ class Predictor:
                                   disp_terms[:, core], force_terms, c, *self._surface(scene))
         return _placed(scene, core, moved[0]), float(df[0])
 
-    def _whole(self, press: Press, force_only: bool) -> Answer:
+    def _whole(self, press: CheckedPress, force_only: bool) -> Answer:
         """The whole network on the whole scene (its graph known)."""
         scene = press.scene
         return self._network(scene.points, scene.neighbours, press.c, force_only)
 
-    def _in_region(self, press: Press, force_only: bool) -> Answer:
+    def _in_region(self, press: CheckedPress, force_only: bool) -> Answer:
         """The whole network on the points near the tip's path and the rings of neighbours
         its layers read; the rest stay where they are."""
         scene = press.scene
@@ -270,7 +270,7 @@ class Predictor:
         return self._scene
 
     def _press(self, points: np.ndarray, condition: np.ndarray, radius: float | None
-               ) -> Press:
+               ) -> CheckedPress:
         """This call's press, checked (ValueError: what is refused), with the reasons to
         flag it that the input alone shows. The press's checks run on its six numbers as
         plain floats (a haptic loop calls with a new press every time: numpy's per-call
@@ -293,7 +293,7 @@ class Predictor:
                                "extent")
             if self.norm.envelope is not None:
                 outside += self._beyond(start, end, scene)
-        return Press(scene, c[None], radius, still, outside, v)
+        return CheckedPress(scene, c[None], radius, still, outside, v)
 
     def _tip_reach(self, c: np.ndarray, start: list[float], end: list[float], scene: Scene
                    ) -> float:
@@ -329,7 +329,7 @@ class Predictor:
                        f"{env.gap_max * 1e3:.3g} mm learned)")       # (no lower point: no search)
         return out
 
-    def _flag(self, press: Press, df: float, note: str = "") -> float:
+    def _flag(self, press: CheckedPress, df: float, note: str = "") -> float:
         """Sets ``extrapolating`` for this call and warns, saying where, if the press or its
         predicted change of force lies outside what the model learned; returns ``df``."""
         outside, env = list(press.outside), self.norm.envelope

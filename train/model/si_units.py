@@ -28,7 +28,7 @@ GATE_SHARE = 0.1      # of the shortest training press: the gate's ramp
 
 
 @dataclass
-class Prediction:
+class BatchPrediction:
     """Model outputs in SI units."""
 
     deformed: torch.Tensor   # (B, N, 3) m
@@ -87,22 +87,22 @@ def newtons(df: torch.Tensor, norm: Normaliser, gate: torch.Tensor | None = None
     return df * (norm.force_scale if gate is None else gate * norm.force_scale)
 
 
-def predict(model: nn.Module, norm: Normaliser, b: Batch) -> Prediction:
+def predict(model: nn.Module, norm: Normaliser, b: Batch) -> BatchPrediction:
     """Deformed points and change of force for a batch."""
-    return Prediction(*in_si(model, norm, b.points, b.cond, b.mask))
+    return BatchPrediction(*in_si(model, norm, b.points, b.cond, b.mask))
 
 
-def distances(p: Prediction, b: Batch) -> torch.Tensor:
+def distances(p: BatchPrediction, b: Batch) -> torch.Tensor:
     """(B, N) Euclidean distance of each predicted point from the truth (0 where masked)."""
     return torch.linalg.vector_norm(p.deformed - b.target, dim=-1) * b.mask
 
 
-def mean_distance(p: Prediction, b: Batch) -> torch.Tensor:
+def mean_distance(p: BatchPrediction, b: Batch) -> torch.Tensor:
     """L_d per example (B,): the mean over its valid points."""
     return distances(p, b).sum(1) / b.mask.sum(1).clamp(min=1)
 
 
-def loss_sum(p: Prediction, b: Batch, alpha: float, norm: Normaliser | None = None
+def loss_sum(p: BatchPrediction, b: Batch, alpha: float, norm: Normaliser | None = None
              ) -> torch.Tensor:
     """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean).
 

@@ -24,7 +24,7 @@ from train.data import StateTensors, make_batch
 from train.intervals.features import press_features
 from train.intervals.table import IntervalTable
 from train.model.normalise import Normaliser
-from train.model.si_units import Prediction, distances, predict
+from train.model.si_units import BatchPrediction, distances, predict
 from train.training.checkpoint import model_from
 from train.training.fold_data import fold_examples
 from train.training.train_params import TrainOptions
@@ -49,7 +49,7 @@ class Residuals:
                          self.force_features[keep])
 
 
-def batch_residuals(b: Any, p: Prediction) -> Residuals:
+def batch_residuals(b: Any, p: BatchPrediction) -> Residuals:
     """The residuals of one predicted batch (its examples numbered from 0)."""
     err = distances(p, b).double().cpu().numpy()
     mask = b.mask.cpu().numpy()

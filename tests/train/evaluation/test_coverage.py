@@ -13,7 +13,7 @@ from helpers.interval_table import FAR, HALF, NEAR, known_table
 from train.data import Batch
 from train.evaluation.coverage import coverage, coverage_doc, coverage_table
 from train.evaluation.eval_view import write_eval_recording
-from train.model.si_units import Prediction
+from train.model.si_units import BatchPrediction
 from train.training.calibrate import Residuals
 
 
@@ -121,7 +121,7 @@ def test_recording_colours_points_by_error_over_radius(tmp_path: Path) -> None:
     pts = torch.tensor([[[0.0, 0, 0], [0.01, 0, 0], [0.02, 0, 0]]])
     b = Batch(pts, pts, torch.ones(1, 3, dtype=torch.bool), torch.zeros(1, 6),
               torch.zeros(1))
-    p = Prediction(pts, torch.zeros(1))
+    p = BatchPrediction(pts, torch.zeros(1))
     write_eval_recording(tmp_path / "e.rrd", [(b, p)], "run", "table",
                          [np.array([[0.0, 1.0, 3.0]])])
     (rgba,) = _colours(tmp_path / "e.rrd", "/interval/points")

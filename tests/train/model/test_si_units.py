@@ -12,7 +12,7 @@ from train.model.normalise import Envelope, Normaliser
 from train.model.si_units import (
     GATE_SHARE,
     MIN_PRESS,
-    Prediction,
+    BatchPrediction,
     deformed,
     distances,
     loss_sum,
@@ -110,7 +110,7 @@ def test_newtons_scales_the_force_change() -> None:
                                torch.tensor([0.375, -2.0], dtype=torch.float64))
 
 
-def _batch() -> tuple[Prediction, Batch]:
+def _batch() -> tuple[BatchPrediction, Batch]:
     """Two examples of three points. Example 0: off by (3, 4, 0) mm (5 mm), (0, 0, 2) mm and
     (1, 1, 1) m on a masked point; force 0.5 N too high. Example 1: off by 1 mm on every
     point, all valid; force 2 N too low."""
@@ -123,7 +123,7 @@ def _batch() -> tuple[Prediction, Batch]:
     mask = torch.tensor([[True, True, False], [True, True, True]])
     b = Batch(target.clone(), target, mask, torch.zeros(2, 6, dtype=torch.float64),
               torch.tensor([1.0, 3.0], dtype=torch.float64))
-    return Prediction(pred, torch.tensor([1.5, 1.0], dtype=torch.float64)), b
+    return BatchPrediction(pred, torch.tensor([1.5, 1.0], dtype=torch.float64)), b
 
 
 def test_distances_are_euclidean_and_zero_where_masked() -> None:

@@ -17,7 +17,7 @@ from train.training import run_files
 from train.training.run_files import LOG_FIELDS, RunFiles, RunWriter, snapshot
 
 
-class Recorder:
+class CallRecorder:
     """A ``save`` that keeps what each write held (name, epoch, a weight's value) and leaves
     a file, as the runner's does."""
 
@@ -59,7 +59,7 @@ def test_every_epoch_writes_last_and_best_only_when_it_is_the_best(tmp_path: Pat
     """``every`` 0: epoch 0 (the best) best.pt and last.pt, the log's header and row; epoch 1
     (not better) last.pt alone, a row appended; a run started over at epoch 0 starts the log
     afresh."""
-    files, save = RunFiles.in_folder(tmp_path), Recorder()
+    files, save = RunFiles.in_folder(tmp_path), CallRecorder()
     writer = RunWriter(files, save, every=0)
     _epochs(writer, nn.Linear(2, 1), range(2), best={0})
     assert save.saved == [("best.pt", 0, 0.0), ("last.pt", 0, 0.0), ("last.pt", 1, 1.0)]
@@ -72,7 +72,7 @@ def test_between_writes_the_best_epoch_keeps_its_weights(tmp_path: Path) -> None
     """Nothing is written before ``every`` seconds; the end's write holds the best epoch's
     weights in best.pt as they were then (the run's tensors changed since), the latest in
     last.pt, and every epoch's row; a second write with nothing new writes nothing."""
-    files, save = RunFiles.in_folder(tmp_path), Recorder()
+    files, save = RunFiles.in_folder(tmp_path), CallRecorder()
     writer = RunWriter(files, save, every=math.inf)
     _epochs(writer, nn.Linear(2, 1), range(5), best={0, 2})
     assert save.saved == [] and not files.log.exists()
@@ -90,7 +90,7 @@ def test_the_files_are_written_every_so_many_seconds(tmp_path: Path,
     the rows are appended in order."""
     now = [0.0]
     monkeypatch.setattr(run_files.time, "monotonic", lambda: now[0])
-    files, save, model = RunFiles.in_folder(tmp_path), Recorder(), nn.Linear(2, 1)
+    files, save, model = RunFiles.in_folder(tmp_path), CallRecorder(), nn.Linear(2, 1)
     writer = RunWriter(files, save, every=10.0)
     for e, t in enumerate((3.0, 9.0, 10.5, 12.0, 21.0, 22.0)):
         now[0] = t
@@ -105,7 +105,7 @@ def test_the_files_are_written_every_so_many_seconds(tmp_path: Path,
 def test_without_best_on_disk_the_first_epoch_is_kept_as_best(tmp_path: Path) -> None:
     """A run whose first epoch is not flagged best (a resumed run whose best.pt is gone)
     still leaves a best.pt: its first epoch's."""
-    files, save = RunFiles.in_folder(tmp_path), Recorder()
+    files, save = RunFiles.in_folder(tmp_path), CallRecorder()
     writer = RunWriter(files, save, every=math.inf)
     _epochs(writer, nn.Linear(2, 1), range(3, 5), best=set())
     writer.write()

@@ -212,7 +212,7 @@ def test_a_force_that_changes_is_something_to_learn(dent, tmp_path):
 
 # --- a refused checkpoint: our one line, not torch's warning before it ----------------------
 
-class _Call:
+class _TrainCall:
     def __reduce__(self):
         return (print, ("a checkpoint that runs code",))
 
@@ -221,9 +221,9 @@ class _Call:
 def test_a_pickled_call_is_refused_without_torch_warnings(tmp_path, how):
     path = tmp_path / "evil.pt"
     if how == "pickle":
-        path.write_bytes(pickle.dumps({"model": _Call()}, protocol=4))
+        path.write_bytes(pickle.dumps({"model": _TrainCall()}, protocol=4))
     else:
-        torch.save({"model": _Call()}, path)
+        torch.save({"model": _TrainCall()}, path)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with pytest.raises(BadInput) as e:

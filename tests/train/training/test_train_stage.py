@@ -285,13 +285,13 @@ def test_fine_tuned_runs_that_differ_only_in_rotation_are_not_pooled(dent, tmp_p
 def test_balanced_loss_puts_each_term_in_its_scale() -> None:
     from train.data import Batch
     from train.model.normalise import Normaliser
-    from train.model.si_units import Prediction, loss_sum
+    from train.model.si_units import BatchPrediction, loss_sum
     from train.training.loop import learning_rate
 
     pts = torch.zeros(1, 2, 3)
     b = Batch(pts, pts + torch.tensor([0.0, 0.0, 0.002]), torch.ones(1, 2, dtype=torch.bool),
               torch.zeros(1, 6), torch.tensor([1.0]))
-    p = Prediction(pts, torch.tensor([4.0]))                      # 2 mm and 3 N off
+    p = BatchPrediction(pts, torch.tensor([4.0]))                      # 2 mm and 3 N off
     norm = Normaliser((0.0, 0.0, 0.0), 0.05, disp_scale=0.001, force_scale=2.0, extent=0.1)
     assert float(loss_sum(p, b, 88.0)) == pytest.approx(88 * 0.002 + 9.0)
     assert float(loss_sum(p, b, 88.0, norm)) == pytest.approx(2.0 + 2.25)
