@@ -5,16 +5,58 @@ runs along the surface's normal at the point its tip touched."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from calib.shape_registration import Registration
+from calib.rest_plane import mean_seen, rest_surface
+from calib.shape_registration import Registration, register_markers
 from core.errors import BadInput
+from data_schema.phantom import PhantomLayout
 from data_schema.shape import Shape
 from sync.presses import Press, PressRecord
 
 TOUCH_OFF_M = 3e-3      # a curved press's tip this far outside the shape at onset never touched
 EXACT_DEPTH_M = 5e-3    # the depth series is exact this near the surface (the touches, the
                         # crossings); beyond, the shape's first guess (data_schema/shape.py)
+
+
+@dataclass(frozen=True)
+class RestSurface:
+    """What depth is measured from: the rest plane (``point``, ``normal`` out of the phantom),
+    or a curved phantom's registered shape (then ``point`` and ``normal`` are its frame's
+    origin and +z in the lab)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    registration: Registration | None = None
+    shape: Shape | None = None
+    source: str = ""
+
+    def depth(self, tip: np.ndarray) -> np.ndarray:
+        """The tip's depth (T,) below the surface (into the phantom: +)."""
+        if self.registration is None:
+            return tip_depth(tip, self.point, self.normal)
+        return shape_depth(tip, self.registration, self.shape)
+
+    def touches(self, tip: np.ndarray, depth: np.ndarray, presses: list[Press]
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Where each press touched the surface (P, 3) and its outward normal there (P, 3);
+        ``depth`` (T,) is :meth:`depth` of ``tip``."""
+        if self.registration is None:
+            return (contact_points(tip, presses, self.point, self.normal),
+                    np.tile(self.normal, (len(presses), 1)))
+        return shape_touches(tip, depth, presses, self.registration, self.shape, self.source)
+
+
+def rest_of(phantom: np.ndarray, cluster: np.ndarray, tip: np.ndarray, names: list[str],
+            layout: PhantomLayout, source: str) -> RestSurface:
+    """The phantom's rest surface: its plane, or its shape registered to the markers."""
+    if layout.shape is None:
+        return RestSurface(*rest_surface(phantom, cluster, tip, source))
+    reg = register_markers(phantom, mean_seen(cluster) - tip, list(names), layout, source)
+    to_lab = np.linalg.inv(reg.to_shape)
+    return RestSurface(to_lab[:3, 3], to_lab[:3, 2], reg, layout.shape, str(source))
 
 
 def tip_depth(tip: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:

@@ -35,13 +35,11 @@ import numpy as np
 
 from calib.force_tare import Tare
 from calib.pivot import PivotResult
-from calib.rest_plane import mean_seen, rest_surface
-from calib.shape_registration import Registration, register_markers
+from calib.shape_registration import Registration
 from core.errors import BadInput
 from core.progress import warn
 from core.series import RawSession
 from data_schema.phantom import PhantomLayout
-from data_schema.shape import Shape
 from data_schema.synced import FORCE_BITS, QUALITY_BITS
 from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
@@ -67,7 +65,7 @@ from sync.holes import (
 from sync.presses import Press, PressRecord, assign_locations, cut_presses, segment_presses
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
-from sync.surface import along_normals, contact_points, shape_depth, shape_touches, tip_depth
+from sync.surface import along_normals, rest_of
 from sync.sync_params import SyncParams
 from sync.tip_track import check_cluster, track_tip
 
@@ -213,44 +211,6 @@ def frame_force(force_at: Callable[[np.ndarray], np.ndarray], cf: ConditionedFor
         if span.stream == "force":
             in_force_hole |= span.frames
     return FrameForce(force_at(t_log), spans, holes.lost | in_force_hole, in_force_hole)
-
-
-@dataclass(frozen=True)
-class RestSurface:
-    """What depth is measured from: the rest plane (``point``, ``normal`` out of the phantom),
-    or a curved phantom's registered shape (then ``point`` and ``normal`` are its frame's
-    origin and +z in the lab)."""
-
-    point: np.ndarray
-    normal: np.ndarray
-    registration: Registration | None = None
-    shape: Shape | None = None
-    source: str = ""
-
-    def depth(self, tip: np.ndarray) -> np.ndarray:
-        """The tip's depth (T,) below the surface (into the phantom: +)."""
-        if self.registration is None:
-            return tip_depth(tip, self.point, self.normal)
-        return shape_depth(tip, self.registration, self.shape)
-
-    def touches(self, tip: np.ndarray, depth: np.ndarray, presses: list[Press]
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """Where each press touched the surface (P, 3) and its outward normal there (P, 3);
-        ``depth`` (T,) is :meth:`depth` of ``tip``."""
-        if self.registration is None:
-            return (contact_points(tip, presses, self.point, self.normal),
-                    np.tile(self.normal, (len(presses), 1)))
-        return shape_touches(tip, depth, presses, self.registration, self.shape, self.source)
-
-
-def rest_of(phantom: np.ndarray, cluster: np.ndarray, tip: np.ndarray, names: list[str],
-            layout: PhantomLayout, source: str) -> RestSurface:
-    """The phantom's rest surface: its plane, or its shape registered to the markers."""
-    if layout.shape is None:
-        return RestSurface(*rest_surface(phantom, cluster, tip, source))
-    reg = register_markers(phantom, mean_seen(cluster) - tip, list(names), layout, source)
-    to_lab = np.linalg.inv(reg.to_shape)
-    return RestSurface(to_lab[:3, 3], to_lab[:3, 2], reg, layout.shape, str(source))
 
 
 def place(presses: list[Press], centres: np.ndarray, radius_m: float) -> np.ndarray:

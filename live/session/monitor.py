@@ -32,7 +32,7 @@ from live.session.model import LiveModel, ModelRefusal
 from live.session.presses import PressTracker
 from live.session.states import Conditioning, History, LivePress, OnlineStates, Surface
 from sync.force_conditioning import RAIL_TOLERANCE, contact_level, noise_level, rails
-from sync.sync import rest_of
+from sync.surface import rest_of
 from sync.sync_params import SyncParams
 
 
@@ -168,7 +168,7 @@ class Monitor:
 
     def _surface(self) -> Surface:
         """The phantom's rest surface and frame from the markers at rest before the tare: sync's
-        rest plane (:func:`sync.sync.rest_of`) with extract's axes and origin, or a curved
+        rest plane (:func:`sync.surface.rest_of`) with extract's axes and origin, or a curved
         phantom's shape registered to the markers, its own frame."""
         frames = np.stack(self._rest)
         self._rest = []

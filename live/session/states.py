@@ -44,7 +44,8 @@ from sync.holes import hole_line, leave_out_touched, session_holes, touch_reach
 from sync.presses import Press as Loaded
 from sync.presses import assign_locations, cut_span, segment_presses
 from sync.resample import antialiased_interpolant
-from sync.sync import RestSurface, frame_force, session_points
+from sync.surface import RestSurface
+from sync.sync import frame_force, session_points
 from sync.sync_params import SyncParams
 
 BEFORE_S = 1.5      # of the session before a contact its press is read with (re-tare, margins)
