@@ -29,7 +29,6 @@ one), a label without a ratio (or a ratio for a label the volume lacks), a ratio
 from __future__ import annotations
 
 import gzip
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +38,7 @@ import numpy as np
 
 from core.bounds import Bound
 from core.errors import BadInput
+from data_schema.phantom import phantom_table
 
 RATIO = Bound(0.1, 20.0, why="a label's stiffness to the block's silicone")
 GZIP = b"\x1f\x8b"            # a gzipped file's first bytes
@@ -202,12 +202,7 @@ class InteriorSpec:
 
 def session_interior(folder: str | Path) -> InteriorSpec | None:
     """The interior a session folder's ``session.toml`` names (None: it names none)."""
-    toml = Path(folder) / "session.toml"
-    try:
-        raw = tomllib.loads(toml.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        raise BadInput(toml, f"unreadable session.toml ({e})") from None
-    phantom = raw.get("phantom") or {}
+    toml, phantom = phantom_table(folder)
     name = phantom.get("interior")
     if name is None:
         for key in ("labels", "intensities"):

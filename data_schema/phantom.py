@@ -134,14 +134,20 @@ def read_layout(path: Path, t: dict | None, markers: list[str]) -> PhantomLayout
     return layout
 
 
-def session_shape(folder: str | Path) -> Shape | None:
-    """The shape a session folder's ``session.toml`` names (None: a flat phantom)."""
+def phantom_table(folder: str | Path) -> tuple[Path, dict]:
+    """A session folder's ``session.toml`` and its ``[phantom]`` table (empty without one)."""
     toml = Path(folder) / "session.toml"
     try:
         raw = tomllib.loads(toml.read_text())
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise BadInput(toml, f"unreadable session.toml ({e})") from None
-    return _shape(toml, (raw.get("phantom") or {}).get("shape"))
+    return toml, raw.get("phantom") or {}
+
+
+def session_shape(folder: str | Path) -> Shape | None:
+    """The shape a session folder's ``session.toml`` names (None: a flat phantom)."""
+    toml, phantom = phantom_table(folder)
+    return _shape(toml, phantom.get("shape"))
 
 
 def _shape(path: Path, v: object) -> Shape | None:
