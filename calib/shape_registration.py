@@ -53,7 +53,7 @@ def register_markers(phantom: np.ndarray, up: np.ndarray, names: list[str],
     seen = np.isfinite(rest).all(axis=1)
     if seen.sum() < 3:
         raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
-    start = _first_guess(rest, seen, up, names, layout, shape)
+    start = _first_guess(rest, seen, up, names, layout, shape, source)
     radius = layout.marker_diameter_m / 2
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -75,7 +75,7 @@ def register_markers(phantom: np.ndarray, up: np.ndarray, names: list[str],
 
 
 def _first_guess(rest: np.ndarray, seen: np.ndarray, up: np.ndarray, names: list[str],
-                 layout: PhantomLayout, shape: Shape) -> np.ndarray:
+                 layout: PhantomLayout, shape: Shape, source: str | Path) -> np.ndarray:
     """Lab -> shape frame as a flat phantom's frame would be: the markers' best plane's normal
     (turned toward ``up``) to +z, the layout's +x to +x and its origin to its place, resting on
     the surface there."""
@@ -84,7 +84,10 @@ def _first_guess(rest: np.ndarray, seen: np.ndarray, up: np.ndarray, names: list
     along_up = up @ z
     if np.nanmedian(along_up[np.isfinite(along_up)]) < 0:
         z = -z
-    x = _unit_mean(layout.along_x(rest, names)[0])
+    along, what = layout.along_x(rest, names)
+    if not np.isfinite(along).all(axis=1).any():
+        raise BadInput(source, f"{what}: never seen at rest, no in-plane axis")
+    x = _unit_mean(along)
     x = x - (x @ z) * z
     x /= np.linalg.norm(x)
     rot = np.stack([x, np.cross(z, x), z])

@@ -8,7 +8,8 @@ touched. A session without ``shape`` is the flat phantom, measured from its rest
 
 Refused in one line: a file trimesh cannot read as a surface (a point cloud, text, nothing);
 a surface with degenerate faces that removing them leaves open; one that is not watertight
-(the solid inside it is what presses deform); a size a thousand times off (metres or
+(the solid inside it is what presses deform); faces that cannot be wound one way round (a
+scan's flipped faces are turned to agree); a size a thousand times off (metres or
 micrometres written as mm).
 """
 
@@ -92,11 +93,12 @@ class Shape:
         curved surface's facets), and the signed distances (P,): positive outside, negative
         inside.
 
-        Exact for points within ``exact_within`` (m) of the surface: after a first guess among
-        the :data:`CANDIDATES` faces nearest by centroid, every face whose centroid lies within
-        that distance plus the largest face's reach is searched. Farther out the first guess
-        stands: never more than that reach too far, and on the twin's moulds equal to the exact
-        distance within 0.01 um (``benchmarks/bench_curved.py``), for a tenth of the time."""
+        Exact for points whose first guess lies within ``exact_within`` (m) of the surface: the
+        first guess is the nearest of the :data:`CANDIDATES` faces nearest by centroid, then
+        every face whose centroid lies within that distance plus the largest face's reach is
+        searched. Farther out the first guess stands: never more than that reach too far (on
+        34,000 tip positions of the dome twin it equalled the exact distance, in a tenth of the
+        time: docs/results.md, "Curved phantoms")."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         tri, normals, reach, index = self._fine
         k = min(CANDIDATES, len(tri))
@@ -180,6 +182,12 @@ def shape_from_mesh(mesh: trimesh.Trimesh, source: Path | str) -> Shape:
     if not mesh.is_watertight:
         raise BadInput(source, "the surface is not watertight: the solid inside it is not "
                                "closed (holes or open edges)")
+    if not mesh.is_winding_consistent:          # a scan's flipped faces: turned to agree
+        mesh = mesh.copy()
+        trimesh.repair.fix_winding(mesh)
+        if not mesh.is_winding_consistent:
+            raise BadInput(source, "its faces cannot be wound one way round: no inside and "
+                                   "outside")
     if mesh.volume < 0:
         mesh.invert()
     return Shape(np.asarray(mesh.vertices, dtype=np.float64) * 1e-3,

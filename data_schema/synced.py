@@ -102,9 +102,11 @@ SYNCED = H5Schema(
         Dataset("calibration/force_bias", "f8", (6,), finite=True,
                 doc="tare of the raw channels"),
         Dataset("calibration/surface_point", "f8", (3,), "m", finite=True, limit=LAB_M,
-                doc="a point of the phantom markers' rest plane (depth 0)"),
+                doc="a point of the phantom markers' rest plane (depth 0); a curved "
+                    "phantom's: its shape frame's origin"),
         Dataset("calibration/surface_normal", "f8", (3,), "1", finite=True,
-                doc="unit normal of the rest plane, out of the phantom"),
+                doc="unit normal of the rest plane, out of the phantom; a curved phantom's: "
+                    "its shape frame's +z"),
         Dataset("calibration/to_shape", "f8", (4, 4), required=False, finite=True,
                 doc="a curved phantom: lab -> its shape's frame (the phantom frame)"),
         Dataset("calibration/marker_residual", "f8", ("N",), "m", required=False,
@@ -121,7 +123,8 @@ SYNCED = H5Schema(
                 limit=TORQUE_NM, doc="sensor frame"),
         Dataset("presses/*/force_magnitude", "f8", ("T",), "N", finite=True, limit=FORCE_N),
         Dataset("presses/*/depth", "f8", ("T",), "m", limit=LAB_M,
-                doc="tip below the rest plane along its normal (positive into the phantom)"),
+                doc="tip below the rest plane along its normal (positive into the phantom); "
+                    "a curved phantom's: below its touch point along touch_normal"),
         Dataset("presses/*/touch", "f8", (3,), "m", required=False, limit=LAB_M,
                 doc="a curved phantom: where the tip touched the surface, lab"),
         Dataset("presses/*/touch_normal", "f8", (3,), "1", required=False,
@@ -157,9 +160,8 @@ def validate_synced(path: str | Path) -> None:
                 raise BadInput(path, f"presses/{key}/points holds {press['points'].shape[1]} "
                                      f"points, but point_names names {points}")
             _check_press(path, f"presses/{key}", press, len(f["locations/centre"]))
-            _check_depth(path, f"presses/{key}", press,
-                         (press["touch"][()], press["touch_normal"][()]) if "touch" in press
-                         else plane)
+            _check_depth(path, f"presses/{key}", press, _touch(path, key, press) if "touch"
+                         in press else plane)
 
 
 def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int) -> None:
@@ -176,6 +178,14 @@ def _check_press(path: str | Path, name: str, press: h5py.Group, locations: int)
     if not 0 <= int(a["location"]) < locations:
         raise BadInput(path, f"{name}: location {a['location']} is not one of the "
                              f"{locations} in locations/centre")
+
+
+def _touch(path: str | Path, key: str, press: h5py.Group) -> tuple[np.ndarray, np.ndarray]:
+    """A curved phantom's press: where it touched and the unit normal there."""
+    normal = press["touch_normal"][()]
+    if abs(float(np.linalg.norm(normal)) - 1.0) > 1e-6:
+        raise BadInput(path, f"presses/{key}/touch_normal {normal} is not a unit vector")
+    return press["touch"][()], normal
 
 
 def _check_depth(path: str | Path, name: str, press: h5py.Group,

@@ -23,6 +23,7 @@ import numpy as np
 from core.errors import BadInput
 from core.progress import progress
 from core.protocol import STEP_N
+from data_schema.shape import Shape
 from extract.extract_params import ExtractParams
 from extract.static_states import PressSeries, PressStates, example_pairs, press_states
 from extract.synced_presses import Session
@@ -95,7 +96,8 @@ def extract(sessions: Sequence[Session], params: ExtractParams) -> Extracted:
 
 def check_same_phantom(sessions: Sequence[Session]) -> None:
     """One states file holds one phantom: every session with the same markers in the same
-    order and the same footprint (a point is a marker, the frame the footprint's)."""
+    order, the same footprint and the same shape (a point is a marker, the frame the
+    footprint's, or the mould's)."""
     first = sessions[0]
     for s in sessions[1:]:
         if s.point_names != first.point_names:
@@ -105,6 +107,18 @@ def check_same_phantom(sessions: Sequence[Session]) -> None:
         if not np.allclose(s.layout.size_m, first.layout.size_m, rtol=0, atol=1e-9):
             raise BadInput(s.path, f"its footprint {_mm(s.layout.size_m)} is not that of "
                                    f"{first.path.name} ({_mm(first.layout.size_m)})")
+        if not _same_shape(s.layout.shape, first.layout.shape):
+            raise BadInput(s.path, f"its phantom's shape is not that of {first.path.name} "
+                                   "(flat, or another mould): its frame is another")
+
+
+def _same_shape(a: Shape | None, b: Shape | None) -> bool:
+    """Whether two layouts' shapes are one (both flat, or the same surface)."""
+    if a is None or b is None:
+        return a is b
+    return (a.faces.shape == b.faces.shape and a.vertices.shape == b.vertices.shape
+            and np.array_equal(a.faces, b.faces) and np.allclose(a.vertices, b.vertices,
+                                                                 rtol=0, atol=1e-9))
 
 
 def _mm(size_m: tuple[float, float]) -> str:

@@ -116,7 +116,9 @@ def shape_touches(tip: np.ndarray, depth: np.ndarray, presses: list[Press], reg:
         raise BadInput(source, f"press {k} (frame {presses[k].onset}): its tip is "
                                f"{off[k] * 1e3:.1f} mm outside the registered shape as the "
                                "force rises: it never touches the phantom")
-    cross = np.array([_crossing(tip, depth, pr.onset) for pr in presses]).reshape(-1, 3)
+    after = [0] + [pr.release for pr in presses[:-1]]      # never into the press before
+    cross = np.array([_crossing(tip, depth, pr.onset, a)
+                      for pr, a in zip(presses, after, strict=True)]).reshape(-1, 3)
     cross = np.where(np.isfinite(cross), cross, start)
     ok = np.isfinite(cross).all(axis=1)
     at, normal = np.full_like(cross, np.nan), np.full_like(cross, np.nan)
@@ -127,9 +129,10 @@ def shape_touches(tip: np.ndarray, depth: np.ndarray, presses: list[Press], reg:
     return at, normal
 
 
-def _crossing(tip: np.ndarray, depth: np.ndarray, onset: int) -> np.ndarray:
-    """The tip where its depth last rose through 0 up to frame ``onset`` (NaN: not seen)."""
-    outside = np.flatnonzero(depth[:onset + 1] <= 0)
+def _crossing(tip: np.ndarray, depth: np.ndarray, onset: int, start: int = 0) -> np.ndarray:
+    """The tip where its depth last rose through 0 between frames ``start`` and ``onset``
+    (NaN: not seen there)."""
+    outside = start + np.flatnonzero(depth[start:onset + 1] <= 0)
     if outside.size == 0:
         return np.full(3, np.nan)
     i = int(outside[-1])

@@ -302,12 +302,16 @@ class OnlineStates:
             if read is None:
                 self.missed += 1
                 continue
+            cut = read.cut if isinstance(read, Touched) else read[0]
+            try:
+                centre, location = self._place(cut)
+            except BadInput as e:                  # a curved phantom's press off its mould
+                self._unread(done, e.line())
+                continue
             if isinstance(read, Touched):
-                self._place(read.cut)
                 self._left_out(done, read.holes)
                 continue
             cut, untrusted, states = read
-            centre, location = self._place(cut)
             self.taken.append(LivePress(done.number, _press(cut, untrusted), centre, location,
                                         states))
             out.append(self.taken[-1])

@@ -20,6 +20,7 @@ import numpy as np
 from skfem import MeshHex
 
 from core.bounds import Bound
+from core.errors import BadInput
 from data_schema.shape import Shape
 
 SPACING = Bound(0.5e-3, 20e-3, unit="m")       # the nodes' spacing across the footprint
@@ -56,7 +57,12 @@ class BlockGeometry:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         if self.shape is None:
             return np.full(len(xy), self.top_z)
-        return self.shape.height(np.clip(xy, self.lower[:2], self.upper[:2]))
+        z = self.shape.height(np.clip(xy, self.lower[:2], self.upper[:2]))
+        if not np.all(z > self.lower[2]):
+            raise BadInput(None, "the shape's top does not cover its footprint (a mould "
+                                 "standing on its base, one surface over its extent, is "
+                                 "what the solid meshes)")
+        return z
 
     def inside(self, points: np.ndarray, tol: float = 1e-9) -> np.ndarray:
         """(P,) bool: which (P, 3) points lie in the block."""

@@ -46,7 +46,8 @@ class Attachments:
     """Where points ride on the top face: the surface point under each, its offset above."""
 
     surface: np.ndarray     # (P, 3) the surface point under each (on the top face)
-    height: np.ndarray      # (P,) m along the normal, above the surface (a marker's centre)
+    height: np.ndarray      # (P,) m above it (a marker's centre): along the normal on a flat
+    #                         top, where the two agree; straight up on a curved one
 
     @classmethod
     def riding(cls, rest: np.ndarray, top_z: float | np.ndarray) -> Attachments:

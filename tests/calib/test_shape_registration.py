@@ -75,3 +75,12 @@ def test_a_marker_off_the_mould_is_refused_by_name(case) -> None:
     with pytest.raises(BadInput) as e:
         register_markers(moved, up, names, layout, "s.tsv")
     assert "P12" in str(e.value) and "off the registered shape" in str(e.value)
+
+
+def test_markers_that_fix_the_axis_never_seen_are_refused(case) -> None:
+    """A grid whose rows' last markers are never seen gives no +x: one line, no traceback."""
+    _, layout, _, frames, up, names = case
+    hidden = frames.copy()
+    hidden[:, 4::5] = np.nan                               # each row's last marker
+    with pytest.raises(BadInput, match="never seen at rest"):
+        register_markers(hidden, up, names, layout, "s.tsv")

@@ -132,3 +132,17 @@ def test_exact_near_the_surface_and_bounded_beyond(tmp_path: Path) -> None:
     np.testing.assert_array_equal(banded[near], exact[near])
     reach = shape._fine[2].max()
     assert np.all(np.abs(banded) - np.abs(exact) <= reach + 1e-12)
+
+
+def test_flipped_faces_are_turned_to_agree() -> None:
+    """A box two of whose faces are wound the other way (as scans export them): the signed
+    distance of a point just inside that side is still negative."""
+    box = trimesh.creation.box(extents=(50.0, 50.0, 20.0))
+    faces = np.asarray(box.faces).copy()
+    faces[:2] = faces[:2, ::-1]
+    shape = shape_from_mesh(trimesh.Trimesh(box.vertices, faces, process=True), "flipped")
+    side = box.triangles_center[0] * 1e-3
+    inward = -box.face_normals[0] * 1e-4
+    _, normal, signed = shape.closest((side + inward)[None])
+    assert signed[0] == pytest.approx(-1e-4, abs=1e-9)
+    np.testing.assert_allclose(normal[0], box.face_normals[0], atol=1e-9)

@@ -46,3 +46,29 @@ def test_extract_reads_synced(clean_lab, tmp_path) -> None:
                               c / "out.h5"),
                 lambda out: arrays(out, STATES), validate_states)
     fuzz(pair, synced_mutations(clean_lab / "synced.h5"), tmp_path)
+
+
+def test_a_flat_and_a_curved_session_are_not_one_phantom() -> None:
+    """check_same_phantom: the same markers and footprint, but one session on a mould."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from core.errors import BadInput
+    from data_schema.phantom import PhantomLayout
+    from extract.extract import check_same_phantom
+    from extract.synced_presses import Session
+    from sim.twin.twin_shape import dome
+
+    names = [f"P{k:02d}" for k in range(25)] + ["tip"]
+    flat = Session(Path("a.h5"), "a", np.eye(4), [], [], names, PhantomLayout())
+    mould = dome((0.1, 0.1, 0.032), 0.03, "dome:30").shape
+    curved = Session(Path("b.h5"), "b", np.eye(4), [], [], names, PhantomLayout(shape=mould))
+    check_same_phantom([curved, curved])
+    for pair in ([flat, curved], [curved, flat]):
+        try:
+            check_same_phantom(pair)
+        except BadInput as e:
+            assert "shape" in str(e) and "\n" not in str(e)
+        else:
+            raise AssertionError("a flat and a curved session were taken for one phantom")

@@ -185,3 +185,27 @@ def test_a_press_that_never_touches_the_mould_is_refused() -> None:
     press = Press(onset=10, peak=20, release=30)
     with pytest.raises(BadInput, match="press 0 .*never touches"):
         shape_touches(tip, shape_depth(tip, reg, shape), [press], reg, shape, "s.tsv")
+
+
+def test_a_press_is_touched_where_it_began_not_at_the_press_before() -> None:
+    """A tip that presses the apex, slides inside the dome to its flank and presses again
+    there without leaving it: the second press's touch is on the flank (its onset moved onto
+    the surface), never the first press's crossing."""
+    from calib.shape_registration import Registration
+    from sim.twin.twin_shape import dome as dome_shape
+    from sync.presses import Press
+    from sync.surface import shape_depth, shape_touches
+
+    shape = dome_shape((0.1, 0.1, 0.032), 0.03, "dome:30").shape
+    reg = Registration(np.eye(4), np.zeros(25))
+    apex, flank = np.array([0.05, 0.05, 0.03]), np.array([0.075, 0.05, 0.0])
+    flank[2] = shape.height(flank[None, :2])[0]
+    path = [apex + [0, 0, 0.01 - 0.001 * k] for k in range(20)]          # down through 0
+    path += [apex + [0, 0, -0.01]] * 20                                   # the first press
+    path += [apex + (flank - apex) * s + [0, 0, -0.01] for s in np.linspace(0, 1, 40)]
+    path += [flank + [0, 0, -0.004]] * 20                                 # the second
+    tip = np.array(path)
+    presses = [Press(onset=12, peak=30, release=40), Press(onset=82, peak=90, release=100)]
+    at, _ = shape_touches(tip, shape_depth(tip, reg, shape), presses, reg, shape, "s.tsv")
+    assert np.linalg.norm(at[0] - apex) < 0.2e-3
+    assert np.linalg.norm(at[1, :2] - flank[:2]) < 3e-3

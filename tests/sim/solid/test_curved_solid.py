@@ -16,6 +16,12 @@ THICKNESS = 0.032
 SPACING, LAYERS = 0.010, 4
 
 
+def _sphere(height: float) -> tuple[np.ndarray, float]:
+    """The dome's sphere (centre, radius) in its frame: through the footprint's corners."""
+    radius = ((np.hypot(0.1, 0.1) / 2) ** 2 + height ** 2) / (2 * height)
+    return np.array([0.05, 0.05, height - radius]), radius
+
+
 def _curved(height: float) -> SolidModel:
     shape = dome((0.1, 0.1, THICKNESS), height, f"dome:{height * 1e3:g}").shape
     return SolidModel(BlockGeometry((0.1, 0.1), THICKNESS, 0.0, shape), SPACING, LAYERS)
@@ -32,13 +38,18 @@ def _centre_tip(model: SolidModel) -> float:
 
 
 def test_the_mesh_spans_the_table_to_the_mould() -> None:
+    """The highest node of each column on the analytic cap (within the mould's facets' sag),
+    the lowest on the table."""
     model = _curved(0.03)
-    p = model.elasticity.mesh.p
-    top = model.block.top(p[:2].T)
-    assert np.all(p[2] >= -THICKNESS - 1e-12) and np.all(p[2] <= top + 1e-12)
-    on_top = np.isclose(p[2], top, atol=1e-9)
-    assert on_top.sum() == len(np.unique(p[0])) * len(np.unique(p[1]))   # one per column
-    assert p[2].max() == pytest.approx(0.03, abs=1e-9)                     # the apex
+    p = model.elasticity.mesh.p.T
+    centre, radius = _sphere(0.03)
+    columns = np.unique(np.round(p[:, :2], 9), axis=0)
+    assert len(columns) == 11 * 11
+    for x, y in columns[::7]:
+        z = p[np.all(np.isclose(p[:, :2], [x, y], atol=1e-9), axis=1), 2]
+        cap = centre[2] + np.sqrt(max(radius ** 2 - (x - 0.05) ** 2 - (y - 0.05) ** 2, 0.0))
+        assert z.min() == pytest.approx(-THICKNESS, abs=1e-12)
+        assert z.max() == pytest.approx(max(cap, 0.0), abs=0.02e-3)
 
 
 def test_a_low_dome_answers_as_the_flat_block() -> None:
@@ -59,6 +70,21 @@ def test_presses_are_drawn_square_to_the_dome() -> None:
         np.array([[0.08, 0.05]]))[0])]])
     down = np.tile([0.0, 0.0, -1.0], (2, 1, 1))
     turned = square_to_surface(model, places, down)[:, 0]
-    normals = model.block.shape.closest(places)[1]
-    np.testing.assert_allclose(turned, -normals, atol=1e-9)
+    centre, _ = _sphere(0.03)
+    normals = (places - centre) / np.linalg.norm(places - centre, axis=1, keepdims=True)
+    np.testing.assert_allclose(turned, -normals, atol=2e-3)    # the sphere's, to its facets
     assert normals[1, 0] > 0.2                        # the flank's normal leans outward
+
+
+def test_a_mould_whose_top_leaves_its_box_uncovered_is_refused() -> None:
+    """A standing cylinder: the corners of its bounding box have no top to mesh up to."""
+    import trimesh
+
+    from core.errors import BadInput
+    from data_schema.shape import shape_from_mesh
+
+    can = trimesh.creation.cylinder(radius=40.0, height=30.0, sections=48)
+    can.apply_translation([40.0, 40.0, 15.0])
+    shape = shape_from_mesh(can, "can.stl")
+    with pytest.raises(BadInput, match="does not cover its footprint"):
+        SolidModel(BlockGeometry((0.08, 0.08), 0.03, 0.0, shape), SPACING, LAYERS)
