@@ -55,6 +55,7 @@ def register_markers(phantom: np.ndarray, up: np.ndarray, names: list[str],
         raise BadInput(source, "fewer than 3 phantom markers were ever seen: no surface")
     start = _first_guess(rest, seen, up, names, layout, shape, source)
     radius = layout.marker_diameter_m / 2
+    lever = float(np.hypot(*layout.size_m)) / 2   # an angle's worth of metres at the edge
 
     def residuals(x: np.ndarray) -> np.ndarray:
         moved = _apply(_moved(start, x), rest)
@@ -62,8 +63,6 @@ def register_markers(phantom: np.ndarray, up: np.ndarray, names: list[str],
         origin, at = layout.origin(moved, names)
         x_dir = _unit_mean(layout.along_x(moved, names)[0][:, :2])
         return np.concatenate([off, origin[:2] - np.asarray(at), lever * (x_dir - [1.0, 0.0])])
-
-    lever = float(np.hypot(*layout.size_m)) / 2   # an angle's worth of metres at the edge
 
     fit = least_squares(residuals, np.zeros(6), loss="soft_l1", f_scale=ROBUST_M,
                         x_scale=np.r_[np.full(3, 0.01), np.full(3, 1e-3)])
