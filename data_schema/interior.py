@@ -150,13 +150,14 @@ def write_interior(path: str | Path, labels: np.ndarray, affine: np.ndarray) -> 
     Path(path).write_bytes(gzip.compress(image.to_bytes(), mtime=0))
 
 
-def check_covers(interior: Interior, path: str | Path, footprint: tuple[float, float],
-                 top_z: float, thickness: float) -> None:
-    """Refuse a volume that does not cover the block (footprint x thickness below ``top_z``)
-    or whose extent disagrees with the footprint (its affine in other units or frame)."""
+def check_covers(interior: Interior, path: str | Path, lower: np.ndarray, upper: np.ndarray
+                 ) -> None:
+    """Refuse a volume that does not cover the block (its box from the ``lower`` to the
+    ``upper`` corner, m) or whose extent disagrees with the footprint (its affine in other
+    units or frame)."""
     lo, hi = interior.extent_m()
-    want_lo = np.array([0.0, 0.0, top_z - thickness])
-    want_hi = np.array([footprint[0], footprint[1], top_z])
+    want_lo, want_hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    footprint = want_hi[:2] - want_lo[:2]
     short = np.maximum(lo - want_lo, want_hi - hi)
     if np.any(short > COVER_TOL_M):
         axis = "xyz"[int(np.argmax(short))]

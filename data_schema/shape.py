@@ -117,11 +117,9 @@ class Shape:
         """(P,) the top surface's z above each (P, 2) point (m): the highest face crossed by
         a vertical line; NaN where none is (outside the footprint)."""
         q = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        tri, normals, _, _ = self._fine
-        up = np.flatnonzero(normals[:, 2] > 1e-9)
-        flat = tri[up][:, :, :2]
-        reach = np.linalg.norm(flat - flat.mean(axis=1, keepdims=True), axis=2).max(axis=1)
-        balls = cKDTree(flat.mean(axis=1)).query_ball_point(q, reach.max() + 1e-12)
+        tri = self._fine[0]
+        up, tree, reach = self._upward
+        balls = tree.query_ball_point(q, reach + 1e-12)
         owner = np.repeat(np.arange(len(q)), [len(b) for b in balls])
         face = up[np.concatenate([np.asarray(b, dtype=np.int64) for b in balls])]
         bary = trimesh.triangles.points_to_barycentric(
@@ -131,6 +129,16 @@ class Shape:
         out = np.full(len(q), -np.inf)
         np.maximum.at(out, owner[inside], z[inside])
         return np.where(np.isfinite(out), out, np.nan)
+
+    @cached_property
+    def _upward(self) -> tuple[np.ndarray, cKDTree, float]:
+        """The fine faces that look up, a tree of their centroids in x, y and their largest
+        reach there: what :meth:`height` searches."""
+        tri, normals, _, _ = self._fine
+        up = np.flatnonzero(normals[:, 2] > 1e-9)
+        flat = tri[up][:, :, :2]
+        reach = np.linalg.norm(flat - flat.mean(axis=1, keepdims=True), axis=2).max(axis=1)
+        return up, cKDTree(flat.mean(axis=1)), float(reach.max())
 
     def _blended_normal(self, face: np.ndarray, at: np.ndarray) -> np.ndarray:
         bary = trimesh.triangles.points_to_barycentric(self._mesh.triangles[face], at)

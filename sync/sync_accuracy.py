@@ -86,9 +86,9 @@ def curved_errors(synced: str | Path, truth: str | Path) -> dict[str, float]:
                                         "phantom/rest_surface"))
     rate = float(t_attrs["rate_hz"])
     ours = s["calibration/to_shape"] @ t["phantom/shape_to_lab"]      # true shape -> our shape
-    corners = t["phantom/rest_surface"].reshape(-1, 3)
+    nodes = t["phantom/rest_surface"].reshape(-1, 3)                 # lab
     back = np.linalg.inv(t["phantom/shape_to_lab"])
-    surface = corners @ back[:3, :3].T + back[:3, 3]                  # true shape frame
+    surface = nodes @ back[:3, :3].T + back[:3, 3]                    # true shape frame
     moved = surface @ ours[:3, :3].T + ours[:3, 3]
     turn = np.degrees(np.arccos(np.clip((np.trace(ours[:3, :3]) - 1) / 2, -1.0, 1.0)))
     err = []

@@ -83,8 +83,9 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     if params is None:
         params = _file_grid(path, source, file_params, spacing)
     if source == "lab":              # a marker beyond the surface would be fitted at its edge
-        check_flat_rest(np.array([points[int(r[0])][:-1] for r in rows.values()]), path)
-        check_inside(np.vstack([points[int(r[0])][:-1] for r in rows.values()]), params, path)
+        rests = np.vstack([points[int(r[0])][:-1] for r in rows.values()])
+        check_flat_rest(rests, path)
+        check_inside(rests, params, path)
     if contact_radius is None:
         contact_radius = float(protocol.get("contact_radius", 0.0)) if source == "msm" else 0.0
     model = MSM(params)

@@ -59,8 +59,7 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
     spec = session_interior(inputs.session) if inputs.session is not None else None
     block = BlockGeometry(data.footprint, p.thickness, data.top_z, shape)
     if spec is not None:
-        check_covers(spec.interior, spec.path, tuple(block.upper[:2]), float(block.upper[2]),
-                     float(block.upper[2] - block.lower[2]))
+        check_covers(spec.interior, spec.path, block.lower, block.upper)
     ratios = spec.ratios if spec is not None else {0: 1.0}
     model = SolidModel(block, p.spacing, p.layers)
     shares = label_shares(model.elasticity, None if spec is None else spec.interior,

@@ -59,11 +59,16 @@ def test_an_uncompressed_nii_from_nibabel_reads_as_well(tmp_path: Path) -> None:
     assert read_interior(tmp_path / "i.nii").label_at(np.array([[0.05, 0.05, -0.0115]])) == 1
 
 
+def _box(thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """The block's lowest and highest corners: the footprint, ``thickness`` below TOP."""
+    return np.array([0.0, 0.0, TOP - thickness]), np.array([*FOOTPRINT, TOP])
+
+
 def test_volume_covering_the_block_passes_and_a_short_one_is_refused(tmp_path: Path) -> None:
     labels, affine = _ball()
-    check_covers(Interior(labels, affine), "i.nii.gz", FOOTPRINT, TOP, THICKNESS)
+    check_covers(Interior(labels, affine), "i.nii.gz", *_box(THICKNESS))
     with pytest.raises(BadInput, match="does not cover the block.*along z"):
-        check_covers(Interior(labels[:, :, 10:], affine), "i.nii.gz", FOOTPRINT, TOP, 0.032)
+        check_covers(Interior(labels[:, :, 10:], affine), "i.nii.gz", *_box(0.032))
 
 
 def test_affine_in_metres_disagrees_with_the_footprint(tmp_path: Path) -> None:
@@ -71,7 +76,7 @@ def test_affine_in_metres_disagrees_with_the_footprint(tmp_path: Path) -> None:
     metres = affine.copy()
     metres[:3, :3] *= 1000.0                    # voxels of 1 m: a volume a thousand times off
     with pytest.raises(BadInput, match="disagrees with the footprint"):
-        check_covers(Interior(labels, metres), "i.nii.gz", FOOTPRINT, TOP, THICKNESS)
+        check_covers(Interior(labels, metres), "i.nii.gz", *_box(THICKNESS))
 
 
 @pytest.mark.parametrize(("data", "match"), [
