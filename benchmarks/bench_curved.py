@@ -118,9 +118,10 @@ def sync_seconds(work: Path, repeats: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--seeds", type=int, default=3, help="twin seeds 0..N-1 per shape")
+    ap.add_argument("--repeats", type=int, default=3, help="timed syncs (the median is quoted)")
+    ap.add_argument("--workdir", type=Path, default=None,
+                    help="where the sessions go [default: a new temporary folder]")
     args = ap.parse_args()
     set_quiet(True)
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_curved_"))

@@ -42,7 +42,8 @@ def fine_tune(job: tuple[Path, int, str, Path, Path | None]) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    from train.evaluation.evaluate import metrics, test_errors
+    from train.evaluation.run_errors import test_errors
+    from train.evaluation.scoring import metrics
 
     demo, fold, setting, run, generic = job
     start, tune, pre = parse(setting)
@@ -104,21 +105,22 @@ def trained(like: Path, run: Path, edits: dict, init: Path | None = None) -> Pat
 
 def score(run: Path, seconds: float, metrics, test_errors) -> dict:
     """A run's test examples' count and mean L_d (mm), and the seconds it took."""
-    m = metrics(test_errors(run)[0])["all"]
-    return {"n": m["n"], "ld": m["ld_mean_mm"], "seconds": seconds}
+    m = metrics(test_errors(run)[0]).all
+    return {"n": m.n, "ld": m.ld_mean_mm, "seconds": seconds}
 
 
 def references(demo: Path) -> dict[str, list[dict]]:
     """Each no-learning reference's rows on the folds' test examples, fitted on each fold's
     training presses (the demo's TL runs name the folds): what every setting must beat."""
-    from train.evaluation.evaluate import load_run, metrics, reference_errors
+    from train.evaluation.run_errors import load_run, reference_errors
+    from train.evaluation.scoring import metrics
 
     rows: dict[str, list[dict]] = {}
     for f in range(FOLDS):
         for name, errs in reference_errors(load_run(demo / "runs" / f"exp_tl_fold{f}")).items():
-            m = metrics(errs)["all"]
-            if m["ld_mean_mm"] is not None:          # the force's reference moves no point
-                rows.setdefault(name, []).append({"n": m["n"], "ld": m["ld_mean_mm"],
+            m = metrics(errs).all
+            if m.ld_mean_mm is not None:          # the force's reference moves no point
+                rows.setdefault(name, []).append({"n": m.n, "ld": m.ld_mean_mm,
                                                   "seconds": 0.0})
     return rows
 
@@ -145,7 +147,8 @@ def main() -> None:
             parse(setting)
     except ValueError as e:
         ap.error(str(e))
-    from train.evaluation.evaluate import metrics, test_errors
+    from train.evaluation.run_errors import test_errors
+    from train.evaluation.scoring import metrics
 
     jobs = [(d, f, s, a.out / d.name / f"{s.replace(':', '_')}_f{f}", a.init)
             for d in a.demos for s in a.settings for f in range(FOLDS)]

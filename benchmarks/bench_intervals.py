@@ -40,6 +40,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from data_schema.intervals_doc import IntervalLevel  # noqa: E402
 from train.data import (  # noqa: E402
     SETS,
     example_groups,
@@ -50,7 +51,7 @@ from train.data import (  # noqa: E402
 )
 from train.evaluation.coverage import coverage, coverage_doc  # noqa: E402
 from train.evaluation.coverage_band import redrawn_counts  # noqa: E402
-from train.evaluation.evaluate import LoadedRun, load_run  # noqa: E402
+from train.evaluation.run_errors import LoadedRun, load_run  # noqa: E402
 from train.intervals.levels import REPORTED, level_index  # noqa: E402
 from train.intervals.quantiles import conformal_quantile  # noqa: E402
 from train.model.config import CGNNConfig  # noqa: E402
@@ -98,7 +99,8 @@ def spread(runs: list[LoadedRun], role_pairs: torch.Tensor) -> dict[str, np.ndar
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
-def ensemble_rows(cal: dict[str, np.ndarray], test: dict[str, np.ndarray]) -> list[dict]:
+def ensemble_rows(cal: dict[str, np.ndarray], test: dict[str, np.ndarray]
+                  ) -> list[IntervalLevel]:
     """Per reported level: the test share inside and mean width of the ensemble's spread
     scaled on the calibration (points, force)."""
     rows = []
@@ -107,14 +109,16 @@ def ensemble_rows(cal: dict[str, np.ndarray], test: dict[str, np.ndarray]) -> li
         qf = conformal_quantile(cal["ferr"] / np.maximum(cal["fsd"], 1e-12),
                                 np.array([level]))[0]
         radius, half = q * test["sd"], qf * test["fsd"]
-        rows.append({"level": level, "coverage": float((test["err"] <= radius).mean()),
-                     "mean_radius_mm": float(radius.mean() * 1e3),
-                     "force_coverage": float((test["ferr"] <= half).mean()),
-                     "force_half_width_n": float(half.mean())})
+        rows.append(IntervalLevel(level=level, points=len(radius),
+                                  coverage=float((test["err"] <= radius).mean()),
+                                  mean_radius_mm=float(radius.mean() * 1e3), examples=len(half),
+                                  force_coverage=float((test["ferr"] <= half).mean()),
+                                  force_half_width_n=float(half.mean())))
     return rows
 
 
-def fold_rows(run_dir: Path, out: Path, count: int) -> tuple[list[dict], list[dict], dict]:
+def fold_rows(run_dir: Path, out: Path, count: int
+              ) -> tuple[list[IntervalLevel], list[IntervalLevel], dict]:
     """Conformal (the run's own table) and ensemble rows on the run's test presses, and the
     raw spreads (to pool)."""
     runs = members(run_dir, out, count)
@@ -125,17 +129,16 @@ def fold_rows(run_dir: Path, out: Path, count: int) -> tuple[list[dict], list[di
     test = example_pairs(first.states, first.test)
     conf = coverage(first.intervals, residuals(first.model, first.norm, first.states, test))
     cal, tst = spread(runs, val), spread(runs, test)
-    return coverage_doc(conf, None)["levels"], ensemble_rows(cal, tst), {"cal": cal,
-                                                                         "test": tst,
-                                                                         "conf": conf}
+    return coverage_doc(conf, None).levels, ensemble_rows(cal, tst), {"cal": cal, "test": tst,
+                                                                       "conf": conf}
 
 
-def show(name: str, conf: list[dict], ens: list[dict]) -> None:
+def show(name: str, conf: list[IntervalLevel], ens: list[IntervalLevel]) -> None:
     for c, e in zip(conf, ens, strict=True):
-        print(f"| {name} | {c['level']:.0%} | {c['coverage']:.1%} / {c['mean_radius_mm']:.3f} mm"
-              f" | {e['coverage']:.1%} / {e['mean_radius_mm']:.3f} mm | "
-              f"{c['force_coverage']:.1%} / {c['force_half_width_n']:.3f} N | "
-              f"{e['force_coverage']:.1%} / {e['force_half_width_n']:.3f} N |")
+        print(f"| {name} | {c.level:.0%} | {c.coverage:.1%} / {c.mean_radius_mm:.3f} mm"
+              f" | {e.coverage:.1%} / {e.mean_radius_mm:.3f} mm | "
+              f"{c.force_coverage:.1%} / {c.force_half_width_n:.3f} N | "
+              f"{e.force_coverage:.1%} / {e.force_half_width_n:.3f} N |")
 
 
 def compare(demo: Path, folds: list[int], count: int, variant: str) -> None:
@@ -157,25 +160,30 @@ def compare(demo: Path, folds: list[int], count: int, variant: str) -> None:
         for k, v in raw["test"].items():
             pooled_test.setdefault(k, []).append(v)
     # pooled: each fold scaled on its own calibration, so pool the per-fold rows' counts
-    show("pooled conformal / fold-mean ensemble", coverage_doc(conf_sum, None)["levels"],
+    show("pooled conformal / fold-mean ensemble", coverage_doc(conf_sum, None).levels,
          _mean_rows([ensemble_rows({k: v[i] for k, v in pooled_cal.items()},
                                    {k: v[i] for k, v in pooled_test.items()})
                      for i in range(len(folds))],
                     [len(t) for t in pooled_test["err"]], [len(t) for t in pooled_test["ferr"]]))
 
 
-def _mean_rows(per_fold: list[list[dict]], points: list[int], examples: list[int]
-               ) -> list[dict]:
+def _mean_rows(per_fold: list[list[IntervalLevel]], points: list[int], examples: list[int]
+               ) -> list[IntervalLevel]:
     """Per level, the folds' rows weighted by their test points (force: examples)."""
     out = []
     for k in range(len(REPORTED)):
         rows = [f[k] for f in per_fold]
         wp, we = np.array(points, float), np.array(examples, float)
-        out.append({"level": rows[0]["level"],
-                    **{key: float(np.average([r[key] for r in rows], weights=wp))
-                       for key in ("coverage", "mean_radius_mm")},
-                    **{key: float(np.average([r[key] for r in rows], weights=we))
-                       for key in ("force_coverage", "force_half_width_n")}})
+
+        def mean(value, weights: np.ndarray, rows: list[IntervalLevel] = rows) -> float:
+            return float(np.average([value(r) for r in rows], weights=weights))
+
+        out.append(dataclasses.replace(
+            rows[0], points=sum(points), examples=sum(examples),
+            coverage=mean(lambda r: r.coverage, wp),
+            mean_radius_mm=mean(lambda r: r.mean_radius_mm, wp),
+            force_coverage=mean(lambda r: r.force_coverage, we),
+            force_half_width_n=mean(lambda r: r.force_half_width_n, we)))
     return out
 
 

@@ -39,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from data_schema.metrics_doc import RunRow, Scores  # noqa: E402
 from pipeline.demo_plan import NETWORKS  # noqa: E402
 from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
 from train.evaluation.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
@@ -55,30 +56,28 @@ def run_demo(out: Path, seed: int, jobs: int | None, extra: tuple[str, ...] = ()
     return time.perf_counter() - tic
 
 
-def variant_row(runs: list[dict], name: str) -> str:
+def variant_row(runs: list[RunRow], name: str) -> str:
     """One table row: fold-mean L_d, folds worse than each reference, force error."""
-    ld = [r["metrics"]["all"]["ld_mean_mm"] for r in runs]
-    worse = [sum(r["metrics"]["all"]["ld_mean_mm"] > r["references"][ref]["ld_mean_mm"]
-                 for r in runs) for ref in (NOTHING_MOVES, NEAREST_PRESS)]
-    force = np.mean([r["metrics"]["all"]["force_abs_n"] for r in runs])
+    ld = [r.metrics.all.ld_mean_mm for r in runs]
+    worse = [sum(r.metrics.all.ld_mean_mm > r.references[ref].ld_mean_mm for r in runs)
+             for ref in (NOTHING_MOVES, NEAREST_PRESS)]
+    force = np.mean([r.metrics.all.force_abs_n for r in runs])
     return (f"| {name} | {np.mean(ld):.3f} | {worse[0]} of {len(runs)} | {worse[1]} of "
             f"{len(runs)} | {force:.3f} |")
 
 
-def reference_row(runs: list[dict]) -> str:
+def reference_row(runs: list[RunRow]) -> str:
     """The references' row on the same folds."""
-    ld = [np.mean([r["references"][ref]["ld_mean_mm"] for r in runs])
+    ld = [np.mean([r.references[ref].ld_mean_mm for r in runs])
           for ref in (NOTHING_MOVES, NEAREST_PRESS)]
-    force = np.mean([r["references"][FORCE_LINEAR]["force_abs_n"] for r in runs])
+    force = np.mean([r.references[FORCE_LINEAR].force_abs_n for r in runs])
     return (f"| {' / '.join(NAMES)} | {ld[0]:.3f} / {ld[1]:.3f} | – "
             f"| – | {force:.3f} (linear) |")
 
 
 def report(out: Path, seed: int, seconds: float) -> None:
     """Print one seed's table from its demo folder."""
-    doc = json.loads((out / "metrics.json").read_text())
-    by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
-          for v in ("notl", "tl", "msm")}
+    by = runs_by_variant(out, ("notl", "tl", "msm"))
     print(f"\n## seed {seed}: quick demo {seconds / 60:.1f} min\n")
     print("| run | mean L_d [mm], mean of folds | folds worse than nothing moves | folds "
           "worse than nearest press | force abs. error [N] |")
@@ -88,26 +87,26 @@ def report(out: Path, seed: int, seconds: float) -> None:
     print(variant_row(by["tl"], "cGNN/MSM (TL)"))
     msm = by["msm"][0]
     print(variant_row(by["msm"], "cGNN/MSM on the MSM test set")
-          + f" ({NOTHING_MOVES} {msm['references'][NOTHING_MOVES]['ld_mean_mm']:.3f} mm, "
-          f"linear force {msm['references'][FORCE_LINEAR]['force_abs_n']:.3f} N)")
-    tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
-    sc = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
-    gains = {v: ", ".join(f"{r['gain']['ld_gain']:+.0%}" for r in by[v]) for v in ("tl", "notl")}
+          + f" ({NOTHING_MOVES} {msm.references[NOTHING_MOVES].ld_mean_mm:.3f} mm, "
+          f"linear force {msm.references[FORCE_LINEAR].force_abs_n:.3f} N)")
+    tl = [r.metrics.all.ld_mean_mm for r in by["tl"]]
+    sc = [r.metrics.all.ld_mean_mm for r in by["notl"]]
+    gains = {v: ", ".join(f"{r.gain.ld_gain:+.0%}" for r in by[v]) for v in ("tl", "notl")}
     print(f"\nTL vs scratch: fold means {1 - np.mean(tl) / np.mean(sc):.0%} lower, better in "
           f"{sum(a < b for a, b in zip(tl, sc, strict=True))} of {len(tl)} folds; gain over "
           f"the best reference per fold: TL {gains['tl']}; scratch {gains['notl']}")
     rows = scarcity_rows(out)
     for name in ("TL", "no TL", NOTHING_MOVES, NEAREST_PRESS):
-        groups, ld = curve(rows, name, "ld_mean_mm")
+        groups, ld = curve(rows, name, lambda r: r.ld_mean_mm)
         print(f"scarcity {name:13}: " + ", ".join(f"{g}: {v:.3f}" for g, v in
                                                     zip(groups, ld, strict=True)) + " mm")
 
 
-def fold_means(out: Path) -> dict[str, list[dict]]:
-    """A demo folder's runs by variant ("notl", "tl"), in fold order."""
-    doc = json.loads((out / "metrics.json").read_text())
-    return {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
-            for v in ("notl", "tl")}
+def runs_by_variant(out: Path, variants: tuple[str, ...]) -> dict[str, list[RunRow]]:
+    """A demo folder's runs of each of ``variants`` (:func:`variant_of`), in fold order."""
+    scores = Scores.from_json(json.loads((out / "metrics.json").read_text()))
+    return {v: sorted((r for r in scores.runs if variant_of(r) == v), key=lambda r: r.fold)
+            for v in variants}
 
 
 def compare(root: Path, networks: list[str], seeds: list[int]) -> None:
@@ -120,11 +119,10 @@ def compare(root: Path, networks: list[str], seeds: list[int]) -> None:
     first: dict[int, tuple[float, float]] = {}
     for net in networks:
         for seed in seeds:
-            by = fold_means(root / net / f"seed{seed}")
-            ld = {v: float(np.mean([r["metrics"]["all"]["ld_mean_mm"] for r in by[v]]))
-                  for v in by}
-            worst = {v: min(r["gain"]["ld_gain"] for r in by[v]) for v in by}
-            force = np.mean([r["metrics"]["all"]["force_abs_n"] for r in by["tl"]])
+            by = runs_by_variant(root / net / f"seed{seed}", ("notl", "tl"))
+            ld = {v: float(np.mean([r.metrics.all.ld_mean_mm for r in by[v]])) for v in by}
+            worst = {v: min(r.gain.ld_gain for r in by[v]) for v in by}
+            force = np.mean([r.metrics.all.force_abs_n for r in by["tl"]])
             base = first.setdefault(seed, (ld["notl"], ld["tl"]))
             print(f"| {net} | {seed} | {ld['notl']:.3f} | {ld['tl']:.3f} | "
                   f"{worst['notl']:+.0%} / {worst['tl']:+.0%} | {force:.3f} | "

@@ -28,7 +28,6 @@ trains on one thread, ``--jobs`` at a time, into
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import json
 import os
@@ -94,8 +93,9 @@ def fine_tune(job: tuple[Path, Path, int, str, int, int]) -> float:
 
     torch.set_num_threads(1)
     from pipeline.demo_plan import QUICK
-    from train.evaluation.evaluate import example_errors, load_run, metrics
+    from train.evaluation.run_errors import example_errors, load_run
     from train.evaluation.scarcity import Retraining
+    from train.evaluation.scoring import metrics
 
     demo, out, fold, kind, n, epochs = job
     again = Retraining.of(demo / "runs" / f"exp_tl_fold{fold}", epochs)
@@ -105,18 +105,15 @@ def fine_tune(job: tuple[Path, Path, int, str, int, int]) -> float:
                              + ("" if epochs == QUICK.scarcity_epochs else f"_e{epochs}"))
     loaded = load_run(run, "cpu") if (run / "best.pt").is_file() \
         else again.train(n, init, run, "cpu")
-    return metrics(example_errors(loaded)[0])["all"]["ld_mean_mm"]
+    return metrics(example_errors(loaded)[0]).all.ld_mean_mm
 
 
 def study_rows(demo: Path, folds: list[int]) -> dict[tuple[str, int, int], float]:
     """The demo's own scarcity rows: (predictor, fold, presses) -> mean L_d (mm)."""
-    rows = {}
-    for fold in folds:
-        with open(demo / "scarcity" / f"fold{fold}.scarcity.csv", newline="") as f:
-            for r in csv.DictReader(f):
-                if r["ld_mean_mm"]:
-                    rows[(r["predictor"], fold, int(r["groups"]))] = float(r["ld_mean_mm"])
-    return rows
+    from pipeline.demo_targets import scarcity_rows
+
+    return {(r.predictor, r.fold, r.groups): r.ld_mean_mm for r in scarcity_rows(demo)
+            if r.fold in folds and r.ld_mean_mm is not None}
 
 
 def table(demo: Path, folds: list[int], groups: list[int], fits: list[str],

@@ -96,13 +96,13 @@ def over_away(solid_json: Path, lump: str) -> None:
     its radius + eval's reach) and away from it, and their ratio (issue 58: <= 1.3)."""
     import json
 
-    from train.evaluation.lump import REACH_M, parse_lump
+    from train.evaluation.lump import parse_lump
 
     where = parse_lump(lump)
     rows = json.loads(solid_json.read_text())["distances_mm"]["per_press"]
     xy = np.array([r["place_mm"] for r in rows]) * 1e-3
     d = np.array([r["all_points"] for r in rows])
-    over = np.hypot(xy[:, 0] - where.x, xy[:, 1] - where.y) <= where.radius + REACH_M
+    over = where.over(xy)
     if over.any() and (~over).any():
         print(f"over the lump ({over.sum()} presses) {d[over].mean():.3f} mm, away "
               f"({(~over).sum()}) {d[~over].mean():.3f} mm: {d[over].mean() / d[~over].mean():.2f}"

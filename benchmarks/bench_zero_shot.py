@@ -57,8 +57,8 @@ def session(out: Path, lab: str, seed: int) -> tuple[Path, Path]:
 def fold_rows(generic: Path, states: Path, splits: Path) -> list[dict[str, float]]:
     """Per fold: the generic model's and the references' mean L_d (mm) on its test examples,
     and their count."""
-    from data_schema.json_docs import FORCE_LINEAR
-    from train.evaluation.evaluate import example_errors, on_lab, reference_errors
+    from data_schema.metrics_doc import FORCE_LINEAR
+    from train.evaluation.run_errors import example_errors, on_lab, reference_errors
     from train.training.checkpoint import load_checkpoint
 
     state = load_checkpoint(generic, "cpu")
@@ -87,7 +87,7 @@ def main() -> None:
     a = ap.parse_args()
     import torch
 
-    from data_schema.json_docs import NEAREST_PRESS, NOTHING_MOVES
+    from data_schema.metrics_doc import NEAREST_PRESS, NOTHING_MOVES
     from train.generic_model import resolve
 
     torch.set_num_threads(1)

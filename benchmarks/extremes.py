@@ -28,7 +28,7 @@ import numpy as np
 from speed_accuracy_report import extremes_text
 
 from train.data import SETS
-from train.evaluation.evaluate import load_run
+from train.evaluation.run_errors import load_run
 from train.inference.predictor import Predictor
 
 Example = tuple[np.ndarray, np.ndarray, np.ndarray, float]   # points, target, C, dF

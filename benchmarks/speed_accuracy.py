@@ -54,7 +54,8 @@ from sim.msm.msm import MSMParams
 from sim.msm.msm_protocol import Protocol
 from sim.msm.simulate_stage import generate
 from train.data import Batch
-from train.evaluation.evaluate import LoadedRun, example_errors, load_run, metrics
+from train.evaluation.run_errors import LoadedRun, example_errors, load_run
+from train.evaluation.scoring import metrics
 from train.inference.predictor import Predictor
 from train.inference.si_model import SIModel
 from train.model.cgnn import CGNN
@@ -147,9 +148,8 @@ def train_seconds_per_epoch(name: str, out: Path) -> float:
 def accuracy(run: LoadedRun, transform: Callable[[Batch], Batch] | None = None,
              predictor: Callable[[Batch], BatchPrediction] | None = None) -> dict[str, float]:
     """Mean L_d, mean max L_d (mm) and force absolute error (N) on the fold's test set."""
-    m = metrics(example_errors(run, transform, predictor)[0])["all"]
-    return {"ld_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
-            "force_n": m["force_abs_n"]}
+    m = metrics(example_errors(run, transform, predictor)[0]).all
+    return {"ld_mm": m.ld_mean_mm, "ld_max_mm": m.ld_max_mm, "force_n": m.force_abs_n}
 
 
 def latency(model: CGNN, n: int, device: torch.device, repeats: int, force_only: bool = False,

@@ -22,6 +22,8 @@ import numpy as np
 from core.errors import BadInput
 from core.runs import true_runs
 
+TARE_S = 2.0          # the longest unloaded start a tare is taken over (s)
+
 
 @dataclass
 class Tare:
@@ -52,7 +54,7 @@ def unloaded_start(
     source: str | Path | None = None,
     probe_s: float = 0.1,
     min_s: float = 0.2,
-    max_s: float = 2.0,
+    max_s: float = TARE_S,
     k_sigma: float = 6.0,
     floor: np.ndarray | float = 1e-12,
 ) -> Tare:

@@ -44,7 +44,8 @@ def pivot_calibrate(
     rotations: np.ndarray,
     translations: np.ndarray,
     source: str | Path | None = None,
-    min_rotation_deg: float = 5.0,
+    *,
+    min_rotation_deg: float,
     min_poses: int = 10,
 ) -> PivotResult:
     """Least-squares tip offset from poses (K, 3, 3) and (K, 3); NaN poses are skipped.

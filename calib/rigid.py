@@ -45,7 +45,7 @@ class RigidFit:
 def fit_rigid(
     reference: np.ndarray,
     observed: np.ndarray,
-    max_rms: float = 1.0e-3,
+    max_rms: float,
     min_spread_ratio: float = 0.1,
     drop_outlier: bool = True,
     robust_scale: float | None = None,

@@ -64,7 +64,7 @@ class Bound:
         if not math.isfinite(value):
             raise BadInput(None, f"{name} {shown}: not a finite number (must be "
                                  f"{self.describe()})")
-        if not self.holds(value):
+        if not self.holds(float(value)):
             unit = f" {self.unit}" if self.unit else ""
             raise BadInput(None, f"{name} {shown}{unit}: must be {self.describe()}"
                                  + (f" ({self.why})" if self.why else ""))

@@ -13,7 +13,8 @@
   deeper than this went through the phantom (simulate counts the MSM's states beyond it).
 
 - :func:`top_level`: the highest level a force reaches, ``floor(force / step)`` with room for
-  the rounding of a force that lands on a level (7.5 N / 0.5 N is level 15, not 14).
+  the rounding of a force that lands on a level (7.5 N / 0.5 N is level 15, not 14): a force
+  :data:`LEVEL_ROUNDING` of a step short of a level is on it.
 
 Plain numbers and the standard library: command-line defaults read them without loading a
 stage.
@@ -27,9 +28,10 @@ STEP_N = 0.5                     # N between force levels
 FOOTPRINT_M = (0.1, 0.1)         # m, width and length of the phantom's footprint
 FOOTPRINT_SIDE = Bound(0, 2.0, min_open=True, unit="m")   # each side of a footprint
 THICKNESS_M = 0.032              # m, the phantom block's thickness
+LEVEL_ROUNDING = 1e-9            # of a step: a force this short of a level is on it
 
 
 def top_level(force_n: float, step_n: float) -> int:
     """The highest force level (index k of ``k * step_n``) that ``force_n`` reaches; a force
     short of a level by less than 1e-9 of a step (rounding) counts as on it."""
-    return math.floor(force_n / step_n + 1e-9)
+    return math.floor(force_n / step_n + LEVEL_ROUNDING)

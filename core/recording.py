@@ -11,7 +11,9 @@ import contextlib
 import itertools
 import os
 from collections.abc import Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 import rerun as rr
@@ -41,14 +43,35 @@ def default_rrd_path(output: str | Path, folder: bool | None = None) -> Path:
 _SERIAL = itertools.count()   # a process (a demo worker) writes many recordings: each its own id
 
 
-@contextlib.contextmanager
-def recording(
-    app_id: str, path: str | Path | None, blueprint: rrb.BlueprintLike | None = None
-) -> Iterator[rr.RecordingStream | None]:
+@overload
+def recording(app_id: str, path: str | Path, blueprint: rrb.BlueprintLike | None = None
+              ) -> AbstractContextManager[rr.RecordingStream]: ...
+
+
+@overload
+def recording(app_id: str, path: None, blueprint: rrb.BlueprintLike | None = None
+              ) -> AbstractContextManager[None]: ...
+
+
+@overload
+def recording(app_id: str, path: str | Path | None, blueprint: rrb.BlueprintLike | None = None
+              ) -> AbstractContextManager[rr.RecordingStream | None]: ...
+
+
+def recording(app_id: str, path: str | Path | None, blueprint: rrb.BlueprintLike | None = None
+              ) -> AbstractContextManager[rr.RecordingStream | None]:
     """A recording stream saved to ``path`` (atomically), or ``None`` when ``path`` is None.
 
-    Stage code does ``with recording(...) as rec: if rec: log_...(rec, ...)``.
+    Stage code does ``with recording(...) as rec: if rec: log_...(rec, ...)``; with a path
+    given, the stream is always there.
     """
+    return _stream(app_id, path, blueprint)
+
+
+@contextlib.contextmanager
+def _stream(app_id: str, path: str | Path | None, blueprint: rrb.BlueprintLike | None
+            ) -> Iterator[rr.RecordingStream | None]:
+    """:func:`recording`'s work."""
     if path is None:
         yield None
         return

@@ -115,9 +115,9 @@ def _range(value: object, key: object, path: str | Path) -> tuple[float, float]:
     """A label's intensity range [low, high), checked."""
     if not (isinstance(key, str) and key.isdigit()):
         raise BadInput(path, f"[phantom.intensities] key {key!r} is not a label number")
-    ok = isinstance(value, list) and len(value) == 2 and all(
-        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in value)
-    if not ok or not value[0] < value[1]:
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)
+            for v in value)) or not value[0] < value[1]:
         raise BadInput(path, f"[phantom.intensities] label {key} = {value!r}: a range must be "
                              "[low, high] with low < high")
     return float(value[0]), float(value[1])
@@ -229,8 +229,8 @@ def _ratio(value: object, label: int, path: str | Path) -> float | None:
     """A label's ratio: a number within :data:`RATIO`, or ``"fit"`` (None)."""
     if value == FIT:
         return None
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
-    if not ok or not np.isfinite(value) or not RATIO.holds(float(value)):
+    if (not isinstance(value, int | float) or isinstance(value, bool)
+            or not np.isfinite(value) or not RATIO.holds(float(value))):
         raise BadInput(path, f"[phantom.labels] label {label} = {value!r}: a ratio must be "
                              f"{RATIO.describe()}, or \"fit\"")
     return float(value)

@@ -32,6 +32,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -59,9 +60,10 @@ class PhantomLayout:
 
     def as_json(self) -> dict:
         """The layout as JSON-ready values in metres (a flat phantom's as before shapes)."""
-        out = {"size_m": list(self.size_m), "x_axis": None if self.x_axis is None else
-               list(self.x_axis), "rows": self.rows, "anchor": self.anchor,
-               "anchor_m": None if self.anchor_m is None else list(self.anchor_m)}
+        out: dict[str, Any] = {
+            "size_m": list(self.size_m), "x_axis": None if self.x_axis is None else
+            list(self.x_axis), "rows": self.rows, "anchor": self.anchor,
+            "anchor_m": None if self.anchor_m is None else list(self.anchor_m)}
         if self.shape is not None:
             out.update(shape=self.shape.as_json(), marker_diameter_m=self.marker_diameter_m)
         return out
@@ -86,6 +88,8 @@ class PhantomLayout:
         the anchor marker at ``anchor_m``, or the seen markers' centroid at the centre (of
         [0, L] x [0, W], or of a shape's extent in its own frame)."""
         if self.anchor is not None:
+            if self.anchor_m is None:
+                raise BadInput(None, f"anchor marker {self.anchor} comes without anchor_m")
             at = rest[names.index(self.anchor)]
             if not np.isfinite(at).all():
                 raise BadInput(None, f"anchor marker {self.anchor} is never seen at rest")

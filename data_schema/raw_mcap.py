@@ -88,8 +88,9 @@ class Channel:
 
     def values_per_sample(self, names: int) -> int:
         """``k`` of the block layout for a channel with ``names`` names."""
-        sizes = {self.dim: names} if self.dim else {}
-        return sum(math.prod(sizes.get(d, d) for d in f.shape) for f in self.fields)
+        sizes: dict[Dim, int] = {self.dim: names} if self.dim else {}
+        return sum(math.prod(d if isinstance(d, int) else sizes[d] for d in f.shape)
+                   for f in self.fields)
 
     def layout_json(self) -> bytes:
         """The schema record's data: this channel's block layout, self-described."""
@@ -256,11 +257,12 @@ def reading(path: str | Path) -> Iterator[None]:
     from mcap.exceptions import McapError
     from zstandard import ZstdError
 
+    errors: tuple[type[Exception], ...] = (McapError, ZstdError, *ERRORS)
     try:
         yield
     except BadInput:
         raise
-    except (McapError, ZstdError, *ERRORS) as e:
+    except errors as e:
         raise BadInput(path, f"not a readable raw MCAP file ({type(e).__name__}: {e})") from None
 
 
@@ -420,12 +422,12 @@ def _check_streams(path: str | Path, session: dict[str, Any],
         if session.get(stream) is not None and topic not in channels:
             raise BadInput(path, f"session record describes {stream!r} but {topic} is missing")
     for topic, info in channels.items():
-        stream = session.get(STREAM_OF_TOPIC[topic])
-        if not isinstance(stream, dict):
+        desc = session.get(STREAM_OF_TOPIC[topic])
+        if not isinstance(desc, dict):
             raise BadInput(path, f"channel {topic} has no {STREAM_OF_TOPIC[topic]!r} "
                                  f"description in the session record")
-        if int(stream["frames"]) != info.frames:
+        if int(desc["frames"]) != info.frames:
             raise BadInput(path, f"channel {topic} has {info.frames} frames, session record "
-                                 f"says {stream['frames']}")
-        if topic != "/force/trigger" and list(stream["names"]) != info.names:
+                                 f"says {desc['frames']}")
+        if topic != "/force/trigger" and list(desc["names"]) != info.names:
             raise BadInput(path, f"channel {topic} names differ from the session record")

@@ -10,14 +10,12 @@ from typing import Any
 from data_schema.hdf5 import H5Schema, validate_h5
 from data_schema.json_docs import (
     FOLDS,
-    METRIC_ROWS,
-    METRICS,
     MSM_PARAMS,
     SOLID_PARAMS,
     validate_folds,
     validate_json_doc,
-    validate_metrics,
 )
+from data_schema.metrics_doc import METRICS, ROW_TABLES, validate_metrics
 from data_schema.raw_mcap import RAW_MCAP, McapLayout
 from data_schema.states import STATES, validate_states
 from data_schema.synced import SYNCED, validate_synced
@@ -59,4 +57,4 @@ def json_validator_for(doc: dict[str, Any]) -> Callable[[str | Path], Any] | Non
     if "schema" in doc:
         name = doc["schema"]
         return JSON_VALIDATORS.get(name) if isinstance(name, str) else None
-    return validate_metrics if set(METRIC_ROWS) <= set(doc) else None
+    return validate_metrics if set(ROW_TABLES) <= set(doc) else None

@@ -53,8 +53,10 @@ Example (every path relative to the folder)::
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal, overload
 
 from core.errors import BadInput
 from core.units import TIME_UNITS, channel_units
@@ -183,7 +185,7 @@ def _force(path: Path, folder: Path, t: dict) -> ForceConfig:
     )
 
 
-def _choice(path: Path, t: dict, key: str, allowed: object) -> str | None:
+def _choice(path: Path, t: dict, key: str, allowed: Collection[str]) -> str | None:
     """force.<key>: absent, or one of ``allowed``."""
     v = t.get(key)
     if v is None:
@@ -238,6 +240,10 @@ def _rate(path: Path, v: object) -> float | None:
     return float(v)
 
 
+@overload
+def _table(path: Path, raw: dict, key: str, required: Literal[True] = True) -> dict: ...
+@overload
+def _table(path: Path, raw: dict, key: str, required: bool) -> dict | None: ...
 def _table(path: Path, raw: dict, key: str, required: bool = True) -> dict | None:
     """The ``[key]`` table; None when it is optional and absent."""
     t = raw.get(key)
@@ -249,6 +255,11 @@ def _table(path: Path, raw: dict, key: str, required: bool = True) -> dict | Non
     return t
 
 
+@overload
+def _str(path: Path, t: dict, key: str, default: str, table: str | None = None) -> str: ...
+@overload
+def _str(path: Path, t: dict, key: str, default: None = None,
+         table: str | None = None) -> str | None: ...
 def _str(path: Path, t: dict, key: str, default: str | None = None,
          table: str | None = None) -> str | None:
     """An optional text value (``default`` when absent); anything but non-empty text is bad."""
@@ -268,6 +279,12 @@ def _names(path: Path, t: dict, key: str, table: str = "mocap") -> list[str]:
     return list(v)
 
 
+@overload
+def _file(path: Path, folder: Path, t: dict, key: str, table: str,
+          required: Literal[True] = True) -> Path: ...
+@overload
+def _file(path: Path, folder: Path, t: dict, key: str, table: str,
+          required: bool) -> Path | None: ...
 def _file(path: Path, folder: Path, t: dict, key: str, table: str,
           required: bool = True) -> Path | None:
     """The file ``t[key]`` names, relative to the folder; it must exist."""

@@ -83,7 +83,7 @@ def _press(rec: rr.RecordingStream, press: PressSeries, st: PressStates, shift: 
             static=True)
     rec.send_columns("force/measured", indexes=[time_column(TIMELINE, _ns(t))],
                      columns=rr.Scalars.columns(scalars=press.force))
-    rec.set_time(TIMELINE, duration=np.timedelta64(_ns(t[press.onset]), "ns"))
+    rec.set_time(TIMELINE, duration=np.timedelta64(int(_ns(t[press.onset])), "ns"))
     rec.log("presses", rr.TextLog(f"press {k}: {len(st.step)} states, levels "
                                   f"0..{st.step.max() if len(st.step) else '-'}"))
     if not len(st.step):
@@ -95,7 +95,7 @@ def _press(rec: rr.RecordingStream, press: PressSeries, st: PressStates, shift: 
                      columns=rr.Scalars.columns(scalars=st.force))
     rest = st.points[0] if st.step[0] == 0 else None
     for i in range(len(st.step)):
-        rec.set_time(TIMELINE, duration=np.timedelta64(_ns(st.time_s[i] + shift), "ns"))
+        rec.set_time(TIMELINE, duration=np.timedelta64(int(_ns(st.time_s[i] + shift)), "ns"))
         _state(rec, st.points[i], st.valid[i], rest, curved)
 
 

@@ -86,7 +86,7 @@ def _layout(attr: object, size_m: tuple[float, float] | None) -> PhantomLayout:
     """The file's phantom layout (absent: the paper's square grid), its size overridden by
     ``size_m`` when given."""
     layout = PhantomLayout.from_json(None if attr is None else json.loads(attr_text(attr)))
-    return layout if size_m is None else replace(layout, size_m=tuple(size_m))
+    return layout if size_m is None else replace(layout, size_m=(size_m[0], size_m[1]))
 
 
 def _force_noise(calibration: str) -> float:

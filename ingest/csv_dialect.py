@@ -306,7 +306,7 @@ def read_text_table(path: str | Path, d: Dialect, fmt: str = "force_csv") -> Log
     if plain and df.shape[1] != len(names):
         raise BadInput(path, f"the header names {len(names)} columns, pandas found "
                              f"{df.shape[1]} (quoted separators?)",
-                       where=f"line {d.header_line + 1}")
+                       where=f"line {(d.header_line or 0) + 1}")   # plain: it has one
     extra = df.iloc[:, width:]
     if not plain and (df.shape[1] < width or extra.notna().any().any()):
         raise BadInput(path, f"rows have {df.shape[1]} fields, the first row {width}",

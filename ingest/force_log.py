@@ -13,6 +13,7 @@ time (the named column, the layout's own, or the rate where the log has none) an
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -119,7 +120,7 @@ def _pick_time(path: str | Path, t: LogTable, time_column: str | None,
     return None
 
 
-def _pick(path: str | Path, t: LogTable, wanted: list[str | int], time: str | None,
+def _pick(path: str | Path, t: LogTable, wanted: Sequence[str | int], time: str | None,
           what: str) -> list[str]:
     """Column names for channels given by name or number (1 = the first non-time column)."""
     signals = [c for c in t.names if c != time]
@@ -152,6 +153,8 @@ def _rate_time(path: str | Path, t: LogTable, n: int, rate_hz: float | None) -> 
         raise BadInput(path, f"force.rate_hz is {rate_hz:g} Hz but the file states "
                              f"{t.rate_hz:g} Hz")
     rate = rate_hz if rate_hz is not None else t.rate_hz
+    if rate is None:              # _pick_time wants a time column where no rate is known
+        raise BadInput(path, "the log has neither a time column nor a rate (force.rate_hz)")
     return frame_times_ns(n, float(rate), path, "the log's rate")
 
 
@@ -161,7 +164,7 @@ def _rate_time(path: str | Path, t: LogTable, n: int, rate_hz: float | None) -> 
 def read_force_log(
     path: str | Path,
     time_column: str | None,
-    channels: list[str | int],
+    channels: Sequence[str | int],
     time_unit: str | None = None,
     units: str | list[str] | None = None,
     kind: str = "gauge",

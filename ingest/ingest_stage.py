@@ -13,6 +13,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -39,6 +40,8 @@ from ingest.ingest_view import write_ingest_recording
 from ingest.mcap_io import write_raw_mcap
 from ingest.qtm_6d import read_qtm_6d
 
+T = TypeVar("T")
+
 
 def run_ingest(inputs: str | Path, out: str | Path, params: IngestParams | None = None,
                rrd: str | Path | None = None) -> RawSession:
@@ -46,15 +49,15 @@ def run_ingest(inputs: str | Path, out: str | Path, params: IngestParams | None 
     ``rrd`` also writes the recording."""
     folder, params = inputs, params or IngestParams()
     cfg = read_session(folder)
-    inputs = session_inputs(cfg)
+    files = session_inputs(cfg)
     if rrd is not None and same_path(out, rrd):
         raise BadInput(out, "--rrd and --out name the same file")
-    clash = [p for p in inputs if any(same_path(p, o) for o in (out, rrd) if o is not None)]
+    clash = [p for p in files if any(same_path(p, o) for o in (out, rrd) if o is not None)]
     if clash:
         raise BadInput(clash[0], "output would overwrite an input file")
     # Hashing the inputs (hashlib frees the GIL) overlaps with parsing them.
     with ThreadPoolExecutor(max_workers=1) as pool:
-        provenance = pool.submit(make_provenance, "ingest", asdict(params), inputs, SCHEMA,
+        provenance = pool.submit(make_provenance, "ingest", asdict(params), files, SCHEMA,
                                  VERSION)
         session = load_session(cfg)
         session.provenance = provenance.result()
@@ -82,20 +85,32 @@ def load_session(cfg: SessionConfig) -> RawSession:
         for step in bar:
             got[step] = _READ[step](cfg)
             if step == "mocap":     # before the other files are read
-                _require_markers(got[step], m.phantom_markers + m.indenter_markers)
-    markers = got["mocap"]
-    _check_shared_clock(markers, got["force"])
+                _require_markers(_got(got, step, MarkerSeries),
+                                 m.phantom_markers + m.indenter_markers)
+    markers, force = _got(got, "mocap", MarkerSeries), _got(got, "force", ForceSeries)
+    _check_shared_clock(markers, force)
     if m.trigger_event and m.trigger_event not in {e for e, _ in markers.events}:
         raise BadInput(m.file, f"no EVENT labelled {m.trigger_event!r} (session.toml "
                                f"trigger_event)")
-    if got["pivot"] is not None:
-        _require_markers(got["pivot"], m.indenter_markers)
+    pivot = None if got["pivot"] is None else _got(got, "pivot", MarkerSeries)
+    if pivot is not None:
+        _require_markers(pivot, m.indenter_markers)
     return RawSession(
-        name=cfg.name, markers=markers, force=got["force"],
+        name=cfg.name, markers=markers, force=force,
         phantom_markers=list(m.phantom_markers), indenter_markers=list(m.indenter_markers),
-        calibration=got["calibration"], bodies=got["bodies"], pivot=got["pivot"],
+        calibration=None if got["calibration"] is None else
+        _got(got, "calibration", AtiCalibration),
+        bodies=None if got["bodies"] is None else _got(got, "bodies", BodySeries), pivot=pivot,
         trigger_event=m.trigger_event, phantom=cfg.phantom.as_json(),
     )
+
+
+def _got(got: dict[str, object], step: str, kind: type[T]) -> T:
+    """What the reader of ``step`` read, as the ``kind`` it returns."""
+    value = got[step]
+    if not isinstance(value, kind):
+        raise TypeError(f"ingest: reading the {step} gave a {type(value).__name__}")
+    return value
 
 
 def _read_mocap(cfg: SessionConfig) -> MarkerSeries:

@@ -54,8 +54,8 @@ def blueprint(s: RawSession) -> rrb.Blueprint:
     if s.pivot is not None:
         pc, ps = _extent(s.pivot.positions)
         left.append(phantom_view("pivot trial (its own clock)", ["+ /pivot/**"], pc, ps))
-    right = [plot(f"{UNIT_NAMES.get(u, f'[{u}]')} (force logger clock)", f"/force/{_part(u)}")
-             for u in dict.fromkeys(s.force.units)]
+    right: list[rrb.View] = [plot(f"{UNIT_NAMES.get(u, f'[{u}]')} (force logger clock)",
+                                  f"/force/{_part(u)}") for u in dict.fromkeys(s.force.units)]
     if s.force.trigger is not None:
         right.append(plot("trigger [V] (force logger clock)", "/trigger", legend=False))
     right += [plot("named markers missing per frame (mocap clock)", "/quality", legend=False),
@@ -140,7 +140,7 @@ def _window_ok(finite: np.ndarray, stride: int) -> np.ndarray:
     windows = -(-n // stride)
     padded = np.ones((windows * stride, *finite.shape[1:]), dtype=bool)
     padded[:n] = finite
-    return padded.reshape(windows, stride, *finite.shape[1:]).all(axis=1)
+    return np.asarray(padded.reshape(windows, stride, *finite.shape[1:]).all(axis=1))
 
 
 def _log_markers(rec: rr.RecordingStream, m: MarkerSeries, finite: np.ndarray, root: str,

@@ -116,7 +116,7 @@ def inspect_json(path: Path) -> dict[str, Any]:
         return {"details": {"items": len(doc)}}
     if not isinstance(doc, dict):
         return {"details": {"value": one_line(doc)}}
-    details = {"keys": sorted(k for k in doc if k != "provenance")}
+    details: dict[str, Any] = {"keys": sorted(k for k in doc if k != "provenance")}
     check = json_validator_for(doc)
     if check is not None:
         details["valid"] = _valid(lambda: check(path))

@@ -39,7 +39,8 @@ from ingest.inspect_lab import (
 from ingest.inspect_outputs import inspect_hdf5, inspect_json, inspect_mcap, inspect_rrd
 from ingest.qtm_mat import MAT_ERRORS
 
-_READ_ERRORS = (*MAT_ERRORS, ArithmeticError, LookupError, UnicodeError, RuntimeError)
+_READ_ERRORS: tuple[type[Exception], ...] = (*MAT_ERRORS, ArithmeticError, LookupError,
+                                             UnicodeError, RuntimeError)
 KEYS = ("path", "format", "frames", "rate_hz", "duration_s", "markers", "bodies", "channels",
         "missing_samples", "holes", "units", "events", "analog", "schema", "schema_version",
         "provenance", "streams", "datasets", "entities", "calibration", "details")

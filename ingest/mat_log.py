@@ -142,7 +142,7 @@ def _is_matrix(v: Any) -> bool:
 def _get(path: str | Path, variables: dict[str, Any], where: str) -> Any:
     """The value at ``where`` ("x", "x.signals.values") of the file's variables."""
     node: Any = variables
-    walked = []
+    walked: list[str] = []
     for part in where.split("."):
         if not isinstance(node, dict) or part not in node:
             have = ", ".join(node) if isinstance(node, dict) else "no fields"

@@ -31,6 +31,7 @@ from data_schema.raw_mcap import (
     RAW_MCAP,
     SCHEMA,
     VERSION,
+    Channel,
     encode_block,
     iter_blocks,
     open_reader,
@@ -56,7 +57,7 @@ class _Stream:
 
 
 def write_raw_mcap(path: str | Path, session: RawSession, metadata: dict[str, Any],
-                   compression: str = COMPRESSIONS[0]) -> None:
+                   compression: str) -> None:
     """Write ``session`` to ``path`` (atomically) as one MCAP file of raw streams.
 
     ``metadata`` holds extra metadata records by name, each a dict of JSON-able values; its
@@ -141,7 +142,7 @@ def _streams(session: RawSession) -> list[_Stream]:
                            f.source))
     for s in out:
         check_time(s.time_ns, s.source)
-        k = RAW_MCAP.channel(s.topic).values_per_sample(len(s.names))
+        k = _channel(s.topic).values_per_sample(len(s.names))
         got = sum(int(np.prod(a.shape[1:])) for a in s.arrays)
         if any(a.shape[0] != s.time_ns.shape[0] for a in s.arrays) or got != k:
             raise ValueError(f"{s.topic}: arrays {[a.shape for a in s.arrays]} do not match "
@@ -158,12 +159,20 @@ def _marker_streams(m: MarkerSeries, prefix: str) -> list[_Stream]:
     return out
 
 
+def _channel(topic: str) -> Channel:
+    """The raw MCAP's layout of the stream ``topic`` (one of its own topics)."""
+    spec = RAW_MCAP.channel(topic)
+    if spec is None:
+        raise ValueError(f"{topic}: no stream of the raw MCAP layout")
+    return spec
+
+
 def _block_samples(rate_hz: float) -> int:
     return max(1, round(rate_hz * BLOCK_SECONDS)) if np.isfinite(rate_hz) else 1
 
 
 def _write_stream(writer: Any, s: _Stream) -> None:
-    spec = RAW_MCAP.channel(s.topic)
+    spec = _channel(s.topic)
     block = _block_samples(s.rate_hz)
     frames = int(s.time_ns.shape[0])
     meta = {"names": json.dumps(s.names), "frames": str(frames), "block_samples": str(block),

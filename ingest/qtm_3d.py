@@ -103,9 +103,9 @@ def _labelled_layout(head: QtmHead, names: list[str]) -> tuple[int, int | None, 
     cols = np.empty((m, 3), dtype=np.int64)
     for j, name in enumerate(names):
         for k, axis in enumerate("XYZ"):
-            col = index.get(f"{name} {axis}")
-            if col is None:
+            found = index.get(f"{name} {axis}")
+            if found is None:
                 raise head.bad(f"column line has no column '{name} {axis}' for marker "
                                f"{name!r} of MARKER_NAMES", head.labels_line)
-            cols[j, k] = col
+            cols[j, k] = found
     return n_fields, index.get("Time"), cols

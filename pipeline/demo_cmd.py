@@ -25,14 +25,12 @@ from pipeline.demo_plan import (
     NETWORKS,
     OUT,
     PAPER,
-    PRETRAINING,
     QUICK,
     RECIPE,
     RECIPE_NETWORK,
-    SHIPPED_MODEL,
     SMOKE,
-    SOLID,
     Lab,
+    Pretraining,
     Step,
     demo_steps,
 )
@@ -68,12 +66,12 @@ from train.training.train_params import DEVICES, TrainParams
               help="Train this network with the rest of the recipe [default: the recipe's]: "
                    "the tip's offsets in the heads or in the first layer, or the paper's "
                    "(docs/results.md compares them; docs/model.md, Latency).")
-@click.option("--pretraining", type=OneOf(PRETRAINING), default=SHIPPED_MODEL,
+@click.option("--pretraining", type=OneOf(Pretraining), default=Pretraining.SHIPPED.value,
               show_default=True,
               help="shipped: none here, every fold starts from the generic model shipped with "
                    "the package (train/generic_model.pt); generic: that model made here, one "
                    "model for every lab pre-trained once on MSM data drawn from the prior (the "
-                   "same whatever the lab or --seed; the shipped one is the quick settings'); "
+                   "same whatever the lab or --seed; with --quick the shipped one's recipe); "
                    "per-fold: per fold the MSM fitted on its training presses, simulated at "
                    "the lab's markers and pre-trained on (five times the work); solid: the "
                    "shipped model's runs, and beside them per fold the solid model of the "
@@ -98,7 +96,7 @@ from train.training.train_params import DEVICES, TrainParams
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,
          device: str, jobs: int | None, host_speed: bool | None, network: str | None,
-         pretraining: str, markers: str, marker_pitch: float, size: str, mocap_rate: float,
+         pretraining: Pretraining, markers: str, marker_pitch: float, size: str, mocap_rate: float,
          inclusions: tuple[str, ...], layer: str | None, shape: str | None, seed: int) -> None:
     """Run every stage on a synthetic session, from lab files to a trained, evaluated cGNN.
 
@@ -123,7 +121,7 @@ def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, s
     from pipeline.demo_targets import summary
 
     settings = SMOKE if smoke else QUICK if quick else PAPER
-    if pretraining in (SHIPPED_MODEL, SOLID) and network not in (None, RECIPE_NETWORK):
+    if pretraining.from_shipped and network not in (None, RECIPE_NETWORK):
         raise BadInput("--network", f"{network}: the shipped generic model is the recipe's "
                        "network; make one of this network with --pretraining generic (or "
                        "per-fold)")

@@ -4,16 +4,16 @@ The protocol, as a lab with only its presses would run it:
 
 1. the session: synth -> ingest -> sync -> extract -> split (5 folds of 20 presses); the twin's
    lab knobs (:class:`Lab`: markers, footprint, mocap rate) make it another lab's phantom;
-2. the pre-training, one of :data:`PRETRAINING`:
+2. the pre-training, one of :class:`Pretraining`:
 
    - ``shipped`` (the default): none here; every fold starts from the generic model shipped
-     with the package (:mod:`train.generic_model`), made by ``generic`` below with the quick
-     settings (``scripts/build_generic.py``);
+     with the package (:mod:`train.generic_model`), made by ``generic`` below with its own
+     recipe (:mod:`train.training.generic_recipe`, ``scripts/build_generic.py``);
    - ``generic``: that model made here: one model for every lab, pre-trained once on MSM data
      drawn from the prior (``simulate --prior``: springs, footprint, markers and press drawn
      per phantom, :mod:`sim.msm.msm_prior`), with the same seed whatever the lab or the
      demo's seed, so every fold of every lab starts from the same model
-     (:func:`generic_steps`);
+     (:func:`generic_steps`; with the quick settings the shipped model's recipe);
    - ``per-fold``: per fold, ``fit-msm --splits --fold`` (the MSM's constants fitted to this
      phantom on that fold's training presses only), ``simulate --params --layout`` (that MSM
      sized to the lab's footprint, sampled at its markers) and a pre-training on it;
@@ -40,7 +40,9 @@ batch 32; a GPU is used when there is one), and ``smoke`` (the wiring only).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from pathlib import Path
+from typing import assert_never
 
 from core.errors import BadInput
 from sim.msm import paper
@@ -48,6 +50,7 @@ from sim.twin.synth_params import SynthParams
 from train import paper as cgnn_paper
 from train.generic_model import SHIPPED
 from train.model.config import Offsets
+from train.training.generic_recipe import SHIPPED_RECIPE, GenericRecipe
 from train.training.recipes import OURS
 
 
@@ -78,12 +81,7 @@ class Settings:
     scarcity_groups: int = 4         # training presses 1..this in the study
     batch: int = cgnn_paper.BATCH
     fit_sequences: int | None = None  # training presses fitted per fold; None: all of them
-    prior_phantoms: int = 1           # the generic model's data: phantoms drawn from the prior
-    prior_locations: int = 1          # ... places pressed on each
-    prior_directions: int = 1         # ... directions at each place
-    generic_epochs: int = 1           # the generic model's pre-training
-    generic_lr: float = 5e-4          # ... its step size: at the fine-tuning's 2e-3 the prior's
-    #                                   variety silences the second and third graph layers
+    generic: GenericRecipe = SHIPPED_RECIPE   # --pretraining generic: the model made here
     solid_locations: int = 32         # --pretraining solid: places pressed on the fitted solid
     solid_directions: int = 3         # ... directions at each (within 20 degrees)
     solid_epochs: int = 40            # ... the shipped model pre-trained on them
@@ -105,28 +103,29 @@ NETWORKS = {
     "paper": (*RECIPE, "--offsets", Offsets.NONE.value),
 }
 RECIPE_NETWORK = "head-offsets"   # the recipe's own, and so the shipped generic model's
-# quick: the generic model pre-trained on 24 phantoms of the prior x 4 places x 2 directions
-# (3,072 states) for 120 epochs at 5e-4 (the shipped model's recipe); per fold (--pretraining
-# per-fold) a small MSM set (16 places x 3 directions) seen for 80 epochs, and the fit on 3
-# training presses (what each costs and buys: docs/results.md, "One pre-training for every
-# lab"); each fold fine-tuned (TL and scratch alike) 100 epochs, the minutes the single
-# pre-training saved (100 against 80: TL 1.5-2 % lower on seeds 0-2, below the per-fold
-# protocol's at 80 on each, 11-13 % below scratch at 100; docs/results.md), the scarcity
-# study's runs 80 (its 16 runs a demo would cost a fifth more)
+# quick: the generic model made by the shipped model's recipe (the Settings' default,
+# train/training/generic_recipe.py); per fold (--pretraining per-fold) a small MSM set (16
+# places x 3 directions) seen for 80 epochs, and the fit on 3 training presses (what each
+# costs and buys: docs/results.md, "One pre-training for every lab"); each fold fine-tuned
+# (TL and scratch alike) 100 epochs, the minutes the single pre-training saved (100 against
+# 80: TL 1.5-2 % lower on seeds 0-2, below the per-fold protocol's at 80 on each, 11-13 %
+# below scratch at 100; docs/results.md), the scarcity study's runs 80 (its 16 runs a demo
+# would cost a fifth more)
 QUICK = Settings(msm_locations=16, msm_directions=3, pretrain_epochs=80, finetune_epochs=100,
-                 lr=2e-3, fit_sequences=3, prior_phantoms=24, prior_locations=4,
-                 prior_directions=2, generic_epochs=120, scarcity_epochs=80)
+                 lr=2e-3, fit_sequences=3, scarcity_epochs=80)
 PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
                  pretrain_epochs=cgnn_paper.EPOCHS, finetune_epochs=cgnn_paper.EPOCHS,
                  lr=cgnn_paper.LR, scarcity_folds=5,
-                 scarcity_groups=12, fit_sequences=10, prior_phantoms=100, prior_locations=10,
-                 prior_directions=paper.DIRECTIONS, generic_epochs=cgnn_paper.EPOCHS,
-                 generic_lr=cgnn_paper.LR)
+                 scarcity_groups=12, fit_sequences=10,
+                 generic=replace(SHIPPED_RECIPE, phantoms=100, locations=10,
+                                 directions=paper.DIRECTIONS, epochs=cgnn_paper.EPOCHS,
+                                 lr=cgnn_paper.LR))
 # Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
                  lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2,
-                 prior_phantoms=2, prior_locations=3, prior_directions=1, generic_epochs=1,
-                 generic_lr=1e-3, solid_locations=10, solid_directions=1, solid_epochs=1)
+                 generic=replace(SHIPPED_RECIPE, phantoms=2, locations=3, directions=1,
+                                 epochs=1, lr=1e-3),
+                 solid_locations=10, solid_directions=1, solid_epochs=1)
 
 
 @dataclass(frozen=True)
@@ -157,7 +156,7 @@ class Lab:
                  ("--size", self.size_mm, default.size_mm),
                  ("--mocap-rate", f"{self.mocap_rate_hz:g}", f"{default.mocap_rate_hz:g}"),
                  ("--layer", self.layer, default.layer), ("--shape", self.shape, default.shape)]
-        return tuple(a for opt, v, d in pairs if v != d for a in (opt, v)) + \
+        return tuple(a for opt, v, d in pairs if v is not None and v != d for a in (opt, v)) + \
             tuple(a for inclusion in self.inclusions for a in ("--inclusion", inclusion))
 
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
@@ -195,25 +194,34 @@ def pretrain_dir(out: Path, fold: int) -> Path:
     return out / "runs" / f"msm_fold{fold}"
 
 
-SHIPPED_MODEL, GENERIC, PER_FOLD, SOLID = "shipped", "generic", "per-fold", "solid"
-# how the demo pre-trains: not at all (the package's generic model), once for every lab, per
-# fold on a fitted MSM, or (beside the shipped model's runs) per fold on the fitted solid
-PRETRAINING = (SHIPPED_MODEL, GENERIC, PER_FOLD, SOLID)
+class Pretraining(StrEnum):
+    """How the demo pre-trains (``demo --pretraining``, these words)."""
+
+    SHIPPED = "shipped"      # not at all: every fold starts from the package's generic model
+    GENERIC = "generic"      # that model made here, once for every lab
+    PER_FOLD = "per-fold"    # per fold, on an MSM fitted to the lab
+    SOLID = "solid"          # the shipped model's runs, and beside them per fold on the solid
+
+    @property
+    def from_shipped(self) -> bool:
+        """Whether the folds fine-tune the shipped generic model (no generic model made
+        here): the network is then the shipped model's."""
+        return self in (Pretraining.SHIPPED, Pretraining.SOLID)
+
+
 SOLID_TAG = "solid"                   # the runs fine-tuned from a fold's solid pre-training
-GENERIC_SEED = 0                      # the generic model's seed, whatever the lab's
 
 
 def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                recipe: tuple[str, ...] = RECIPE, lab: Lab = Lab(),
-               pretraining: str = SHIPPED_MODEL) -> list[Step]:
+               pretraining: Pretraining = Pretraining.SHIPPED) -> list[Step]:
     """The demo's commands in order; each names what it reads and writes (for skipping).
-    ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``);
-    ``pretraining``: one of :data:`PRETRAINING`."""
-    if lab.shape is not None and pretraining == PER_FOLD:
+    ``recipe``: the training flags every run shares (``RECIPE``, or one of ``NETWORKS``)."""
+    if lab.shape is not None and pretraining is Pretraining.PER_FOLD:
         raise BadInput("--pretraining", f"{pretraining} fits an MSM to the lab, a flat "
                        "surface: a curved lab (--shape) pre-trains on its solid "
-                       f"({SOLID}), or fine-tunes the shipped generic model ({SHIPPED_MODEL}) "
-                       f"or a generic one ({GENERIC})")
+                       f"({Pretraining.SOLID}), or fine-tunes the shipped generic model "
+                       f"({Pretraining.SHIPPED}) or a generic one ({Pretraining.GENERIC})")
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
     session = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [
@@ -221,25 +229,25 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
              (states,), (splits,))]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
     tags = VARIANTS
-    if pretraining in (SHIPPED_MODEL, SOLID):
+    if pretraining is Pretraining.SHIPPED or pretraining is Pretraining.SOLID:
         inits = [SHIPPED] * s.folds
         steps = [replace(step, parallel=True, batch=FOLDS) for step in session]
-        if pretraining == SOLID:
+        if pretraining is Pretraining.SOLID:
             steps += solid_steps(out, s, states, splits, (*train, *sd))
             tags = (*VARIANTS, SOLID_TAG)
-    elif pretraining == GENERIC:
-        pre = generic_steps(out, s, device, recipe)
+    elif pretraining is Pretraining.GENERIC:
+        pre = generic_steps(out, s.generic, device, recipe)
         inits = [pre[-1].outputs[0]] * s.folds
         steps = pre + [replace(step, parallel=True, batch=FOLDS) for step in session]
-    elif pretraining == PER_FOLD:
+    elif pretraining is Pretraining.PER_FOLD:
         pre = per_fold_steps(out, s, states, splits, train, sd)
         inits = [pretrain_dir(out, fold) / "best.pt" for fold in range(s.folds)]
         steps = session + pre
     else:
-        raise ValueError(f"pretraining {pretraining!r} is not one of {', '.join(PRETRAINING)}")
+        assert_never(pretraining)
     runs = [(fold, tag, out / "runs" / f"exp_{tag}_fold{fold}") for fold in range(s.folds)
             for tag in tags]
-    order = runs if pretraining == PER_FOLD else \
+    order = runs if pretraining is Pretraining.PER_FOLD else \
         sorted(runs, key=lambda r: r[1] != "notl")      # scratch first: it waits for nothing
     for fold, tag, run in order:
         start = {"tl": inits[fold], SOLID_TAG: solid_pre_dir(out, fold) / "best.pt"}.get(tag)
@@ -251,37 +259,38 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                           (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
                           stage="train (fine-tuning)"))
     scarcity = [_scarcity_step(out, fold, s, device) for fold in range(s.scarcity_folds)]
-    if pretraining != PER_FOLD:                       # the study goes on beside the last runs
+    if pretraining is not Pretraining.PER_FOLD:      # the study goes on beside the last runs
         steps += [replace(step, batch=FOLDS) for step in scarcity]
     # the recording shows the first run's test examples: a fine-tuned one, not the MSM's
     finetuned = [run for _, _, run in runs]
-    pres = [] if pretraining in (SHIPPED_MODEL, SOLID) else \
+    pres = [] if pretraining.from_shipped else \
         list(dict.fromkeys(init.parent for init in inits))      # the pre-trained run(s)
     truth = ("--truth", str(out / "session" / "truth.h5")) if lab.inclusions else ()
     steps.append(Step(("eval", *map(str, finetuned), *map(str, pres), *truth, "--out",
                        str(out / "metrics.json")),
                       tuple(r / "best.pt" for r in finetuned + pres), (out / "metrics.json",)))
-    return steps + (scarcity if pretraining == PER_FOLD else [])
+    return steps + (scarcity if pretraining is Pretraining.PER_FOLD else [])
 
 
-def generic_steps(out: Path, s: Settings, device: str = "auto",
-                  recipe: tuple[str, ...] = RECIPE) -> list[Step]:
-    """The generic model: the prior's MSM data (``msm/prior.h5``), one fold of it, and the
-    pre-training (``runs/generic``, at the settings' ``generic_lr``), all with
-    :data:`GENERIC_SEED`; the last step's output is the model every fold fine-tunes from."""
-    sd = ("--seed", str(GENERIC_SEED))
-    train = ("--device", device, "--lr", str(s.generic_lr), "--batch", str(s.batch), *recipe)
+def generic_steps(out: Path, g: GenericRecipe, device: str = "auto",
+                  recipe: tuple[str, ...] | None = None) -> list[Step]:
+    """The generic model made by ``g``: the prior's MSM data (``msm/prior.h5``), one fold of
+    it, and the pre-training (``runs/generic``), all with ``g.seed``; the last step's output
+    is the model every fold fine-tunes from. ``recipe``: the training flags (default: ``g``'s;
+    the demo's another network's)."""
+    sd = ("--seed", str(g.seed))
+    flags = g.training_flags() if recipe is None else recipe
+    train = ("--device", device, "--lr", str(g.lr), "--batch", str(g.batch), *flags)
     prior, splits, run = out / "msm" / "prior.h5", out / "msm" / "prior_splits.json", \
         out / "runs" / "generic"
     return [
-        Step(("simulate", "--prior", str(s.prior_phantoms), "--locations",
-              str(s.prior_locations), "--directions", str(s.prior_directions), "--workers",
-              "1", "--out", str(prior), *sd), (), (prior,), parallel=True, batch=FOLDS,
-             stage="simulate --prior"),
+        Step(("simulate", "--prior", str(g.phantoms), "--locations", str(g.locations),
+              "--directions", str(g.directions), "--workers", "1", "--out", str(prior), *sd),
+             (), (prior,), parallel=True, batch=FOLDS, stage="simulate --prior"),
         Step(("split", str(prior), "--out", str(splits), "--folds", "1", *sd), (prior,),
              (splits,), parallel=True, batch=FOLDS),
         Step(("train", "--data", str(prior), "--splits", str(splits), "--out", str(run),
-              "--epochs", str(s.generic_epochs), *train, *sd), (prior, splits),
+              "--epochs", str(g.epochs), *train, *sd), (prior, splits),
              (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
              stage="train (pre-training)"),
     ]

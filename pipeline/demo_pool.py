@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from multiprocessing import connection, get_context
 from multiprocessing.process import BaseProcess
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 import click
 
@@ -168,8 +168,8 @@ class Pool:
             if not self._busy():
                 raise RuntimeError("demo steps wait on each other: "
                                    + ", ".join(" ".join(s.args[:1]) for s in waiting))
-            for worker, result in self._finished():
-                step, worker.step = worker.step, None
+            for worker, step, result in self._finished():
+                worker.step = None
                 if result.rc != 0:
                     self._fail(result)
                 done(step, result)
@@ -190,14 +190,18 @@ class Pool:
     def _busy(self) -> list[_Worker]:
         return [w for w in self._workers if w.step is not None]
 
+    def _running(self) -> list[Step]:
+        """The steps the busy workers run."""
+        return [w.step for w in self._workers if w.step is not None]
+
     def _start_ready(self, waiting: list[Step], started: Callable[[Step, int], None]) -> None:
         """Give each free worker the first waiting step whose inputs are written."""
         while waiting:
-            pending = waiting + [w.step for w in self._busy()]
+            pending = waiting + self._running()
             step = next((s for s in waiting if ready(s, [p for p in pending if p is not s])),
                         None)
             worker = self._free() if step is not None else None
-            if worker is None:
+            if step is None or worker is None:
                 return
             waiting.remove(step)
             started(step, worker.number)
@@ -224,12 +228,14 @@ class Pool:
         self._workers.append(worker)
         return worker
 
-    def _finished(self) -> list[tuple[_Worker, StepResult]]:
-        """Wait for at least one busy worker to answer (or die); their results."""
+    def _finished(self) -> list[tuple[_Worker, Step, StepResult]]:
+        """Wait for at least one busy worker to answer (or die); each with its step and
+        result."""
         busy = self._busy()
-        by_handle = {**{w.conn: w for w in busy}, **{w.process.sentinel: w for w in busy}}
+        by_handle: dict[Any, _Worker] = {     # each worker by its pipe and its sentinel (an int)
+            **{w.conn: w for w in busy}, **{w.process.sentinel: w for w in busy}}
         answered = {by_handle[h].number: by_handle[h] for h in connection.wait(list(by_handle))}
-        return [(w, self._result(w)) for w in answered.values()]
+        return [(w, w.step, self._result(w)) for w in answered.values() if w.step is not None]
 
     @staticmethod
     def _result(worker: _Worker) -> StepResult:

@@ -11,7 +11,8 @@ examples, :mod:`train.evaluation.references`):
 - fine-tuned with transfer learning (TL) and from scratch: mean L_d at least 30 % below the
   best reference in every fold; force error at most half the linear reference's;
 - with a lump (``--inclusion``): the same 30 % in every fold over the lump (the test presses
-  within its radius + 10 mm, beside the references on those presses) and away from it;
+  within its radius plus the reach, :data:`train.evaluation.lump.LUMP_REACH_M`, beside the
+  references on those presses) and away from it;
 - TL: pooled mean L_d at least 10 % below scratch trained as many epochs (the paper reports
   23 %, against a scratch model of its own), better in all folds but one; in the data-scarcity
   study, at least 30 % below scratch at every number of training presses shown;
@@ -31,15 +32,29 @@ examples, :mod:`train.evaluation.references`):
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 
-from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, validate_metrics
+from data_schema.intervals_doc import DistanceBin, IntervalLevel
+from data_schema.metrics_doc import (
+    FORCE_LINEAR,
+    NEAREST_PRESS,
+    NOTHING_MOVES,
+    LumpPart,
+    LumpRow,
+    Metrics,
+    Row,
+    RunRow,
+    ScarcityRow,
+    Scores,
+    validate_metrics,
+)
 from pipeline.demo_plan import msm_dir
-from train.training.variant import SOURCE_NAMES
+from train.training.variant import SOURCE_NAMES, Variant
 
 FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
 TL_CUT = 0.10           # pooled: TL this far below scratch at equal epochs
@@ -60,12 +75,12 @@ def summary(out: Path, seconds: float, quick: bool, host_s: float | None = None)
     checks += _sync(out)
     checks += _fit(out)
     click.echo("\n" + (out / "metrics.md").read_text())
-    doc = validate_metrics(out / "metrics.json")
-    checks += _msm_model(doc)
-    checks += _fine_tuned(doc)
-    checks += _over_lump(doc)
-    checks += _solid_over_lump(doc)
-    checks += _intervals(doc)
+    scores = Scores.from_json(validate_metrics(out / "metrics.json"))
+    checks += _msm_model(scores)
+    checks += _fine_tuned(scores)
+    checks += _over_lump(scores)
+    checks += _solid_over_lump(scores)
+    checks += _intervals(scores)
     checks += _scarcity(out)
     if quick:
         checks.append(_quick_time(seconds, host_s))
@@ -120,31 +135,36 @@ def _fit(out: Path) -> list[tuple[str, bool, str]]:
              and max(ratios) <= MSM_VS_STILL, f"{text} (target {MSM_VS_STILL:.0%} each)")]
 
 
-def variant_of(run: dict) -> str:
+def variant_of(row: Row) -> str:
     """'tl' (fine-tuned), 'solid' (fine-tuned from a pre-training on the fitted solid), 'msm'
     (the MSM model) or 'notl' (lab data from scratch), from the variant the run's checkpoint
     records."""
-    v = run["variant"]
-    if v["pretrained"]:
-        return "solid" if v["pretrained"].get("train_data") == SOURCE_NAMES["solid"] else "tl"
-    return "msm" if v["train_data"] == "MSM" else "notl"
+    v = Variant.from_dict(row.variant)
+    if v.pretrained:
+        return "solid" if v.pretrained.train_data == SOURCE_NAMES["solid"] else "tl"
+    return "msm" if v.train_data == "MSM" else "notl"
 
 
 FINE_TUNED = (("tl", "TL"), ("notl", "scratch"), ("solid", "TL from the solid"))
 
 
-def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
+def _ld_mm(m: Metrics) -> float:
+    """Mean L_d (mm); infinite where the predictions were not finite (no L_d)."""
+    return math.inf if m.ld_mean_mm is None else m.ld_mean_mm
+
+
+def _msm_model(scores: Scores) -> list[tuple[str, bool, str]]:
     """Each fold's MSM model on its own MSM test set, beside the references there."""
-    runs = [r for r in doc["runs"] if variant_of(r) == "msm"]
+    runs = [r for r in scores.runs if variant_of(r) == "msm"]
     if not runs:
         return []
     ld, still, force, linear = [], [], [], []
     for r in runs:
-        m, refs = r["metrics"]["all"], r["references"]
-        ld.append(m["ld_mean_mm"] if m["ld_mean_mm"] is not None else float("inf"))
-        still.append(refs[NOTHING_MOVES]["ld_mean_mm"])
-        force.append(m["force_abs_n"])
-        linear.append(refs[FORCE_LINEAR]["force_abs_n"])
+        m, refs = r.metrics.all, r.references
+        ld.append(_ld_mm(m))
+        still.append(_ld_mm(refs[NOTHING_MOVES]))
+        force.append(m.force_abs_n)
+        linear.append(refs[FORCE_LINEAR].force_abs_n)
     return [("MSM models, mean L_d on their test sets",
              all(a <= MSM_VS_STILL * b for a, b in zip(ld, still, strict=True)),
              ", ".join(f"{a:.3f}" for a in ld) + " mm; nothing moves "
@@ -154,27 +174,31 @@ def _msm_model(doc: dict) -> list[tuple[str, bool, str]]:
              + ", ".join(f"{b:.3f}" for b in linear) + " N")]
 
 
-def _ld_gain(row: dict) -> float:
+def _ld_gain(row: RunRow | LumpPart) -> float:
     """A row's mean L_d gain over the best reference; -100 % where predictions were not
     finite (no gain to report)."""
-    gain = row["gain"]["ld_gain"]
+    gain = row.gain.ld_gain
     return -1.0 if gain is None else gain
 
 
-def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
+LUMP_PARTS: tuple[tuple[Callable[[LumpRow], LumpPart | None], str], ...] = (
+    (lambda lump: lump.over, "over the lump"), (lambda lump: lump.away, "away from the lump"))
+
+
+def _over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
     """Where eval split the test presses by a lump: TL and scratch, every fold that has test
     presses there, over the lump and away from it, beside the best reference there."""
     checks = []
-    for part, where in (("over", "over the lump"), ("away", "away from the lump")):
+    for part, where in LUMP_PARTS:
         for variant, name in FINE_TUNED:
-            folds = sorted(((r["fold"], r["lump"][part]) for r in doc["runs"]
-                            if variant_of(r) == variant and r.get("lump")),
+            folds = sorted(((r.fold, part(r.lump)) for r in scores.runs
+                            if variant_of(r) == variant and r.lump),
                            key=lambda fold_rows: fold_rows[0])
             held = [(k, rows) for k, rows in folds if rows]
             empty = [str(k) for k, rows in folds if not rows]
             if not folds:
                 continue
-            text = ", ".join(f"fold {k}: {_ld_gain(rows):+.0%} ({rows['metrics']['n']} "
+            text = ", ".join(f"fold {k}: {_ld_gain(rows):+.0%} ({rows.metrics.n} "
                              "examples)" for k, rows in held)
             text += f"; no test press there in fold(s) {', '.join(empty)}" if empty else ""
             checks.append((f"{name} {where}: mean L_d below the best reference",
@@ -183,19 +207,19 @@ def _over_lump(doc: dict) -> list[tuple[str, bool, str]]:
     return checks
 
 
-def _solid_over_lump(doc: dict) -> list[tuple[str, bool, str]]:
+def _solid_over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
     """With --pretraining solid and a lump: TL from the solid against TL from the shipped
     model over the lump, pooled over the folds with test presses there (the same examples)."""
-    over = {v: [r["lump"]["over"]["metrics"] for r in doc["runs"] if variant_of(r) == v
-                and r.get("lump") and r["lump"]["over"]] for v in ("tl", "solid")}
+    over = {v: [r.lump.over.metrics for r in scores.runs if variant_of(r) == v
+                and r.lump and r.lump.over] for v in ("tl", "solid")}
     if not over["tl"] or not over["solid"]:
         return []
 
-    def pooled(rows: list[dict], key: str) -> float:
-        return sum(m[key] * m["n"] for m in rows) / sum(m["n"] for m in rows)
+    def pooled(rows: list[Metrics], value: Callable[[Metrics], float]) -> float:
+        return sum(value(m) * m.n for m in rows) / sum(m.n for m in rows)
 
-    ld = {v: pooled(rows, "ld_mean_mm") for v, rows in over.items()}
-    force = {v: pooled(rows, "force_abs_n") for v, rows in over.items()}
+    ld = {v: pooled(rows, _ld_mm) for v, rows in over.items()}
+    force = {v: pooled(rows, lambda m: m.force_abs_n) for v, rows in over.items()}
     gain = 1 - ld["solid"] / ld["tl"]
     return [("TL from the solid over the lump, against TL from the shipped model",
              gain >= SOLID_OVER_LUMP,
@@ -204,16 +228,16 @@ def _solid_over_lump(doc: dict) -> list[tuple[str, bool, str]]:
              f"{SOLID_OVER_LUMP:.0%} lower L_d)")]
 
 
-def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
+def _fine_tuned(scores: Scores) -> list[tuple[str, bool, str]]:
     checks = []
-    by = {v: sorted((r for r in doc["runs"] if variant_of(r) == v), key=lambda r: r["fold"])
+    by = {v: sorted((r for r in scores.runs if variant_of(r) == v), key=lambda r: r.fold)
           for v, _ in FINE_TUNED}
     for variant, name in FINE_TUNED:
         if not by[variant]:
             continue
         gains = [_ld_gain(r) for r in by[variant]]
-        force = [r["metrics"]["all"]["force_abs_n"]
-                 / r["references"][FORCE_LINEAR]["force_abs_n"] for r in by[variant]]
+        force = [r.metrics.all.force_abs_n / r.references[FORCE_LINEAR].force_abs_n
+                 for r in by[variant]]
         checks.append((f"{name}: mean L_d below the best reference in every fold",
                        min(gains, default=0) >= FOLD_GAIN,
                        "gains " + ", ".join(f"{g:+.0%}" for g in gains)
@@ -222,10 +246,10 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
                        max(force, default=1) <= FORCE_VS_LINEAR,
                        "ratios " + ", ".join(f"{f:.2f}" for f in force)
                        + f" (target <= {FORCE_VS_LINEAR})"))
-    tl = [r["metrics"]["all"]["ld_mean_mm"] for r in by["tl"]]
-    scratch = [r["metrics"]["all"]["ld_mean_mm"] for r in by["notl"]]
+    tl = [_ld_mm(r.metrics.all) for r in by["tl"]]
+    scratch = [_ld_mm(r.metrics.all) for r in by["notl"]]
     if tl and len(tl) == len(scratch):
-        n = [r["metrics"]["all"]["n"] for r in by["tl"]]
+        n = [r.metrics.all.n for r in by["tl"]]
         pooled = 1 - sum(a * k for a, k in zip(tl, n, strict=True)) / sum(
             b * k for b, k in zip(scratch, n, strict=True))
         better = sum(a < b for a, b in zip(tl, scratch, strict=True))
@@ -237,27 +261,27 @@ def _fine_tuned(doc: dict) -> list[tuple[str, bool, str]]:
     return checks
 
 
-def _intervals(doc: dict) -> list[tuple[str, bool, str]]:
+def _intervals(scores: Scores) -> list[tuple[str, bool, str]]:
     """Each fine-tuned variant's intervals on its test presses against the targets: pooled
     over its folds, each level's share inside its band; each run's radius and near/far."""
-    runs = sorted((r for r in doc["runs"] if variant_of(r) in ("tl", "notl")),
-                  key=lambda r: (variant_of(r), r["fold"]))
+    runs = sorted((r for r in scores.runs if variant_of(r) in ("tl", "notl")),
+                  key=lambda r: (variant_of(r), r.fold))
     if not runs:
         return []
-    absent = [r["run"] for r in runs if r.get("intervals") is None]
-    if absent:
-        return [("intervals", False, "absent (retrain): " + ", ".join(absent))]
-    name = {r["run"]: f"{'TL' if variant_of(r) == 'tl' else 'scratch'} {r['fold']}"
-            for r in runs}
+    held = [(r, r.intervals) for r in runs if r.intervals is not None]
+    if len(held) < len(runs):
+        return [("intervals", False, "absent (retrain): "
+                 + ", ".join(r.run for r in runs if r.intervals is None))]
+    name = {r.run: f"{'TL' if variant_of(r) == 'tl' else 'scratch'} {r.fold}" for r in runs}
     pooled = [("TL" if variant_of(r) == "tl" else "scratch", v)
-              for r in sorted(doc["overall"], key=variant_of, reverse=True)
-              if variant_of(r) in ("tl", "notl") and r.get("intervals")
-              for v in r["intervals"]["levels"]]
-    ratio = [(name[r["run"]], r["intervals"]["radius_to_ld"]) for r in runs]
-    near = [(name[r["run"]], r["intervals"]["by_distance"]) for r in runs]
+              for r in sorted(scores.overall, key=variant_of, reverse=True)
+              if variant_of(r) in ("tl", "notl") and r.intervals
+              for v in r.intervals.levels]
+    ratio = [(name[r.run], doc.radius_to_ld) for r, doc in held]
+    near = [(name[r.run], doc.by_distance) for r, doc in held]
     return [
-        _pooled_check(pooled, "test points", "coverage", "band"),
-        _pooled_check(pooled, "changes of force", "force_coverage", "force_band"),
+        _pooled_check(pooled, "test points", lambda v: (v.coverage, v.band)),
+        _pooled_check(pooled, "changes of force", lambda v: (v.force_coverage, v.force_band)),
         ("intervals: mean 90 % radius against mean L_d",
          all(v is not None and v <= RADIUS_VS_LD for _, v in ratio),
          _per_run(ratio, lambda v: "unbounded" if v is None else f"{v:.2f}x")
@@ -265,17 +289,20 @@ def _intervals(doc: dict) -> list[tuple[str, bool, str]]:
         ("intervals: points beside the tip's path get larger 90 % radii than far ones",
          all(_falls(bins) for _, bins in near),
          _per_run(near, lambda b: " > ".join(
-             "–" if x["mean_radius_mm"] is None else f"{x['mean_radius_mm']:.2f}" for x in b)
+             "–" if x.mean_radius_mm is None else f"{x.mean_radius_mm:.2f}" for x in b)
              + " mm")),
     ]
 
 
-def _pooled_check(pooled: list[tuple[str, dict]], what: str, share: str, band: str
+Share = Callable[[IntervalLevel], tuple[float, list[float] | None]]   # a share and its band
+
+
+def _pooled_check(pooled: list[tuple[str, IntervalLevel]], what: str, share: Share
                   ) -> tuple[str, bool, str]:
     """One score's pooled shares (each variant's levels) against their bands."""
     return (f"intervals: {what} inside their 80/90/95 % intervals, pooled over the folds",
-            bool(pooled) and all(_inside(v[share], v.get(band)) for _, v in pooled),
-            _per_run(pooled, lambda v: _in_band(v[share], v.get(band)))
+            bool(pooled) and all(_inside(*share(v)) for _, v in pooled),
+            _per_run(pooled, lambda v: _in_band(*share(v)))
             + " (target: inside the range re-drawn calibration presses give by chance)")
 
 
@@ -298,16 +325,22 @@ def _per_run(items: list[tuple[str, Any]], show: Callable[[Any], str]) -> str:
     return "; ".join(f"{name}: {'/'.join(v)}" for name, v in by.items())
 
 
-def _falls(bins: list[dict]) -> bool:
+def _falls(bins: list[DistanceBin]) -> bool:
     """Whether the nearest distance bin's mean radius exceeds the farthest's."""
-    radii = [b["mean_radius_mm"] for b in bins]
-    return len(radii) > 1 and None not in (radii[0], radii[-1]) and radii[0] > radii[-1]
+    radii = [b.mean_radius_mm for b in bins]
+    first, last = (radii[0], radii[-1]) if radii else (None, None)
+    return len(radii) > 1 and first is not None and last is not None and first > last
 
 
-def scarcity_rows(out: Path) -> list[dict]:
+def scarcity_rows(out: Path) -> list[ScarcityRow]:
     """The data-scarcity rows of every fold the demo studied (``scarcity/fold<K>.json``)."""
     files = [p for p in sorted((out / "scarcity").glob("fold*.json")) if p.suffixes == [".json"]]
-    return [r for p in files for r in json.loads(p.read_text())["scarcity"]]
+    return [r for p in files
+            for r in Scores.from_json(json.loads(p.read_text())).scarcity or []]
+
+
+def _scarcity_ld(row: ScarcityRow) -> float | None:
+    return row.ld_mean_mm
 
 
 def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
@@ -316,9 +349,9 @@ def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
     rows = scarcity_rows(out)
     if not rows:
         return []
-    groups, tl = curve(rows, "TL", "ld_mean_mm")
-    _, scratch = curve(rows, "no TL", "ld_mean_mm")
-    _, near = curve(rows, NEAREST_PRESS, "ld_mean_mm")
+    groups, tl = curve(rows, "TL", _scarcity_ld)
+    _, scratch = curve(rows, "no TL", _scarcity_ld)
+    _, near = curve(rows, NEAREST_PRESS, _scarcity_ld)
     cuts = [1 - a / b for a, b in zip(tl, scratch, strict=True)]
     if not cuts:                                  # runs without --init: no TL to compare
         return []
@@ -330,24 +363,20 @@ def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
             *_scarce_intervals(rows)]
 
 
-def _scarce_intervals(rows: list[dict]) -> list[tuple[str, bool, str]]:
+def _scarce_intervals(rows: list[ScarcityRow]) -> list[tuple[str, bool, str]]:
     """The intervals of the scarcity study's models with the fewest training presses: the
     points' and the force's share inside their 90 % intervals, each inside the range its
     fold's re-drawn calibration presses give by chance (none where no row says)."""
-    fewest = min(r["groups"] for r in rows)
-    runs = [r for r in rows if r["groups"] == fewest and r.get("points_90") is not None]
+    fewest = min(r.groups for r in rows)
+    runs = [(r, r.shares) for r in rows if r.groups == fewest and r.shares is not None
+            and r.shares.points_90 is not None]
     if not runs:
         return []
-    shares = [(r, what) for r in runs for what in ("points", "force")]
-    ok = all(_inside(r[f"{w}_90"], _band_of(r, w)) for r, w in shares)
-    text = "; ".join(f"fold {r['fold']} {r['predictor']}: {w} "
-                     + _in_band(r[f"{w}_90"], _band_of(r, w)) for r, w in shares)
+    shares = [(r, what, share, band) for r, s in runs
+              for what, (share, band) in s.by_score().items() if share is not None]
+    ok = all(_inside(share, band) for _, _, share, band in shares)
+    text = "; ".join(f"fold {r.fold} {r.predictor}: {what} " + _in_band(share, band)
+                     for r, what, share, band in shares)
     return [(f"intervals with {fewest} training press{'es' if fewest > 1 else ''} (scarcity "
              "study), 90 %", ok, text + " (target: inside the range re-drawn calibration "
              "presses give by chance)")]
-
-
-def _band_of(row: dict, what: str) -> list[float] | None:
-    """A scarcity row's band of ``what`` ('points', 'force'): [low, high], or None."""
-    low, high = row.get(f"{what}_90_low"), row.get(f"{what}_90_high")
-    return None if low is None or high is None else [low, high]

@@ -8,6 +8,7 @@ import click
 
 from pipeline.options import OneOf, ranged, resolve_rrd, rrd_option
 from train.evaluation.eval_params import DEVICES, EvalParams
+from train.evaluation.lump import LUMP_REACH_M
 
 D = EvalParams              # the option defaults are its fields', the bounds its BOUNDS
 
@@ -34,7 +35,8 @@ D = EvalParams              # the option defaults are its fields', the bounds it
 @click.option("--lump", default=D.lump, metavar="X,Y,R",
               help="A lump on the footprint (mm, phantom frame: centre and radius): also "
                    "report L_d, the force error and the intervals' coverage over it (test "
-                   "presses within R + 10 mm) and away from it, each beside the references.")
+                   f"presses within R + {LUMP_REACH_M * 1e3:g} mm) and away from it, each "
+                   "beside the references.")
 @click.option("--truth", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               default=D.truth,
               help="A twin's truth.h5: its first inclusion is the lump (instead of --lump).")
@@ -64,7 +66,7 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     over the lump and away from it.
     """
     from train.evaluation.eval_stage import run_eval
-    from train.evaluation.evaluate import not_beating
+    from train.evaluation.metrics_table import not_beating
 
     rrd_path = resolve_rrd(out, rrd, no_rrd)
     result, table = run_eval(runs, out, EvalParams(device, scarcity, scarcity_epochs,

@@ -6,7 +6,7 @@ import math
 from collections.abc import Callable, Iterable
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import click
 
@@ -165,7 +165,8 @@ class OneOf(click.Choice):
 
     def __init__(self, choices: type[Enum] | Iterable[str]) -> None:
         self.kind = choices if isinstance(choices, type) and issubclass(choices, Enum) else None
-        super().__init__([str(m.value) for m in choices] if self.kind else list(choices))
+        super().__init__([str(m.value) for m in self.kind] if self.kind is not None
+                         else [str(c) for c in choices])
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Any:
@@ -248,4 +249,5 @@ class Checkpoint(click.ParamType):
                 ctx: click.Context | None) -> Path:
         if isinstance(value, Path):
             return value
-        return self.path.convert(str(resolve_model(str(value))), param, ctx)
+        # click.Path(path_type=Path) converts to a Path; its annotation is the wider os.PathLike
+        return cast(Path, self.path.convert(str(resolve_model(str(value))), param, ctx))

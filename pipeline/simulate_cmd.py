@@ -23,6 +23,11 @@ OUT = click.Path(dir_okay=False, path_type=Path)
 IN = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 
+def _mm(span: tuple[float, float]) -> str:
+    """A range of the prior in m as ``LO-HI`` in mm (its help, its closing line)."""
+    return f"{span[0] * 1e3:g}-{span[1] * 1e3:g}"
+
+
 @click.command()
 @click.option("--out", required=True, type=OUT, help="States file to write (HDF5).")
 @click.option("--locations", type=ranged(B["locations"]), default=D.locations,
@@ -34,8 +39,10 @@ IN = click.Path(exists=True, dir_okay=False, path_type=Path)
                    f"{PRIOR_DIRECTIONS}].")
 @click.option("--prior", type=ranged(B["prior"]), default=D.prior, show_default=True,
               help="Draw this many phantoms from the prior (sim/msm/msm_prior.py: springs, "
-                   "contact patch, footprint 60-160 mm a side, 12-64 markers in a grid or "
-                   "scattered 8-25 mm apart, some occluded, the press's angle), one block of "
+                   f"contact patch, footprint {_mm(PRIOR.side)} mm a side, "
+                   f"{PRIOR.markers[0]}-{PRIOR.markers[1]} markers in a grid or "
+                   f"scattered {_mm(PRIOR.pitch)} mm apart, some occluded, the press's angle), "
+                   "one block of "
                    "--locations x --directions sequences each, sampled at its markers: the "
                    "data one pre-training for every lab learns from (0: one MSM).")
 @click.option("--steps", type=ranged(B["steps"]), default=D.steps, show_default=True,
@@ -178,9 +185,8 @@ def _depths(run: Simulation, thickness: float, prior: bool) -> str:
     or, for a prior's phantoms, against the depth range their centre presses were drawn in."""
     deep, deepest = run.beyond_thickness
     if prior:
-        lo, hi = PRIOR.depth_m
         return (f"deepest {deepest * 1e3:.1f} mm (each phantom's centre press at 7.5 N drawn "
-                f"{lo * 1e3:g}-{hi * 1e3:g} mm deep)")
+                f"{_mm(PRIOR.depth_m)} mm deep)")
     if deep:
         return (f"{deep} states deeper than the phantom's {thickness * 1e3:g} mm thickness "
                 f"(deepest {deepest * 1e3:.1f} mm: lower --fmax or stiffen the springs to "

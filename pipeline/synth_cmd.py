@@ -45,7 +45,7 @@ class Locations(click.ParamType):
                 ctx: click.Context | None) -> int | str:
         """``value`` as N or the grid's text, or BadInput naming the option."""
         if isinstance(value, int) or str(value).strip().isdigit():
-            return ranged(RANDOM_PLACES).convert(value, param, ctx)
+            return int(ranged(RANDOM_PLACES).convert(value, param, ctx))   # whole: an int
         parse_locations(str(value))
         return str(value).strip()
 

@@ -17,7 +17,7 @@ from train.training.train_params import DEVICES, Loss, Schedule, TrainOptions, T
 EXISTING = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 T, N = TrainOptions, CGNNConfig     # the option defaults are their fields' (the paper's)
-B = T.BOUNDS | N.BOUNDS            # and the options' bounds theirs
+B = {**T.BOUNDS, **N.BOUNDS}       # and the options' bounds theirs
 
 
 @click.command()

@@ -2,12 +2,13 @@
 
     python scripts/build_generic.py [--out train/generic_model.pt] [--work DIR]
 
-Runs the quick demo's generic pre-training (:mod:`pipeline.generic_build`: ``simulate
---prior``, ``split``, ``train``) on one thread and the CPU, in ``--work`` (a temporary folder
-unless given), then writes the slimmed checkpoint (:func:`train.generic_model.slim`) to
-``--out``, whole or not at all. On the same CPU kind and torch build it writes the same bytes
-(compare with ``cmp``); it prints the weights' digest, which the file's provenance records too.
-About 16 minutes on one core (67 s to simulate the prior, about 14 min to train: docs/results.md).
+Runs the generic model's recipe (:mod:`train.training.generic_recipe`, as the steps of
+:mod:`pipeline.generic_build`: ``simulate --prior``, ``split``, ``train``) on one thread and the
+CPU, in ``--work`` (a temporary folder unless given), then writes the slimmed checkpoint
+(:func:`train.generic_model.slim`) to ``--out``, whole or not at all. On the same CPU kind and
+torch build it writes the same bytes (compare with ``cmp``); it prints the weights' digest,
+which the file's provenance records too. About 16 minutes on one core (67 s to simulate the
+prior, about 14 min to train: docs/results.md).
 """
 
 from __future__ import annotations

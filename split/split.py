@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.errors import BadInput
-from split.split_params import SplitParams, check_ratio
+from split.split_params import SplitParams, check_ratio, filled_in
 
 
 def parse_ratio(text: str) -> tuple[int, int, int]:
@@ -57,7 +57,7 @@ def make_folds(groups: np.ndarray, plan: SplitParams, places: dict[int, int] | N
     g = len(ids)
     if plan.folds < 1:
         raise BadInput(None, f"--folds must be at least 1, got {plan.folds}")
-    n_train, n_val, n_test = role_counts(g, plan.ratio)
+    n_train, n_val, n_test = role_counts(g, filled_in(plan)[1])
     rng = np.random.default_rng(plan.seed)
     order = ids[rng.permutation(g)]
     spread = False

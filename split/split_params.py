@@ -44,6 +44,14 @@ class SplitParams:
         check_bounds(self, self.BOUNDS)
 
 
+def filled_in(plan: SplitParams) -> tuple[str, tuple[int, int, int]]:
+    """The grouping and the ratio of a plan whose data's defaults are filled in (by the
+    runner, before it splits); a plan without them is a programming error."""
+    if plan.group_by is None or plan.ratio is None:
+        raise ValueError("a split plan needs its grouping and ratio filled in from the data")
+    return plan.group_by, plan.ratio
+
+
 def check_ratio(ratio: tuple[int, ...], text: str) -> None:
     """Refuse a train:val:test ratio (written ``text``) that is not three counts, the train and
     test ones positive."""

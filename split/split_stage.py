@@ -21,7 +21,7 @@ from data_schema.hdf5 import attr_text, h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
 from data_schema.states import example_groups, validate_states
 from split.split import examples_by_role, make_folds
-from split.split_params import DEFAULTS, SplitParams
+from split.split_params import DEFAULTS, SplitParams, filled_in
 from split.split_view import write_split_recording
 
 
@@ -58,10 +58,11 @@ def build_manifest(states: str | Path, plan: SplitParams) -> dict:
     """The manifest document for ``states`` under ``plan``, the settings with the data's
     defaults filled in (:func:`default_plan`); validated before it is written."""
     validate_states(states)
-    eg = example_groups(states, plan.group_by)
+    group_by, ratio = filled_in(plan)
+    eg = example_groups(states, group_by)
     try:
         folds, note = make_folds(np.concatenate(list(eg.values())), plan,
-                                 group_places(states, plan.group_by))
+                                 group_places(states, group_by))
     except BadInput as e:                       # a plan that does not fit: name the file
         raise (BadInput(states, e.what) if e.path is None else e) from None
     out = []
@@ -73,7 +74,7 @@ def build_manifest(states: str | Path, plan: SplitParams) -> dict:
     return {
         "schema": FOLDS.name, "schema_version": FOLDS.version,
         "data": {"file": Path(states).name, "sha256": sha256_file(states)},
-        "group_by": plan.group_by, "ratio": list(plan.ratio), "seed": plan.seed,
+        "group_by": group_by, "ratio": list(ratio), "seed": plan.seed,
         "groups": groups, "note": note, "folds": out,
         "provenance": make_provenance("split", asdict(plan), [states], FOLDS.name,
                                       FOLDS.version),

@@ -35,6 +35,7 @@ MAX_DRIFT_PPM = 200.0      # a crystal oscillator drifts tens of ppm; hundreds i
 MAX_OFFSET_SD_S = 5e-3     # a data lock must pin the offset to a few mocap frames
 MIN_RISE = 0.5             # rank correlation of force with depth over a press's loaded frames
 MIN_RISING_SHARE = 0.8     # share of the presses in which the force must rise with the depth
+MIN_PULSES = 3             # trigger edges and events the trigger clock needs
 MIN_LOCK_PRESSES = 2       # one press matches any press of a similar shape: the intervals pin it
 CONTENDER = 0.9            # a lag whose contact matches this nearly as well must fail its checks
 
@@ -134,7 +135,7 @@ def match_trigger(
     source: str | Path | None = None,
     prior: ClockFit | None = None,
     max_drift_ppm: float = MAX_DRIFT_PPM,
-    min_pulses: int = 3,
+    min_pulses: int = MIN_PULSES,
     timing_sd_s: float = 0.0,
 ) -> ClockFit:
     """Clock from trigger pulses seen by both systems (logger edges, mocap EVENT times).
@@ -214,11 +215,11 @@ def _cluster(values: np.ndarray, gap: float) -> list[np.ndarray]:
 
 def xcorr_curve(
     t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, rate_hz: float = 200.0,
+    t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Normalised cross-correlation of a mocap signal with a logger signal at every lag
     (logger minus mocap time, s) at which the two recordings overlap (and within
-    ``max_lag_s``; by default no other bound): the lags and the correlation, -inf where not
+    ``max_lag_s``; inf: no other bound): the lags and the correlation, -inf where not
     admissible.
 
     FFT cross-correlation at ``rate_hz``, each stream on a grid from its own first stamp (so
@@ -250,7 +251,7 @@ def xcorr_curve(
 
 def xcorr_lag(
     t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, rate_hz: float = 200.0,
+    t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
 ) -> tuple[float, float]:
     """Lag (logger minus mocap time, s) that best matches a mocap signal to a logger signal
     (:func:`xcorr_curve`), refined by a parabola through the peak, and the normalised
@@ -288,7 +289,7 @@ def curve_peaks(lags: np.ndarray, xc: np.ndarray, count: int, min_gap_s: float
 
 def contact_lags(
     t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, force_level: float = 0.25,
+    t_logger_span: tuple[float, float], max_lag_s: float, force_level: float = 0.25,
     levels: int = 24, count: int = 4, min_gap_s: float = 0.5,
 ) -> list[tuple[float, float]]:
     """Whole-session lags (s) and their normalised correlations, best first, by matching
@@ -300,8 +301,7 @@ def contact_lags(
     and a lag of one press cycle can fit as well); the contact state is the same on/off pattern
     in both streams. The depth at which contact starts depends on the marker and tip geometry,
     so levels across the upper depth range are tried and the best-matching one kept. Every
-    lag at which the recordings overlap is searched (within ``max_lag_s``, unbounded by
-    default).
+    lag at which the recordings overlap is searched (within ``max_lag_s``; inf: unbounded).
     """
     finite = depth[np.isfinite(depth)]
     if finite.size == 0:
@@ -322,7 +322,7 @@ def contact_lags(
 
 def contact_lag(
     t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float = np.inf, force_level: float = 0.25,
+    t_logger_span: tuple[float, float], max_lag_s: float, force_level: float = 0.25,
     levels: int = 24,
 ) -> float:
     """The best of :func:`contact_lags`."""

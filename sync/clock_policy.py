@@ -25,6 +25,7 @@ from core.text import count
 from sync.clock import (
     CONTENDER,
     MIN_LOCK_PRESSES,
+    MIN_PULSES,
     ClockFit,
     Lock,
     clock_from_data,
@@ -34,13 +35,14 @@ from sync.clock import (
     rising_presses,
     stamp_resolution_s,
 )
-from sync.presses import segment_presses
+from sync.presses import PressRule, segment_presses
 from sync.sync_params import SyncParams
 
-MIN_PULSES = 3                   # trigger edges and events the trigger clock needs
 AMBIGUOUS_S = 0.1                # two data locks this far apart are two different offsets
 PRIOR_SHARE = 0.1                # a data prior picks a trigger match if its sd is this share
 #                                  of the pulse spacing (the right candidate then by 5 sd)
+LOCK_CONTACT_N = 0.1             # the data lock finds presses with a contact level of at least
+#                                  this (N)
 SHARED = ClockFit(0.0, 0.0, 0.0, 0.0, 0.0, 0, "shared")   # one clock: exact, nothing estimated
 
 Magnitude = Callable[[np.ndarray], np.ndarray]   # logger time (s) -> force magnitude (N)
@@ -56,17 +58,19 @@ def estimate_clock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nd
     """
     if p.clock == "auto" and shares_mocap_clock(raw):
         return SHARED, None
-    edges, events = _trigger(raw)
-    if p.clock == "trigger" and edges is None:
+    trigger = _trigger(raw)
+    if p.clock == "trigger" and trigger is None:
         raise BadInput(raw.force.source, "--clock trigger, but the session has no trigger "
                                          "channel with matching mocap events")
     note = None
-    if p.clock == "auto" and edges is not None and min(len(edges), len(events)) < MIN_PULSES:
+    if p.clock == "auto" and trigger is not None and min(map(len, trigger)) < MIN_PULSES:
+        edges, events = trigger
         note = (f"trigger unusable ({len(edges)} pulse edges in the force log, {len(events)} "
                 "trigger events in the mocap file): clock from the data")
-        edges = None
-    if p.clock == "data" or edges is None:
+        trigger = None
+    if p.clock == "data" or trigger is None:
         return _data_clock(raw, p, t_m, depth, t_f, magnitude_at), note
+    edges, events = trigger
     # both stamps are rounded: the logger's edge to its sample, the EVENT to its decimals
     step = np.median(np.diff(t_f))
     sd = float(np.sqrt((step**2 + stamp_resolution_s(np.round(events * 1e9)) ** 2) / 12))
@@ -141,14 +145,16 @@ def check_overlap(raw: RawSession, clock: ClockFit, t_m: np.ndarray, t_f: np.nda
                                          f"{clock.method} clock)")
 
 
-def _trigger(raw: RawSession) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _trigger(raw: RawSession) -> tuple[np.ndarray, np.ndarray] | None:
+    """The trigger's rising edges on the logger's clock and the mocap's trigger events (s);
+    None where the session recorded no trigger or the mocap file no matching event."""
     f = raw.force
     if f.trigger is None or raw.trigger_event is None:
-        return None, None
+        return None
     events = np.array([t for label, t in raw.markers.events if label == raw.trigger_event],
                       float) * 1e-9
     if events.size == 0:
-        return None, None
+        return None
     return rising_edges(f.time_ns.astype(np.float64) * 1e-9, f.trigger), events
 
 
@@ -223,8 +229,9 @@ def _checked_lock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nda
                   magnitude_at: Magnitude, lag0: float) -> tuple[ClockFit | None, list[str]]:
     """The per-press lock from the whole-session lag ``lag0`` and what is wrong with it."""
     rate = raw.markers.rate_hz
+    rule = PressRule(p.detect_n, max(p.contact_n, LOCK_CONTACT_N))
     mag = magnitude_at(t_m + lag0)
-    loaded, _ = segment_presses(mag, rate, p.detect_n, max(p.contact_n, 0.1))
+    loaded, _ = segment_presses(mag, rate, rule)
     windows = [(t_m[pr.onset:pr.release], depth[pr.onset:pr.release]) for pr in loaded]
     try:
         fit = clock_from_data(windows, magnitude_at, lag0, raw.markers.source)
@@ -233,8 +240,7 @@ def _checked_lock(raw: RawSession, p: SyncParams, t_m: np.ndarray, depth: np.nda
     f = magnitude_at(fit.to_logger(t_m))
     ok = np.isfinite(f) & np.isfinite(depth)
     r = float(np.corrcoef(f[ok], depth[ok])[0, 1]) if ok.sum() > 10 else 0.0
-    presses, _ = segment_presses(np.where(np.isfinite(f), f, np.nan), rate, p.detect_n,
-                                 max(p.contact_n, 0.1))
+    presses, _ = segment_presses(np.where(np.isfinite(f), f, np.nan), rate, rule)
     rising, checked = rising_presses([(f[pr.onset:pr.release], depth[pr.onset:pr.release])
                                       for pr in presses])
     return fit, Lock(fit, rising, checked, r).problems(p.min_correlation)

@@ -81,13 +81,15 @@ def tare_and_calibrate(raw: RawSession, p: SyncParams) -> tuple[Tare, np.ndarray
     bias over one press cycle.
     """
     f = raw.force
-    if f.kind == "gauge" and raw.calibration is None:
-        raise BadInput(f.source, "gauge voltages but no ATI calibration in the session")
+    matrix = None
+    if f.kind == "gauge":
+        if raw.calibration is None:
+            raise BadInput(f.source, "gauge voltages but no ATI calibration in the session")
+        matrix = raw.calibration.matrix
     if not np.isfinite(f.values).all():
         bad = int(np.flatnonzero(~np.isfinite(f.values).all(axis=1))[0])
         raise BadInput(f.source, "force log has missing samples", where=f"sample {bad}")
     tare = unloaded_start(f.values, f.rate_hz, f.source)
-    matrix = raw.calibration.matrix if f.kind == "gauge" else None
     wrench = apply_calibration(f.values, tare.bias, matrix)
     noise = noise_level(wrench, tare)
     contact = contact_level(p, noise)
@@ -138,11 +140,17 @@ def noise_level(wrench: np.ndarray, tare: Tare) -> float:
 
 def over_range(raw: RawSession, sampled: np.ndarray) -> np.ndarray:
     """Samples (T, 6) beyond the calibration's rated load on any axis."""
-    if raw.calibration is None:
-        return np.zeros(len(sampled), bool)
-    limit = np.asarray(raw.calibration.max_load, float)
+    return beyond_rating(sampled, raw.calibration)
+
+
+def beyond_rating(wrench: np.ndarray, calibration: AtiCalibration | None) -> np.ndarray:
+    """Samples of a wrench (T, 6) beyond ``calibration``'s rated load on any axis (none
+    without a calibration, which alone states the rating); NaN is never beyond it."""
+    if calibration is None:
+        return np.zeros(len(wrench), bool)
+    limit = np.asarray(calibration.max_load, float)
     with np.errstate(invalid="ignore"):
-        return (np.abs(sampled) > limit).any(axis=1)
+        return np.asarray((np.abs(wrench) > limit).any(axis=1))
 
 
 RAIL_TOLERANCE = 0.005      # a gauge within this share of the output range of a rail is on it
@@ -192,12 +200,7 @@ def on_rail(raw: RawSession) -> np.ndarray:
     v = np.asarray(raw.force.values, float)
     if raw.force.kind != "gauge":
         return np.zeros(len(v), bool)
-    flagged = np.zeros(len(v), bool)
-    rails = output_rails(raw)
-    if rails is not None:
-        lo, hi = rails
-        tol = RAIL_TOLERANCE * (hi - lo)
-        flagged |= ((v <= lo + tol) | (v >= hi - tol)).any(axis=1)
+    flagged = at_rails(v, output_rails(raw))
     sigma = noise_sigma(v)
     for c, s in zip(v.T, sigma, strict=True):
         if not s >= FLAT_MIN_STEPS * quantisation_step(c):
@@ -207,6 +210,18 @@ def on_rail(raw: RawSession) -> np.ndarray:
             if abs(extreme - med) > FLAT_SIGMAS * s:
                 flagged |= _runs_at_least(c == extreme, FLAT_RUN)
     return flagged
+
+
+def at_rails(volts: np.ndarray, rails: tuple[float, float] | None) -> np.ndarray:
+    """Samples (L,) where any gauge channel of ``volts`` (L, C) lies within
+    :data:`RAIL_TOLERANCE` of the output range of either of the amplifier's ``rails`` (none
+    where the rails are unknown)."""
+    v = np.asarray(volts, float)
+    if rails is None:
+        return np.zeros(len(v), bool)
+    lo, hi = rails
+    tol = RAIL_TOLERANCE * (hi - lo)
+    return np.asarray(((v <= lo + tol) | (v >= hi - tol)).any(axis=1))
 
 
 def quantisation_step(values: np.ndarray) -> float:

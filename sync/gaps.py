@@ -66,7 +66,7 @@ def _slope(t: np.ndarray, x: np.ndarray, idx: np.ndarray, at: int,
 
 
 def _seen_before(missing: np.ndarray, a: int, n: int) -> np.ndarray:
-    idx = []
+    idx: list[int] = []
     i = a - 1
     while i >= 0 and len(idx) < n and not missing[i]:
         idx.append(i)
@@ -75,7 +75,7 @@ def _seen_before(missing: np.ndarray, a: int, n: int) -> np.ndarray:
 
 
 def _seen_after(missing: np.ndarray, b: int, n: int) -> np.ndarray:
-    idx = []
+    idx: list[int] = []
     i = b
     while i < len(missing) and len(idx) < n and not missing[i]:
         idx.append(i)

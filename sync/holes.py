@@ -21,6 +21,7 @@ stream's own clock; jitter stays bad input). Sync never interpolates across one:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -185,7 +186,7 @@ def leave_out_touched(presses: list[Press], spans: list[HoleSpan], reach: int) -
 
 
 def hole_line(span: HoleSpan, time_ns: np.ndarray, depth: np.ndarray,
-              found: list[Press] = (), reach: int = 0) -> str:
+              found: Sequence[Press] = (), reach: int = 0) -> str:
     """One warning line: the file, the hole (on its stream's clock, and on the mocap's for a
     force hole), and what it cost: the presses left out, or a press the force hole swallowed
     whole, seen by the tip's ``depth`` below the surface away from every ``found`` press

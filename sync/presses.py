@@ -1,20 +1,56 @@
 """Splitting a session into presses, naming each press's location and repeat, cutting them out.
 
 A press runs from contact onset to release: the frames where the force magnitude stays above
-a contact level (a few noise widths), in a run that rises above a detection level. Presses at
-the same place on the phantom (tip within ``radius`` of a location's centre, measured in the
-surface plane) share a location id; locations are numbered in the order they are first
-pressed, repeats within each location. Each press is then cut out of the session's series with
-a margin of unloaded frames on both sides (:func:`cut_presses`).
+a contact level (a few noise widths), in a run that rises above a detection level. What makes
+a press is :class:`PressRule`, stated once here for sync on a whole recording
+(:func:`segment_presses`) and ``pipeline live`` on a stream (:mod:`live.session.presses`).
+Presses at the same place on the phantom (tip within ``radius`` of a location's centre,
+measured in the surface plane) share a location id; locations are numbered in the order they
+are first pressed, repeats within each location. Each press is then cut out of the session's
+series with a margin of unloaded frames on both sides (:func:`cut_presses`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
 from core.runs import true_runs
+
+MIN_PRESS_S = 0.2    # a contact shorter than this is a touch, not a press (s)
+MERGE_S = 0.05       # contacts apart by less than this are one: flicker at the contact level (s)
+
+
+@dataclass(frozen=True)
+class PressRule:
+    """What makes a press, for a whole series (sync) and a stream (live) alike: a contact is
+    a force above ``contact_n``; two contacts apart by less than :data:`MERGE_S` are one; a
+    contact is a press when it peaks above ``detect_n`` and lasts :data:`MIN_PRESS_S`."""
+
+    detect_n: float      # a press must rise above this force (N)
+    contact_n: float     # a contact is a force above this (N)
+
+    @overload
+    def touching(self, force_n: float) -> bool: ...
+
+    @overload
+    def touching(self, force_n: np.ndarray) -> np.ndarray: ...
+
+    def touching(self, force_n: np.ndarray | float) -> np.ndarray | bool:
+        """Where the force (N) is a contact: a mask of a series, or one sample's answer."""
+        return force_n > self.contact_n
+
+    def bridges(self, gap_samples: int, rate_hz: float) -> bool:
+        """Whether a gap of ``gap_samples`` samples at ``rate_hz`` below the contact level
+        joins the contacts either side of it into one."""
+        return gap_samples < MERGE_S * rate_hz
+
+    def is_press(self, peak_n: float, duration_s: float) -> bool:
+        """Whether a contact that peaked at ``peak_n`` (N) and lasted ``duration_s`` is a
+        press."""
+        return peak_n > self.detect_n and duration_s >= MIN_PRESS_S
 
 
 @dataclass
@@ -28,18 +64,13 @@ class Press:
     repeat: int = -1
 
 
-def segment_presses(
-    force_magnitude: np.ndarray,
-    rate_hz: float,
-    detect_n: float,
-    contact_n: float,
-    min_duration_s: float = 0.2,
-    merge_s: float = 0.05,
-) -> tuple[list[Press], int]:
+def segment_presses(force_magnitude: np.ndarray, rate_hz: float, rule: PressRule
+                    ) -> tuple[list[Press], int]:
     """Complete presses in a force-magnitude series (NaN = unknown), and how many were cut off.
 
-    Runs above ``contact_n`` closer than ``merge_s`` are merged (noise flicker at the contact
-    level); a press is a merged run that peaks above ``detect_n`` and lasts ``min_duration_s``.
+    Runs of contact (``rule``) that :meth:`PressRule.bridges` joins are merged (noise flicker
+    at the contact level); a press is a merged run that ``rule`` calls one, its duration
+    counted in samples from onset to release.
     A press that touches either end of the series or the unknown (NaN) samples before or after
     the force was recorded was cut off by the end of a recording: its onset or release is not
     known, so it is left out and only counted (the second value). Unknown samples between
@@ -58,14 +89,14 @@ def segment_presses(
         known = known | inside
     f = np.where(known, f, 0.0)
     spans: list[list[int]] = []
-    for a, b in true_runs(f > contact_n):
-        if spans and a - spans[-1][1] < merge_s * rate_hz:
+    for a, b in true_runs(rule.touching(f)):
+        if spans and rule.bridges(a - spans[-1][1], rate_hz):
             spans[-1][1] = b
         else:
             spans.append([a, b])
     presses, cut = [], 0
     for a, b in spans:
-        if f[a:b].max() <= detect_n or (b - a) < min_duration_s * rate_hz:
+        if not rule.is_press(float(f[a:b].max()), (b - a) / rate_hz):
             continue
         if a == 0 or b == len(f) or not known[a - 1 : b + 1].all():
             cut += 1
@@ -74,9 +105,8 @@ def segment_presses(
     return presses, cut
 
 
-def assign_locations(
-    centres: np.ndarray, radius: float = 0.010
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def assign_locations(centres: np.ndarray, radius: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Location id and repeat number of each press from its contact point (K, D).
 
     Greedy in press order: a press joins the nearest known location within ``radius`` (whose

@@ -75,9 +75,9 @@ def antialiased_interpolant(
     shorter than the filter gives NaN too.
     """
     t_src = np.asarray(t_src, float)
-    parts = [_stretch_interpolant(t_src[a:b], x[a:b], fs_out, passband)
+    found = [_stretch_interpolant(t_src[a:b], x[a:b], fs_out, passband)
              for a, b in (stretches or [(0, len(t_src))])]
-    parts = [part for part in parts if part is not None]
+    parts = [part for part in found if part is not None]
 
     def at(t_query: np.ndarray) -> np.ndarray:
         tq = np.asarray(t_query, float)

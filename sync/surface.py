@@ -22,6 +22,14 @@ EXACT_DEPTH_M = 5e-3    # the depth series is exact this near the surface (the t
 
 
 @dataclass(frozen=True)
+class Curved:
+    """A curved phantom's shape, and its registration to the markers."""
+
+    registration: Registration
+    shape: Shape
+
+
+@dataclass(frozen=True)
 class RestSurface:
     """What depth is measured from: the rest plane (``point``, ``normal`` out of the phantom),
     or a curved phantom's registered shape (then ``point`` and ``normal`` are its frame's
@@ -33,20 +41,32 @@ class RestSurface:
     shape: Shape | None = None
     source: str = ""
 
+    @property
+    def curved(self) -> Curved | None:
+        """A curved phantom's registration and shape; None for a flat one (its plane)."""
+        if self.registration is None and self.shape is None:
+            return None
+        if self.registration is None or self.shape is None:
+            raise ValueError("a curved rest surface needs its registration and its shape")
+        return Curved(self.registration, self.shape)
+
     def depth(self, tip: np.ndarray) -> np.ndarray:
         """The tip's depth (T,) below the surface (into the phantom: +)."""
-        if self.registration is None:
+        curved = self.curved
+        if curved is None:
             return tip_depth(tip, self.point, self.normal)
-        return shape_depth(tip, self.registration, self.shape)
+        return shape_depth(tip, curved.registration, curved.shape)
 
     def touches(self, tip: np.ndarray, depth: np.ndarray, presses: list[Press]
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Where each press touched the surface (P, 3) and its outward normal there (P, 3);
         ``depth`` (T,) is :meth:`depth` of ``tip``."""
-        if self.registration is None:
+        curved = self.curved
+        if curved is None:
             return (contact_points(tip, presses, self.point, self.normal),
                     np.tile(self.normal, (len(presses), 1)))
-        return shape_touches(tip, depth, presses, self.registration, self.shape, self.source)
+        return shape_touches(tip, depth, presses, curved.registration, curved.shape,
+                             self.source)
 
 
 def rest_of(phantom: np.ndarray, cluster: np.ndarray, tip: np.ndarray, names: list[str],

@@ -62,7 +62,14 @@ from sync.holes import (
     session_holes,
     touch_reach,
 )
-from sync.presses import Press, PressRecord, assign_locations, cut_presses, segment_presses
+from sync.presses import (
+    Press,
+    PressRecord,
+    PressRule,
+    assign_locations,
+    cut_presses,
+    segment_presses,
+)
 from sync.resample import antialias_taps, antialiased_interpolant
 from sync.smooth import lowpass_track
 from sync.surface import along_normals, rest_of
@@ -135,7 +142,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     force, torque = on.sampled[:, :3], on.sampled[:, 3:]
     magnitude = on.magnitude
 
-    found, cut_off = segment_presses(magnitude, rate, p.detect_n, cf.contact)
+    found, cut_off = segment_presses(magnitude, rate, PressRule(p.detect_n, cf.contact))
     touch, touch_normal = surface.touches(points[:, -1], depth, found)
     loc_centres = place(found, touch, p.location_radius_m)
     reach = touch_reach(rate, p)

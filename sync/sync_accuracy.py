@@ -15,6 +15,7 @@ from calib.rigid import fit_rigid
 from data_schema.hdf5 import read_h5
 from data_schema.synced import SYNCED
 from data_schema.truth import TRUTH
+from sync.sync_params import SyncParams
 
 # What sync must reach on the twin, the demo's and the tests' targets (same keys as
 # sync_errors' result).
@@ -55,7 +56,8 @@ def sync_errors(synced: str | Path, truth: str | Path) -> dict[str, float]:
         ours.append(int(s_attrs[f"{group}/location"]))
     tip = np.concatenate(tip_err)
     force = np.concatenate(force_err)
-    to_truth = fit_rigid(s["calibration/cluster_body"], t["indenter/markers"][None])
+    to_truth = fit_rigid(s["calibration/cluster_body"], t["indenter/markers"][None],
+                         SyncParams().max_fit_rms_m)
     tip_offset = to_truth.apply(s["calibration/tip_body"])[0] - t["indenter/tip"]
     match = match_presses(frames, ours, t["presses/start_frame"], t["presses/end_frame"],
                           t["presses/location"])

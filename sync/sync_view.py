@@ -39,6 +39,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.spatial import Delaunay
 
+from calib.shape_registration import Registration
 from core.recording import (
     colormap,
     declare_up,
@@ -132,7 +133,7 @@ def log_sync(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: fl
                 "a hole (frames lost, or force read from a hole's edge)", COLORS["hole"])
     _log_scene(rec, r, rest, scale)
     if r.registration is not None:
-        _shape(rec, r, rest)
+        _shape(rec, r, r.registration, rest)
     _presses(rec, r)
     _holes(rec, r)
 
@@ -173,12 +174,15 @@ def _log_scene(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray, scale: 
                                                   radii=[RADIUS_M / 5]), static=True)
 
 
-def _shape(rec: rr.RecordingStream, r: SyncResult, rest: np.ndarray) -> None:
-    """The registered mould in the lab, and each marker's residual off it."""
-    layout = PhantomLayout.from_json(r.phantom)
-    log_mould(rec, "scene/shape", layout.shape.vertices, layout.shape.faces,
-              np.linalg.inv(r.registration.to_shape))
-    res = r.registration.residual
+def _shape(rec: rr.RecordingStream, r: SyncResult, registration: Registration,
+           rest: np.ndarray) -> None:
+    """The mould ``registration`` placed in the lab, and each marker's residual off it."""
+    shape = PhantomLayout.from_json(r.phantom).shape
+    if shape is None:
+        raise ValueError("a registered phantom without its shape")
+    log_mould(rec, "scene/shape", shape.vertices, shape.faces,
+              np.linalg.inv(registration.to_shape))
+    res = registration.residual
     ok = np.isfinite(rest).all(axis=1) & np.isfinite(res)
     names = r.point_names[:-1]
     rec.log("scene/residual", rr.Points3D(
@@ -211,7 +215,7 @@ def _surface(rec: rr.RecordingStream, t: np.ndarray, markers: np.ndarray, rest: 
 
 
 def _points(rec: rr.RecordingStream, path: str, t: np.ndarray, xyz: np.ndarray,
-            filled: np.ndarray, color: tuple[int, int, int], radius: float) -> None:
+            filled: np.ndarray, color: tuple[int, ...], radius: float) -> None:
     """Points per frame (NaN ones left out), filled samples in the 'filled' colour."""
     ok = np.isfinite(xyz).all(axis=2)
     colors = np.where(filled[..., None], COLORS["filled"], color).astype(np.uint8)

@@ -65,6 +65,8 @@ def _press_arrays(rec: PressRecord) -> dict[str, np.ndarray]:
            "torque": rec.torque, "force_magnitude": rec.force_magnitude, "depth": rec.depth,
            "quality": rec.quality, "force_quality": rec.force_quality}
     if rec.touch is not None:
+        if rec.touch_normal is None:
+            raise ValueError("a press's touch point without the surface's normal there")
         out.update(touch=rec.touch, touch_normal=rec.touch_normal)
     return out
 

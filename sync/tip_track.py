@@ -54,7 +54,7 @@ def pivot_tip(raw: RawSession, p: SyncParams) -> tuple[np.ndarray, PivotResult]:
     fit = fit_rigid(ref, cluster, max_rms=p.max_fit_rms_m, robust_scale=p.robust_scale_m)
     good = fit.valid & ~fit.poor
     res = pivot_calibrate(fit.rotation[good], fit.translation[good], raw.pivot.source,
-                          p.min_pivot_rotation_deg)
+                          min_rotation_deg=p.min_pivot_rotation_deg)
     return ref, res
 
 

@@ -23,7 +23,7 @@ from data_schema.states import validate_states
 from pipeline.cli import cli
 from sync.force_conditioning import over_range
 from train.data import load_manifest, role_examples
-from train.evaluation.evaluate import example_errors, load_run
+from train.evaluation.run_errors import example_errors, load_run
 from train.model.config import CGNNConfig
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams

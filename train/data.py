@@ -37,7 +37,7 @@ class StateTensors:
     #                                     uses (MSM drawn from a prior); None: all N - 1
     location: np.ndarray | None = None  # (S,) each state's place id (states/location)
 
-    def to(self, device: torch.device) -> StateTensors:
+    def to(self, device: str | torch.device) -> StateTensors:
         return StateTensors(self.points.to(device), self.valid.to(device), self.tip.to(device),
                             self.force.to(device), {k: v.to(device) for k, v in
                                                     self.pairs.items()}, self.width,
@@ -103,6 +103,8 @@ def role_examples(doc: dict, fold: int, role: str, data: str | Path | None = Non
     if not 1 <= train_groups <= len(subsets):
         raise BadInput(None, f"--train-groups {train_groups}: fold {fold} has "
                              f"{len(subsets)} training groups")
+    if data is None:
+        raise ValueError("role_examples: train_groups needs the data file its groups are in")
     groups = example_groups(data, doc["group_by"])
     keep = np.asarray(subsets[train_groups - 1])
     return {s: ids[s][np.isin(groups[s][ids[s]], keep)] for s in SETS}

@@ -4,10 +4,11 @@ from the prior (:mod:`sim.msm.msm_prior`), where every fold of every lab starts
 
 ``pipeline train --init generic`` and ``pipeline demo`` (its default pre-training) read it; no
 lab waits for a fit, a simulation or a pre-training before its first fine-tuning, and nothing
-is downloaded. ``python scripts/build_generic.py`` rebuilds it from the prior and the demo's
-quick settings (``pipeline/demo_plan.py``, :func:`generic_steps`): on the same CPU kind and
-torch build, byte for byte (one thread; the file written from memory, with no time or path of
-the machine that made it); on another, the same recipe to the rounding of that CPU's kernels.
+is downloaded. ``python scripts/build_generic.py`` rebuilds it from the prior and its own
+recipe (:mod:`train.training.generic_recipe`, run by :mod:`pipeline.generic_build`): on the same
+CPU kind and torch build, byte for byte (one thread; the file written from memory, with no time
+or path of the machine that made it); on another, the same recipe to the rounding of that CPU's
+kernels.
 
 The file is a checkpoint of ``pipeline train`` (:mod:`train.training.checkpoint`) slimmed by
 :func:`slim`: the averaged weights, the network, the normaliser, the intervals calibrated on

@@ -60,10 +60,10 @@ from live.protocol.parameters import SECTIONS, ForceDevice
 
 VERSION = "1.25"                  # the protocol version asked for (QTM 2019 and later)
 DEVICE_COMPONENTS = {"analog": Component.ANALOG, "force": Component.FORCE}  # by its name
-END_EVENTS = {Event.RT_FROM_FILE_STOPPED: "QTM stopped playing the file",
-              Event.CAPTURE_STOPPED: "QTM stopped capturing",
-              Event.CONNECTION_CLOSED: "QTM closed the connection",
-              Event.QTM_SHUTTING_DOWN: "QTM is shutting down"}
+END_EVENTS: dict[int, str] = {Event.RT_FROM_FILE_STOPPED: "QTM stopped playing the file",
+                              Event.CAPTURE_STOPPED: "QTM stopped capturing",
+                              Event.CONNECTION_CLOSED: "QTM closed the connection",
+                              Event.QTM_SHUTTING_DOWN: "QTM is shutting down"}
 READ_BYTES = 1 << 16
 POLL_S = 0.05                     # how often a running stream checks its deadlines
 CLOSE_S = 1.0                     # the longest a polite goodbye may take
@@ -181,6 +181,8 @@ class Connection:
             pump.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await pump
+        if self._ending is None:        # _done is set with an ending, or what on_frame raised
+            raise RuntimeError("the stream ended without its ending")
         return self._ending
 
     def stop(self, why: str) -> None:
@@ -295,6 +297,8 @@ class Connection:
         if packet.type == PacketType.DATA:
             self._last_frame = self._clock()
             d = self._device
+            if d is None:                   # frames are streamed only once start() named it
+                raise RuntimeError("a frame arrived before the stream was started")
             on_frame(decode_frame(packet.payload, d.device_id, d.component))
         elif packet.type == PacketType.EVENT:
             why = END_EVENTS.get(decode_event(packet.payload))

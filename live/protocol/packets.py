@@ -336,7 +336,8 @@ class PacketReader:
         """The packets that ``data`` completes, in order; :class:`ProtocolError` where a
         header states an impossible size (with the packets completed before it)."""
         self._buffer += data
-        packets, start = [], 0
+        packets: list[Packet] = []
+        start = 0
         while len(self._buffer) - start >= HEADER.size:
             size, kind = HEADER.unpack_from(self._buffer, start)
             if not HEADER.size <= size <= self._max_size:

@@ -135,10 +135,17 @@ def _corners_mm(node: ET.Element, unit: str) -> list[list[float]] | None:
     all twelve are numbers in a length unit."""
     try:
         mm = length_scale(unit) * 1e3
-        return [[float(node.findtext(f"Location/Corner{k}/{a}")) * mm for a in "XYZ"]
+        return [[_float(node.findtext(f"Location/Corner{k}/{a}")) * mm for a in "XYZ"]
                 for k in range(1, 5)]
     except (TypeError, ValueError):
         return None
+
+
+def _float(text: str | None) -> float:
+    """The number an element of the document holds; ValueError where there is none."""
+    if text is None:
+        raise ValueError("no such element")
+    return float(text)
 
 
 def _word(text: str) -> str:
@@ -150,8 +157,8 @@ def _word(text: str) -> str:
 def _number(text: str | None, source: str, what: str) -> float:
     """A positive finite number from the document, or bad input naming the element."""
     try:
-        value = float(text)
-    except (TypeError, ValueError):
+        value = _float(text)
+    except ValueError:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
         raise BadInput(source, f"its parameters lack a positive {what} (got {text!r})")

@@ -52,23 +52,23 @@ def _three_d_no_labels(source: ReplaySource, frame: int, start: int) -> bytes:
 
 
 def _analog(source: ReplaySource, frame: int, start: int) -> bytes:
-    return encode_analog(_blocks(source, frame, start, Component.ANALOG))
+    got = _samples(source, frame, start, Component.ANALOG)
+    return encode_analog([] if got is None else [AnalogBlock(DEVICE_ID, *got)])
 
 
 def _force(source: ReplaySource, frame: int, start: int) -> bytes:
-    return encode_force(_blocks(source, frame, start, Component.FORCE))
+    got = _samples(source, frame, start, Component.FORCE)
+    return encode_force([] if got is None else [ForceBlock(PLATE_ID, *got)])
 
 
-def _blocks(source: ReplaySource, frame: int, start: int, component: Component
-            ) -> list[AnalogBlock] | list[ForceBlock]:
-    """The force's samples of frames ``start`` to ``frame`` as ``component``'s one block
-    (device or plate), where that component carries the force; else none."""
+def _samples(source: ReplaySource, frame: int, start: int, component: Component
+             ) -> tuple[int, np.ndarray] | None:
+    """The force's samples of frames ``start`` to ``frame`` (the first one's number, the
+    values) for ``component``'s one block (device or plate), where that component carries
+    the force; else None."""
     if source.force.component != component:
-        return []
-    first, values = source.force.samples(start, frame + 1)
-    if component == Component.ANALOG:
-        return [AnalogBlock(DEVICE_ID, first, values)]
-    return [ForceBlock(PLATE_ID, first, values)]
+        return None
+    return source.force.samples(start, frame + 1)
 
 
 _ENCODERS: dict[Component, Callable[[ReplaySource, int, int], bytes]] = {

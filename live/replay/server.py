@@ -86,7 +86,7 @@ class ReplayServer:
         """Listen, serve until stopped, then close every connection."""
         await self.start()
         try:
-            await self._done.wait()
+            await self._stopping().wait()
         finally:
             await self.close()
 
@@ -99,8 +99,8 @@ class ReplayServer:
             self._server = await asyncio.start_server(self._client, p.host, p.port)
         except OSError as e:
             # asyncio words a bind error at length; a lookup error's own words are short
-            resolving = isinstance(e, socket.gaierror) or not e.errno
-            why = (e.strerror or str(e)) if resolving else os.strerror(e.errno)
+            code = None if isinstance(e, socket.gaierror) else e.errno
+            why = os.strerror(code) if code else (e.strerror or str(e))
             raise BadInput(f"{p.host}:{p.port}", f"cannot listen there ({why})") from None
         self.port = self._server.sockets[0].getsockname()[1]
         s = self.source
@@ -112,7 +112,13 @@ class ReplayServer:
     def stop(self) -> None:
         """End :meth:`serve` (from any thread)."""
         if self._loop is not None:
-            self._loop.call_soon_threadsafe(self._done.set)
+            self._loop.call_soon_threadsafe(self._stopping().set)
+
+    def _stopping(self) -> asyncio.Event:
+        """What ends :meth:`serve`, made when the server starts."""
+        if self._done is None:
+            raise RuntimeError("the replay server is not started")
+        return self._done
 
     async def close(self) -> None:
         """Stop listening and end every connection (its handler then ends as on a client's
@@ -129,6 +135,8 @@ class ReplayServer:
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         """One client's connection, from the greeting until it leaves."""
         task = asyncio.current_task()
+        if task is None:                    # asyncio runs each connection's handler as a task
+            raise RuntimeError("a client's connection handled outside a task")
         self._clients[task] = writer
         self.stats.clients += 1
         client = _Client(self.source, self.params.speed, writer, self.stats)
@@ -147,7 +155,7 @@ class ReplayServer:
             del self._clients[task]
             self.stats.left += 1
             if self.params.max_clients and self.stats.left >= self.params.max_clients:
-                self._done.set()
+                self._stopping().set()
 
 
 class _Client:
@@ -176,7 +184,7 @@ class _Client:
         match command:
             case Version(number=None):
                 self._send(encode_command(f"Version is {self.version}"))
-            case Version(number=number):
+            case Version(number=str() as number):
                 self._set_version(number)
             case GetParameters(sections=sections):
                 self._send(encode_xml(parameters_xml(self.source, sections, self.version)))

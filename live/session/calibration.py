@@ -28,8 +28,6 @@ from live.session.layout import LiveLayout
 from sync.sync_params import SyncParams
 from sync.tip_track import pivot_tip
 
-TARE_S = 2.0                   # seconds of the force's start the tare may use (its max_s)
-
 
 @dataclass(frozen=True)
 class TipModel:
@@ -71,10 +69,10 @@ def tip_model(cfg: SessionConfig, layout: LiveLayout, calibration: Path | None,
 
 
 def force_tare(values: np.ndarray, rate_hz: float, source: str) -> Tare:
-    """The force's bias from its unloaded start (the force channels' first :data:`TARE_S`
-    seconds, as the session's force stores them: gauge volts or a wrench); bad input where
-    the force does not start unloaded."""
-    return unloaded_start(values, rate_hz, source, max_s=TARE_S)
+    """The force's bias from its unloaded start (the force channels' first
+    :data:`calib.force_tare.TARE_S` seconds at most, as the session's force stores them: gauge
+    volts or a wrench); bad input where the force does not start unloaded."""
+    return unloaded_start(values, rate_hz, source)
 
 
 def wrench(values: np.ndarray, tare: Tare, layout: LiveLayout) -> np.ndarray:

@@ -28,7 +28,7 @@ from ingest.detect import detect_format
 from ingest.force_source import log_force
 from ingest.log_table import LogTable
 from ingest.qtm_force_plate import export_plate_name
-from live.protocol.parameters import ForceDevice, QtmParameters
+from live.protocol.parameters import ForceDevice, ForcePlate, QtmParameters
 
 FORMAT = "qtm_rt"                 # the analog export's format, as ingest's readers name theirs
 PLATE_FORMAT = "qtm_rt_force"     # a plate's samples as a force log, as ingest's name theirs
@@ -59,6 +59,8 @@ class LiveLayout:
         from its export: timed by the plate's rate on the mocap's clock (the device a
         :class:`~live.protocol.parameters.ForcePlate`)."""
         d = self.device
+        if not isinstance(d, ForcePlate):
+            raise ValueError(f"{d.name} is an analog board, not a force plate")
         return LogTable(format=PLATE_FORMAT,
                         columns={c: values[:, i] for i, c in enumerate(d.labels)},
                         units=dict(zip(d.labels, d.units, strict=True)), rate_hz=d.rate_hz,
@@ -118,7 +120,7 @@ def _plates(params: QtmParameters, cfg: SessionConfig) -> list[ForceDevice]:
     name = export_plate_name(cfg.force.file)
     if name is None or not params.plates:
         return list(params.plates)
-    named = [p for p in params.plates if p.name == name]
+    named: list[ForceDevice] = [p for p in params.plates if p.name == name]
     if not named:
         raise BadInput(params.source, f"no force plate named {name!r} (the plate of "
                                       f"{cfg.force.file.name}) in its parameters; it has: "

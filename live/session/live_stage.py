@@ -36,6 +36,7 @@ from extract.extract import extract
 from extract.extract_stage import write_states
 from ingest.ati_cal import read_ati_cal
 from ingest.detect import read_mocap
+from ingest.ingest_params import IngestParams
 from ingest.ingest_stage import session_inputs
 from ingest.mcap_io import write_raw_mcap
 from live.protocol.parameters import device_from_json, device_json
@@ -197,7 +198,8 @@ async def _record(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path 
             LiveModel(params.model, list(cfg.mocap.phantom_markers))
         await link.start()
         part.parent.mkdir(parents=True, exist_ok=True)
-        recorder = Recorder(layout, Journal(part, _header(layout)))
+        journal = Journal(part, _header(layout))
+        recorder = Recorder(layout, journal)
         try:
             with atomic_output(rrd) if rrd is not None else contextlib.nullcontext() as tmp:
                 view = None if tmp is None else LiveView(tmp, len(cfg.mocap.phantom_markers),
@@ -213,7 +215,7 @@ async def _record(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path 
                     view.close()
         finally:
             recorder.flush()
-            recorder.journal.close()
+            journal.close()
     finally:
         await link.close()
     return _Recorded(streamed, recorder.counts, monitor)
@@ -221,12 +223,13 @@ async def _record(cfg: SessionConfig, part: Path, params: LiveParams, rrd: Path 
 
 def _finish(content: JournalContent, part: Path, mcap: Path, cfg: SessionConfig,
             params: LiveParams) -> None:
-    """The journal's ``content`` as ``session.mcap`` in ingest's layout, with its provenance;
+    """The journal's ``content`` as ``session.mcap`` in ingest's layout (and its default
+    compression), with its provenance;
     the journal (``part``) removed once the MCAP is in place."""
     layout = _layout(content.header, cfg)
     raw = raw_session(content.streams, layout, cfg)
     prov = make_provenance("live", asdict(params), session_inputs(cfg), SCHEMA, VERSION)
-    write_raw_mcap(mcap, replace(raw, provenance=prov), {})
+    write_raw_mcap(mcap, replace(raw, provenance=prov), {}, IngestParams().compression)
     part.unlink()
 
 

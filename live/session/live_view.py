@@ -58,7 +58,8 @@ def blueprint(centre: np.ndarray | None = None, size: float = 0.1,
         (", model green" if model else "")
     scene = rrb.Spatial3DView(origin="scene", name=name) if centre is None else \
         phantom_view(name, ["$origin/**"], centre, size, origin="scene")
-    plots = [plot("force (N)", "force"), plot("lost markers, saturated, over range", "quality")]
+    plots: list[rrb.View] = [plot("force (N)", "force"),
+                             plot("lost markers, saturated, over range", "quality")]
     if model:
         plots.append(plot("model: L_d (mm), force error (N)", "model"))
     plots.append(rrb.TextLogView(origin="status", name="status: presses, their states, warnings"))
@@ -181,7 +182,8 @@ class LiveView:
         """A curved phantom's mould where its markers registered it (lab, translucent)."""
         log_mould(self.rec, "scene/shape", shape.vertices, shape.faces, np.linalg.inv(to_shape))
 
-    def note(self, time_ns: int, text: str, level: str = rr.TextLogLevel.INFO) -> None:
+    def note(self, time_ns: int, text: str, level: rr.TextLogLevel = rr.TextLogLevel.INFO
+             ) -> None:
         """A line of the session's status."""
         self._at(time_ns)
         self.rec.log("status", rr.TextLog(text, level=level))

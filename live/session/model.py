@@ -72,8 +72,11 @@ class LiveModel:
         the press: it is not asked again until the next press starts."""
         if self._start is None or not np.isfinite(tip).all():
             return None
+        to_phantom = self.to_phantom
+        if to_phantom is None:                 # a start state is taken in the phantom's frame
+            raise ValueError("a press's start state without the phantom's frame")
         points, tip_start, force_start = self._start
-        tip_now = apply_transform(self.to_phantom, tip)
+        tip_now = apply_transform(to_phantom, tip)
         condition = np.concatenate([tip_start, tip_now]).astype(np.float32)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -83,7 +86,7 @@ class LiveModel:
             except ValueError as e:            # the predictor's refusal of its input
                 self._start = None
                 raise ModelRefusal(str(e)) from None
-        back = np.linalg.inv(self.to_phantom)
+        back = np.linalg.inv(to_phantom)
         predicted = apply_transform(back, deformed[:-1].astype(float))
         seen = np.isfinite(phantom).all(axis=1)
         ld = float(np.linalg.norm(predicted[seen] - phantom[seen], axis=1).mean()) * 1e3

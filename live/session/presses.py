@@ -1,10 +1,12 @@
 """Presses as they happen.
 
-Sync's rules (:func:`sync.presses.segment_presses`) applied sample by sample to the tared force
-magnitude: a contact begins above ``contact_n`` and ends once it has stayed below for
-``merge_s`` (noise flicker at the contact level is one contact); it is a press when it peaked
-above ``detect_n`` and lasted ``min_duration_s``. Where it landed, its location and its states
-follow once the session after it has arrived (:mod:`live.session.states`).
+Sync's rule (:class:`sync.presses.PressRule`) applied sample by sample to the tared force
+magnitude: a contact begins above the contact level and ends once it has stayed below for
+longer than the rule bridges (noise flicker at the contact level is one contact); it is a
+press when the rule calls it one, its duration counted from its first sample above contact to
+its last (sync, on a whole series, counts its frames from onset to release). Where it landed,
+its location and its states follow once the session after it has arrived
+(:mod:`live.session.states`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from sync.presses import PressRule
 
 
 @dataclass
@@ -27,13 +31,11 @@ class PressDone:
 
 @dataclass
 class PressTracker:
-    """Contacts and presses of one session, sample by sample."""
+    """Contacts and presses of one session, sample by sample, at ``rate_hz`` samples a
+    second."""
 
     rate_hz: float
-    detect_n: float
-    contact_n: float
-    min_duration_s: float = 0.2
-    merge_s: float = 0.05
+    rule: PressRule
     presses: int = 0
     _start: int | None = None       # the contact's first sample time (ns), None: no contact
     _below: int = 0                 # samples below contact since it last was above
@@ -43,13 +45,14 @@ class PressTracker:
 
     @property
     def in_contact(self) -> bool:
+        """Whether a contact goes on."""
         return self._start is not None
 
     def add(self, times_ns: np.ndarray, magnitude: np.ndarray) -> list[PressDone]:
         """A frame's samples: the presses that ended."""
         done = []
         for t, f in zip(times_ns.tolist(), magnitude.tolist(), strict=True):
-            if f > self.contact_n:
+            if self.rule.touching(f):
                 if self._start is None:
                     self._start, self._peak = t, 0.0
                 self._below, self._last_above = 0, t
@@ -57,14 +60,15 @@ class PressTracker:
                     self._peak, self._peak_t = f, t
             elif self._start is not None:
                 self._below += 1
-                if self._below >= self.merge_s * self.rate_hz:
-                    done += self._end()
+                if not self.rule.bridges(self._below, self.rate_hz):
+                    done += self._end(self._start)
         return done
 
-    def _end(self) -> list[PressDone]:
-        start, end, peak = self._start, self._last_above, self._peak
+    def _end(self, start: int) -> list[PressDone]:
+        """The contact that began at ``start`` (ns) is over: the press it was, if any."""
+        end, peak = self._last_above, self._peak
         self._start = None
-        if peak <= self.detect_n or (end - start) * 1e-9 < self.min_duration_s:
+        if not self.rule.is_press(peak, (end - start) * 1e-9):
             return []
         self.presses += 1
         return [PressDone(self.presses, peak, start, end, self._peak_t)]

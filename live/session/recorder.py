@@ -51,12 +51,14 @@ class Recorder:
         """Record one frame; returns its time (ns) and the force samples' times and values
         (None where it carried none); None for a frame recorded before a reconnection."""
         if self.resuming:
+            if self.last_number is None:    # a reconnection follows a first frame
+                raise ValueError("resuming a stream that recorded no frame")
             if frame.number <= self.last_number:
                 self.counts.resent += 1
                 return None
             self.resuming = False
         self._check(frame)
-        if self.first_number is None:
+        if self.last_number is None:
             self.first_number = frame.number
         elif frame.number > self.last_number + 1:
             self.counts.skipped += frame.number - self.last_number - 1
@@ -64,18 +66,23 @@ class Recorder:
         t = self._frame_time(frame.number)
         self._pending[MARKERS].add(np.array([t], np.int64), frame.markers.reshape(1, -1))
         self.counts.frames += 1
-        times = None
-        if frame.force is not None:
-            if self.first_sample is None:
-                self.first_sample = frame.first_sample
-            n = len(frame.force)
-            numbers = frame.first_sample - self.first_sample + np.arange(n)
-            times = np.round(numbers * (1e9 / self.layout.device.rate_hz)).astype(np.int64)
-            self._pending[FORCE].add(times, frame.force)
-            self.counts.samples += n
+        times = None if frame.force is None else self._samples(frame, frame.force)
         if self._pending[MARKERS].samples >= FLUSH_S * self.layout.rate_hz:
             self.flush()
         return t, times, frame.force
+
+    def _samples(self, frame: Frame, force: np.ndarray) -> np.ndarray:
+        """Record a frame's force samples (n, C); their times (ns)."""
+        if frame.first_sample is None:
+            raise ValueError(f"frame {frame.number}: force samples without their number")
+        if self.first_sample is None:
+            self.first_sample = frame.first_sample
+        n = len(force)
+        numbers = frame.first_sample - self.first_sample + np.arange(n)
+        times = np.round(numbers * (1e9 / self.layout.device.rate_hz)).astype(np.int64)
+        self._pending[FORCE].add(times, force)
+        self.counts.samples += n
+        return times
 
     def flush(self) -> None:
         """Write what is pending to the journal (each stream as one block)."""
@@ -91,6 +98,9 @@ class Recorder:
         return 0 if self.last_number is None else self._frame_time(self.last_number)
 
     def _frame_time(self, number: int) -> int:
+        """Frame ``number``'s time (ns) since the first frame."""
+        if self.first_number is None:
+            raise ValueError("no frame recorded yet: no clock")
         return int(round((number - self.first_number) * (1e9 / self.layout.rate_hz)))
 
     def _check(self, frame: Frame) -> None:

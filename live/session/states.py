@@ -42,7 +42,7 @@ from live.session.presses import PressDone
 from sync.force_conditioning import retared
 from sync.holes import hole_line, leave_out_touched, session_holes, touch_reach
 from sync.presses import Press as Loaded
-from sync.presses import assign_locations, cut_span, segment_presses
+from sync.presses import PressRule, assign_locations, cut_span, segment_presses
 from sync.resample import antialiased_interpolant
 from sync.surface import RestSurface
 from sync.sync import frame_force, session_points
@@ -379,7 +379,7 @@ def press_record(stretch: tuple[np.ndarray, ...], done: PressDone, on: OnlineSta
     force_at = antialiased_interpolant(cf.time_s, cf.wrench, rate, p.passband, cf.stretches)
     on_frames = frame_force(force_at, cf, raw, holes, t_m, p)
     magnitude = on_frames.magnitude
-    presses, _ = segment_presses(magnitude, rate, p.detect_n, cf.contact)
+    presses, _ = segment_presses(magnitude, rate, PressRule(p.detect_n, cf.contact))
     peak_s = done.peak_ns * 1e-9
     hit = [k for k, pr in enumerate(presses) if t_m[pr.onset] <= peak_s <= t_m[pr.release - 1]]
     if not hit:

@@ -57,7 +57,19 @@ class Link:
 
     async def start(self) -> None:
         """Ask for the frames of the session's markers and force device."""
-        await self.connection.start(self.layout.device)
+        await self.standing().start(self._opened().device)
+
+    def standing(self) -> Connection:
+        """The connection that stands now."""
+        if self.connection is None:
+            raise RuntimeError("no connection stands: open the link first")
+        return self.connection
+
+    def _opened(self) -> LiveLayout:
+        """The session's streams, known once the link opened."""
+        if self.layout is None:
+            raise RuntimeError("the session's layout is unknown: open the link first")
+        return self.layout
 
     async def reconnect(self) -> bool:
         """After a lost connection: connect again within ``--reconnect`` seconds to a server
@@ -75,7 +87,7 @@ class Link:
                 await self.close()
                 await asyncio.sleep(RETRY_S)
                 continue
-            again, before = self._layout(xml), self.layout
+            again, before = self._layout(xml), self._opened()
             if (again.labels, again.rate_hz, again.device) != \
                     (before.labels, before.rate_hz, before.device):
                 raise BadInput(again.source, "reconnected, but QTM now streams another "
@@ -144,7 +156,7 @@ class Streaming:
         with stopping_on_signals(self.stop):
             while True:
                 left = None if d is None else d - (time.perf_counter() - start)
-                ending = await self.link.connection.run(self.on_frame, left)
+                ending = await self.link.standing().run(self.on_frame, left)
                 if ending.damage is not None:
                     n = self.recorder.last_number
                     where = "before its first frame" if n is None else f"after frame {n}"
@@ -206,6 +218,6 @@ class Streaming:
         self._refusal = self._refusal or refusal
         self.link.stop("a frame refused")
 
-    def _note(self, text: str, level: str = rr.TextLogLevel.INFO) -> None:
+    def _note(self, text: str, level: rr.TextLogLevel = rr.TextLogLevel.INFO) -> None:
         if self.view is not None:
             self.view.note(self.recorder.last_time_ns, text, level)

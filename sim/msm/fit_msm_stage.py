@@ -72,7 +72,8 @@ def _document(result: FitResult, found: MapResult | None, params: MSMParams,
     """The ``phantom.msm_params`` document: the fit, the map where one was fitted (also as
     ``msm_params.stiffness_map``), the full MSM parameters, provenance."""
     fitted = replace(params, k_between=result.k_between, k_fixed=result.k_fixed,
-                     stiffness_map=None if found is None else found.factors)
+                     stiffness_map=None if found is None else
+                     tuple(tuple(row) for row in found.factors))
     return {
         "schema": MSM_PARAMS.name, "schema_version": MSM_PARAMS.version,
         **asdict(result), "map": None if found is None else asdict(found),

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -92,6 +93,20 @@ class MSMParams:
                 raise MSMError(e.what) from None
 
     @property
+    def grid_rows(self) -> int:
+        """``n_y`` as stored: the masses along y, the grid's rows (resolved, never None)."""
+        if self.n_y is None:
+            raise MSMError("n_y is unresolved")
+        return self.n_y
+
+    @property
+    def width(self) -> float:
+        """``size_y`` as stored: the surface's width along y (m; resolved, never None)."""
+        if self.size_y is None:
+            raise MSMError("size_y is unresolved")
+        return self.size_y
+
+    @property
     def spacing_x(self) -> float:
         """Rest length of the row springs, the masses' spacing along x (m)."""
         return self.size / (self.n - 1)
@@ -99,14 +114,15 @@ class MSMParams:
     @property
     def spacing_y(self) -> float:
         """Rest length of the column springs, the masses' spacing along y (m)."""
-        return self.size_y / (self.n_y - 1)
+        return self.width / (self.grid_rows - 1)
 
     @property
     def footprint(self) -> tuple[float, float]:
         """(L, W): the surface's extent along x and y (m); it covers [0, L] x [0, W]."""
-        return float(self.size), float(self.size_y)
+        return float(self.size), float(self.width)
 
-    def as_dict(self) -> dict[str, float | int]:
+    def as_dict(self) -> dict[str, Any]:
+        """The fields by name (the stiffness map as rows of factors)."""
         return asdict(self)
 
 
@@ -115,7 +131,7 @@ class MSM:
 
     def __init__(self, params: MSMParams | None = None) -> None:
         self.params = params or MSMParams()
-        rows, cols = int(self.params.n_y), int(self.params.n)
+        rows, cols = int(self.params.grid_rows), int(self.params.n)
         hx, hy = self.params.spacing_x, self.params.spacing_y
         self.rows, self.cols, self.N = rows, cols, rows * cols
         ii, jj = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
@@ -272,12 +288,12 @@ class MSM:
             k_fixed = k_fixed.T
         N, bw = self.N, self.band_width
         ab = np.zeros((bw + 1, 3 * N))
-        diag = np.zeros((r, c, 3, 3))
+        diag: np.ndarray = np.zeros((r, c, 3, 3))
         diag[..., [0, 1, 2], [0, 1, 2]] = k_fixed[..., None]
         for (di, dj), k in blocks.items():
             diag[: r - di, : c - dj] += k
             diag[di:, dj:] += k
-            by_target = np.zeros((r, c, 3, 3))
+            by_target: np.ndarray = np.zeros((r, c, 3, 3))
             by_target[di:, dj:] = k
             by_target = by_target.reshape(N, 3, 3)
             off = di * c + dj

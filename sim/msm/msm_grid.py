@@ -53,7 +53,7 @@ def grid_params(footprint: tuple[float, float], spacing: float | None = None,
 
 def describe(params: MSMParams) -> str:
     """``150 x 80 mm of 48 x 26 masses`` for messages."""
-    return (f"{params.size * 1e3:g} x {params.size_y * 1e3:g} mm of {params.n} x {params.n_y} "
+    return (f"{params.size * 1e3:g} x {params.width * 1e3:g} mm of {params.n} x {params.n_y} "
             "masses")
 
 

@@ -17,7 +17,8 @@ Gauss-Newton on ``theta`` with the exact derivatives of the equilibria
 
 **The weight is chosen by held-out presses**, at every step: the presses are cut into
 :data:`VALIDATION_GROUPS` groups, each holding out at most one press of a place in turn (a
-place pressed once is held out whole); for each weight of :data:`WEIGHTS` and each group,
+place pressed once is held out whole; a place is the states file's location id, one rule for
+every reader, :mod:`data_schema.places`); for each weight of :data:`WEIGHTS` and each group,
 the step is taken on the other groups' presses alone and scored on the group's (through the
 fit's linearisation at the current map), and the weight whose held-out error is lowest is the
 step's. The last step's table is reported.
@@ -28,9 +29,13 @@ I`` and ``g_p`` press p's gradient ``J_p^T r_p`` (the points of one press err al
 counting them as independent would claim far more certainty than the presses give).
 
 **Regions the presses cannot tell.** A region is informed by the presses whose tip rests
-within :data:`REACH_M` of it; one with none is held at the uniform fit (factor 1, no
+within :data:`REGION_REACH_M` of it; one with none is held at the uniform fit (factor 1, no
 uncertainty), and where fewer than two regions are informed the whole map is uniform. Either
-is said in one line (:attr:`MapResult.note`).
+is said in one line (:attr:`MapResult.note`). The reach is how near a press must be for the
+depth its tip sinks to tell the region's springs (the masses sharing its load and their
+neighbours, a few millimetres on the paper's grid); it is not eval's
+:data:`train.evaluation.lump.LUMP_REACH_M` (10 mm), which says which presses dent the surface
+over a lump, as L_d measures the whole surface: a wider question.
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from data_schema.places import place_ids
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_fit import at_points, distances, grid_states
 from sim.msm.msm_measured import MeasuredSequence
@@ -48,8 +54,7 @@ from sim.msm.msm_regions import finest_grid, region_bounds, region_centres
 from sim.msm.msm_sensitivity import mass_regions, state_derivatives
 from sim.msm.workers import worker_pool
 
-REACH_M = 0.005            # m: a press this close to a region (or inside it) informs it
-PLACE_M = 0.005            # m: presses whose tips rest this close are one place
+REGION_REACH_M = 0.005     # m: a press whose tip rests this close to a region informs it
 WEIGHTS = (0.0, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0)   # shrinkage tried
 VALIDATION_GROUPS = 3      # presses held out in turn to choose the weight
 MAX_STEPS = 8              # Gauss-Newton steps
@@ -84,35 +89,31 @@ def tip_xy(seq: MeasuredSequence) -> np.ndarray:
 
 def informing(sequences: list[MeasuredSequence], footprint: tuple[float, float],
               shape: tuple[int, int]) -> list[list[list[int]]]:
-    """Per region, the sequence ids whose tip rests within :data:`REACH_M` of it."""
+    """Per region, the sequence ids whose tip rests within :data:`REGION_REACH_M` of it."""
     out = []
     for i in range(shape[0]):
         row = []
         for j in range(shape[1]):
             x0, x1, y0, y1 = region_bounds(footprint, shape, i, j)
             row.append([s.sequence for s in sequences
-                        if x0 - REACH_M <= tip_xy(s)[0] <= x1 + REACH_M
-                        and y0 - REACH_M <= tip_xy(s)[1] <= y1 + REACH_M])
+                        if x0 - REGION_REACH_M <= tip_xy(s)[0] <= x1 + REGION_REACH_M
+                        and y0 - REGION_REACH_M <= tip_xy(s)[1] <= y1 + REGION_REACH_M])
         out.append(row)
     return out
 
 
-def place_ids(sequences: list[MeasuredSequence]) -> np.ndarray:
-    """Each sequence's press place (K,): a tip resting within :data:`PLACE_M` of an earlier
-    place's first tip joins it."""
-    firsts: list[np.ndarray] = []
-    ids = np.empty(len(sequences), dtype=int)
-    for k, s in enumerate(sequences):
-        near = [i for i, p in enumerate(firsts) if np.linalg.norm(tip_xy(s) - p) <= PLACE_M]
-        if not near:
-            firsts.append(tip_xy(s))
-        ids[k] = near[0] if near else len(firsts) - 1
-    return ids
+def press_places(sequences: list[MeasuredSequence]) -> np.ndarray:
+    """Each sequence's press place (K,), numbered in the order first met: its location id in
+    the states file (:func:`data_schema.places.place_ids`; each press its own place where the
+    sequences carry none)."""
+    locations = [s.location for s in sequences]
+    known = None if None in locations else np.asarray(locations)
+    return place_ids(known, len(sequences))
 
 
 def place_centres(sequences: list[MeasuredSequence]) -> np.ndarray:
     """The distinct press places (K, 2), m: the mean tip of each place's presses."""
-    ids = place_ids(sequences)
+    ids = press_places(sequences)
     tips = np.array([tip_xy(s) for s in sequences]).reshape(-1, 2)
     return np.array([tips[ids == i].mean(axis=0) for i in range(ids.max(initial=-1) + 1)]
                     ).reshape(-1, 2)
@@ -133,7 +134,7 @@ def fit_map(sequences: list[MeasuredSequence], params: MSMParams,
     if len(free) < 2:
         note = (f"the presses cannot tell regions apart: {places} distinct place(s), "
                 f"{len(free)} of {shape[0]}x{shape[1]} region(s) with a press within "
-                f"{REACH_M * 1e3:g} mm; the map is uniform")
+                f"{REGION_REACH_M * 1e3:g} mm; the map is uniform")
         ones = [[1.0] * shape[1] for _ in range(shape[0])]
         return MapResult(shape, ones, [[None] * shape[1] for _ in range(shape[0])], informed,
                          places, 0.0, [], uniform, uniform, 0, note)
@@ -151,7 +152,8 @@ def with_map(params: MSMParams, shape: tuple[int, int], free: np.ndarray, theta:
     """``params`` with the factors ``exp(theta)`` on the ``free`` regions, 1 elsewhere."""
     table = np.ones(shape[0] * shape[1])
     table[free] = np.exp(theta)
-    return replace(params, stiffness_map=table.reshape(shape).tolist())
+    return replace(params, stiffness_map=tuple(tuple(row) for row in
+                                               table.reshape(shape).tolist()))
 
 
 def _search(sequences: list[MeasuredSequence], params: MSMParams, shape: tuple[int, int],
@@ -162,7 +164,7 @@ def _search(sequences: list[MeasuredSequence], params: MSMParams, shape: tuple[i
     theta = np.zeros(len(free))
     ev = _evaluate(params, shape, free, theta, sequences, pool)
     scale = float(ev.r @ ev.r)
-    steps, weight, table = 0, 0.0, []
+    steps, weight, table = 0, 0.0, list[dict]()
     while steps < MAX_STEPS:
         steps += 1
         weight, table = _choose_weight(ev, theta, groups, scale)
@@ -228,7 +230,7 @@ def _groups(sequences: list[MeasuredSequence], seed: int) -> list[np.ndarray]:
     """The presses (indices) of each held-out group: the presses of each place in a seeded
     order, the k-th of every place in group k mod :data:`VALIDATION_GROUPS`, so a group
     holds out presses at places the others still press (where a place has more than one)."""
-    ids = place_ids(sequences)
+    ids = press_places(sequences)
     seen = np.zeros(ids.max(initial=-1) + 1, dtype=int)
     group = np.empty(len(sequences), dtype=int)
     for k in np.random.default_rng(seed).permutation(len(sequences)):
@@ -306,7 +308,7 @@ def _result(ev: _Evaluation, theta: np.ndarray, weight: float, scale: float, tab
         sd[region] = float(factors[region] * math.sqrt(max(cov[k, k], 0.0)))
     held = [f"r{k // shape[1]}c{k % shape[1]}" for k in range(len(factors)) if k not in free]
     notes = [f"region(s) {', '.join(held)} of {shape[0]}x{shape[1]} have no press within "
-             f"{REACH_M * 1e3:g} mm: held at the uniform fit (factor 1)"] if held else []
+             f"{REGION_REACH_M * 1e3:g} mm: held at the uniform fit (factor 1)"] if held else []
     if weight == WEIGHTS[-1]:
         notes.append(f"the held-out presses chose the strongest shrinkage tried ({weight:g}): "
                      "they are predicted no better by a map than by a flatter one")

@@ -20,7 +20,7 @@ spacing unless told otherwise; the paper's 100 mm square where the file has no f
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -50,6 +50,7 @@ class MeasuredSequence:
     rest: np.ndarray         # (P, 3) measured rest positions (NaN: missing)
     forces: np.ndarray       # (T, 3) load of each loaded state, in order
     points: np.ndarray       # (T, P, 3) measured positions of each loaded state
+    location: int | None = None   # its place: the file's location id (data_schema.places)
 
 
 
@@ -75,6 +76,7 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
         force = f["states/force"][()].astype(float)
         fvec = f["states/force_vector"][()].astype(float) if "states/force_vector" in f else None
         tip = f["states/tip"][()].astype(float)
+        location = f["states/location"][()]
         ids = _chosen(np.unique(seq), only, max_sequences, seed, path)
         rows = {int(s): np.flatnonzero(seq == s) for s in ids}
         wanted = np.sort(np.concatenate(list(rows.values())))
@@ -96,8 +98,9 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
             warn(f"{path}: sequence {s} has no rest state (step 0): left out of the fit")
         elif len(r) >= 2:
             loads = fvec[r[1:]] if fvec is not None else _loads_along_tip(force[r[1:]], tip[r])
-            sequences.append(_measured(path, model, s, tip[r[0]],
-                                       [points[int(i)] for i in r], loads, contact_radius))
+            sequences.append(replace(_measured(path, model, s, tip[r[0]],
+                                               [points[int(i)] for i in r], loads,
+                                               contact_radius), location=int(location[r[0]])))
     if not sequences:
         raise BadInput(path, "no sequence with a rest state and a loaded state to fit")
     return sequences, model.params

@@ -23,18 +23,22 @@ same bytes.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields, replace
+from types import MappingProxyType
+from typing import ClassVar
 
 import numpy as np
 
+from core.bounds import Bound, check_bounds
 from core.errors import BadInput
-from core.protocol import STEP_N
+from core.protocol import FOOTPRINT_SIDE, STEP_N
 from sim.msm import paper
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_depth import normal_depths
+from sim.msm.msm_fit import K_MAX, K_MIN
 from sim.msm.msm_grid import PAPER_SPACING_M, grid_params
-from sim.msm.msm_protocol import Plan, Protocol
+from sim.msm.msm_protocol import CONTACT_RADIUS, MAX_ANGLE, Plan, Protocol
 
 ATTEMPTS = 200          # draws of one block before the prior is called impossible
 PRIOR_LOCATIONS = 4     # places pressed per phantom, by default: its dent seen at a few places
@@ -72,15 +76,27 @@ class Prior:
     depth_m: tuple[float, float] = (0.010, 0.040)
     masses: int = paper.GRID_N                          # most masses along a side
 
-    def check(self) -> None:
-        """Refuse ranges that are empty or meaningless, naming the field."""
-        for name in ("k_between", "k_fixed", "contact_radius", "side", "markers", "pitch",
-                     "missing", "max_angle_deg", "depth_m"):
-            lo, hi = getattr(self, name)
-            if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
-                raise BadInput(None, f"prior {name} ({lo:g}, {hi:g}): not a range")
-        if self.k_between[0] <= 0 or self.k_fixed[0] <= 0 or self.markers[0] < 4:
-            raise BadInput(None, "prior springs must be positive and markers at least 4")
+    # each end of a range, and each single value, within what it can mean
+    SPRINGS: ClassVar[Bound] = Bound(K_MIN, K_MAX, unit="N/m", why="the range fit-msm searches")
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
+        "k_between": SPRINGS, "k_fixed": SPRINGS, "contact_radius": CONTACT_RADIUS,
+        "side": FOOTPRINT_SIDE,
+        "markers": Bound(4, whole=True, why="the fewest a session names"),
+        "pitch": Bound(0, min_open=True, unit="m"), "scattered": Bound(0, 1),
+        "edge": Bound(0, unit="m"), "missing": Bound(0, 1, max_open=True),
+        "max_angle_deg": MAX_ANGLE, "depth_m": Bound(0, unit="m"),
+        "masses": Bound(2, whole=True),
+    })
+
+    def __post_init__(self) -> None:
+        """Refuse, in one line naming the field, a value out of its bound or a range whose
+        ends are the wrong way round."""
+        check_bounds(self, self.BOUNDS)
+        for f in fields(self):
+            span = getattr(self, f.name)
+            if isinstance(span, tuple) and span[0] > span[1]:
+                raise BadInput(None, f"{f.name} ({span[0]:g}, {span[1]:g}): not a range "
+                                     "(low, high)")
 
 
 PRIOR = Prior()

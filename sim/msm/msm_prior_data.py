@@ -13,11 +13,14 @@ joins to the bytes of a whole run.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import ClassVar
 
 import numpy as np
 
-from core.errors import BadInput
+from core.bounds import Bound
 from core.progress import progress
 from core.protocol import STEP_N
 from sim.msm.msm_dataset import MSMData, simulate_data
@@ -42,12 +45,17 @@ class PriorRun:
     directions: int
     seed: int
 
-    def check(self) -> None:
-        """Refuse a run that cannot be simulated (one line naming the setting)."""
-        self.prior.check()
-        for name in ("blocks", "locations", "directions"):
-            if getattr(self, name) < 1:
-                raise BadInput(None, f"--{name} must be at least 1, got {getattr(self, name)}")
+    # the option of ``pipeline simulate`` that sets each count (its ranges are the prior's own)
+    OPTIONS: ClassVar[Mapping[str, str]] = MappingProxyType(
+        {"blocks": "--prior", "locations": "--locations", "directions": "--directions"})
+    BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType(
+        {name: Bound(1, whole=True) for name in OPTIONS})
+
+    def __post_init__(self) -> None:
+        """Refuse a run that cannot be simulated, in one line naming the option that sets
+        the count (a library caller is refused as the command line would be)."""
+        for name, bound in self.BOUNDS.items():
+            bound.check(self.OPTIONS[name], getattr(self, name))
 
     def as_json(self) -> dict:
         """The run as JSON values: what a states file records and its shards must share."""
@@ -59,7 +67,6 @@ def simulate_prior(run: PriorRun, *, tol: float = DEFAULT_TOL, workers: int = 1,
                    shard: tuple[int, int] | None = None) -> MSMData:
     """The blocks of ``run`` (or one shard of them): the states file's arrays and root
     attributes (but the provenance)."""
-    run.check()
     check_tol(tol)
     blocks = shard_locations(run.blocks, shard)
     jobs = [(run, int(b), tol) for b in blocks]
@@ -91,7 +98,7 @@ def _simulate_block(args: tuple[PriorRun, int, float]) -> tuple[dict[str, np.nda
     occlusion = np.random.default_rng([run.seed, block, 1])
     data = simulate_data(phantom.protocol, phantom.params, tol=tol, layout=phantom.layout)
     arrays = padded(data.arrays, phantom, block, run.prior.markers[1], occlusion)
-    arrays.update({f"phantoms/{k}": v[None] for k, v in phantom_row(phantom).items()})
+    arrays.update({f"phantoms/{k}": np.asarray(v)[None] for k, v in phantom_row(phantom).items()})
     return arrays, data.sim.max_residual, data.sim.stored_residual
 
 
@@ -115,8 +122,9 @@ def padded(a: dict[str, np.ndarray], phantom: PriorPhantom, block: int, width: i
             "states/phantom": np.full(states, block, np.int32)}
 
 
-def phantom_row(phantom: PriorPhantom) -> dict[str, np.ndarray]:
-    """A block's phantom as its row of the ``phantoms/*`` datasets."""
+def phantom_row(phantom: PriorPhantom) -> dict[str, np.generic | np.ndarray]:
+    """A block's phantom as its row of the ``phantoms/*`` datasets (numbers, and the
+    footprint's two sides)."""
     p, q = phantom.params, phantom.protocol
     return {"k_between": np.float64(p.k_between), "k_fixed": np.float64(p.k_fixed),
             "contact_radius": np.float64(q.contact_radius),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Any
 
 import numpy as np
 
@@ -38,10 +39,11 @@ def parse_regions(text: str, option: str = "--regions") -> tuple[int, int]:
     return int(m[1]), int(m[2])
 
 
-def check_map(factors: object, what: str = "stiffness_map") -> tuple[tuple[float, ...], ...]:
-    """A map as rows of finite positive factors, all rows as long (else one line)."""
+def check_map(factors: Any, what: str = "stiffness_map") -> tuple[tuple[float, ...], ...]:
+    """A map as rows of finite positive factors, all rows as long (else one line); ``factors``
+    may be anything (what a file or a caller gave)."""
     try:
-        rows = tuple(tuple(float(v) for v in row) for row in factors)   # type: ignore[union-attr]
+        rows = tuple(tuple(float(v) for v in row) for row in factors)
     except (TypeError, ValueError):
         raise BadInput(None, f"{what}: must be rows of numbers, got {factors!r}") from None
     if not rows or not rows[0] or len({len(r) for r in rows}) != 1:

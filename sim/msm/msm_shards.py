@@ -63,6 +63,8 @@ def merge_shards(paths: Sequence[str | Path]) -> Merged:
         if i in shards:
             raise BadInput(path, f"shard {i}/{n} given twice (also {shards[i]})")
         shards[i] = path
+    if first is None or count is None:   # no shard read: paths is not empty
+        raise BadInput(None, "--merge needs the shard files")
     missing = sorted(set(range(count)) - set(shards))
     if missing:
         raise BadInput(None, f"shards {missing} of {count} are missing")
@@ -78,13 +80,13 @@ def merge_shards(paths: Sequence[str | Path]) -> Merged:
         else:
             chunks = [p[name] for p in parts]
         arrays[name] = np.concatenate(chunks).astype(parts[0][name].dtype)
-    attrs = {k: v for k, v in _root_attrs(shards[0]).items()
-             if k not in ("shard", "provenance", "schema", "schema_version")}
+    root = {k: v for k, v in _root_attrs(shards[0]).items()
+            if k not in ("shard", "provenance", "schema", "schema_version")}
     for key in RESIDUAL_ATTRS:
-        values = [_root_attrs(shards[i]).get(key) for i in range(count)]
-        if all(v is not None for v in values):
-            attrs[key] = float(max(values))
-    return Merged(arrays, attrs, [shards[i] for i in range(count)], json.loads(first["protocol"]))
+        values = [v for i in range(count) if (v := _root_attrs(shards[i]).get(key)) is not None]
+        if len(values) == count:
+            root[key] = float(max(values))
+    return Merged(arrays, root, [shards[i] for i in range(count)], json.loads(first["protocol"]))
 
 
 def _dataset_names(f: h5py.File) -> list[str]:

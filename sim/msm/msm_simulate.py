@@ -71,9 +71,10 @@ def _simulate_location(args: tuple) -> tuple[np.ndarray, np.ndarray, float, floa
             time.process_time() - cpu)
 
 
-def simulate_plan(plan: Plan, params: MSMParams, locations: Sequence[int] | None = None,
-             tol: float = DEFAULT_TOL, workers: int = 1, layout: np.ndarray | None = None
-             ) -> Simulated:
+def simulate_plan(plan: Plan, params: MSMParams,
+                  locations: Sequence[int] | np.ndarray | None = None,
+                  tol: float = DEFAULT_TOL, workers: int = 1, layout: np.ndarray | None = None
+                  ) -> Simulated:
     """Simulate ``locations`` (default: all) of ``plan`` with the fast static path.
 
     With ``layout`` (P, 3) the states hold the MSM sampled at those rest positions (a lab's
@@ -85,7 +86,7 @@ def simulate_plan(plan: Plan, params: MSMParams, locations: Sequence[int] | None
     jobs = [(params, plan.nodes[loc], plan.directions[loc], p.steps, p.fmax, tol,
              p.contact_radius, layout) for loc in locs]
     per_loc = p.directions * (p.steps + 1)
-    n_out = params.n * params.n_y if layout is None else len(layout) + 1
+    n_out = params.n * params.grid_rows if layout is None else len(layout) + 1
     points = np.empty((len(locs) * per_loc, n_out, 3), dtype=np.float32)
     tips = np.empty((len(locs) * per_loc, 3), dtype=np.float32)
     worst = stored = cpu = 0.0

@@ -174,12 +174,15 @@ class StaticSolver:
 
     def _band_solve(self, q: np.ndarray) -> np.ndarray:
         """``K^-1 q`` by the banded Cholesky factor (its unknowns in the model's band order)."""
-        solve = lapack.spbtrs if self._chol.dtype == np.float32 else lapack.dpbtrs
+        chol = self._chol
+        if chol is None:
+            raise MSMError("no factor to solve with: factor the tangent first")
+        solve = lapack.spbtrs if chol.dtype == np.float32 else lapack.dpbtrs
         order = self.model.band_order
         if order is None:
-            return solve(self._chol, q.astype(self._chol.dtype), lower=0)[0].astype(np.float64)
+            return solve(chol, q.astype(chol.dtype), lower=0)[0].astype(np.float64)
         r = np.empty_like(q)
-        r[order] = solve(self._chol, q[order].astype(self._chol.dtype), lower=0)[0]
+        r[order] = solve(chol, q[order].astype(chol.dtype), lower=0)[0]
         return r
 
     def _line_search(self, x: np.ndarray, energy: float, slope: float, p: np.ndarray,

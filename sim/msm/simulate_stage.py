@@ -86,7 +86,7 @@ def run_simulate(inputs: SimulateInputs | None, out: str | Path,
     if params_file is not None:
         msm, protocol, fitted = _fitted(params_file, msm, protocol)
     msm = _sized(msm, p.size, p.spacing, lab, layout, params_file if fitted else None)
-    if lab is not None:
+    if lab is not None and layout is not None:      # a lab is read from its layout file
         check_inside(lab.points, msm, layout, lab.names)
     used = replace(p, k_between=msm.k_between, k_fixed=msm.k_fixed,
                    contact_radius=protocol.contact_radius, locations=protocol.locations,
@@ -156,17 +156,18 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                rrd: str | Path | None) -> Simulation:
     """``simulate --solid S --layout STATES``: the fitted solid (:mod:`sim.solid`) pressed
     by the protocol at the lab's markers, or one shard of it."""
-    if inputs.layout is None or inputs.params_file is not None:
-        raise BadInput(inputs.solid, "--solid simulates at a lab's markers: give --layout "
-                                     "STATES, and no --params (the MSM's)")
-    solid = read_solid(inputs.solid)
-    lab = read_layout(inputs.layout, curved=solid.model.block.shape is not None)
+    solid_file, layout = inputs.solid, inputs.layout
+    if solid_file is None or layout is None or inputs.params_file is not None:
+        raise BadInput(solid_file, "--solid simulates at a lab's markers: give --layout "
+                                   "STATES, and no --params (the MSM's)")
+    solid = read_solid(solid_file)
+    lab = read_layout(layout, curved=solid.model.block.shape is not None)
     protocol = p.protocol()
     candidates = candidate_places(solid.model, lab.points, solid.material.contact_radius)
     if protocol.locations > len(candidates):
-        raise BadInput(inputs.solid, f"--locations {protocol.locations}: the solid's top face has "
-                                     f"{len(candidates)} nodes inside the markers' bounding box "
-                                     "clear of them (fit it on a finer --spacing-mm for more)")
+        raise BadInput(solid_file, f"--locations {protocol.locations}: the solid's top face has "
+                                   f"{len(candidates)} nodes inside the markers' bounding box "
+                                   "clear of them (fit it on a finer --spacing-mm for more)")
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))
     locs = shard_locations(protocol.locations, parse_shard(p.shard) if p.shard else None)
     at = Attachments.riding(lab.points, solid.model.block.top(lab.points[:, :2]))
@@ -180,12 +181,13 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
         sim = Simulated(locs, states.points, states.tips, 0.0, 0.0, 0, 1, 0.0)
         arrays = {k: v for k, v in states_arrays(plan, sim).items() if k != "states/mass"}
         prov = make_provenance("simulate", asdict(used),
-                               inputs=[Path(inputs.solid), Path(inputs.layout)],
+                               inputs=[Path(solid_file), Path(layout)],
                                schema=STATES.name, schema_version=STATES.version)
         write_states(tmp_out, arrays, {"provenance": json.dumps(prov),
                                        **solid_attrs(plan, solid.material, lab, p.shard)})
         seconds = time.perf_counter() - started
-        _record(tmp_rrd, arrays, None, protocol.step_n, p.rrd_sequences, lab.footprint)
+        _record(tmp_rrd, arrays, None, protocol.step_n, p.rrd_sequences,
+                lab.footprint or FOOTPRINT_M)
     return Simulation(arrays, seconds, None, solid.model.block.thickness, 1)
 
 
@@ -291,10 +293,11 @@ def _stiffness_map(record: dict, path: str | Path) -> tuple | None:
 
 
 def _record(path: Path | None, arrays: dict[str, np.ndarray], params: MSMParams | None,
-            step_n: float, sequences: int, footprint: tuple[float, float] | None = None
+            step_n: float, sequences: int, footprint: tuple[float, float] = FOOTPRINT_M
             ) -> None:
     """The recording: the surface as triangles when the states are every mass of one MSM
-    (``params``; None: phantoms drawn from the prior, each on its ``footprint``'s largest)."""
+    (``params``; None: phantoms drawn from the prior, each on its ``footprint``'s largest,
+    or the solid's or merged shards' points on theirs)."""
     if path is None:
         return
     model = None if params is None else MSM(params)

@@ -60,14 +60,14 @@ def run_fit_solid(inputs: FitSolidInputs, out: str | Path | None,
     block = BlockGeometry(data.footprint, p.thickness, data.top_z, shape)
     if spec is not None:
         check_covers(spec.interior, spec.path, block.lower, block.upper)
-    ratios = spec.ratios if spec is not None else {0: 1.0}
+    ratios: dict[int, float | None] = spec.ratios if spec is not None else {0: 1.0}
     model = SolidModel(block, p.spacing, p.layers)
     shares = label_shares(model.elasticity, None if spec is None else spec.interior,
                           max(ratios) + 1)
     responses = Responses(model, shares)
     fitted_labels = [k for k, r in ratios.items() if r is None]
     start = SolidMaterial(modulus=p.modulus, stiffening=p.stiffening, poisson=p.poisson,
-                          ratios=tuple(1.0 if ratios.get(k) is None else ratios[k]
+                          ratios=tuple(1.0 if (r := ratios.get(k)) is None else r
                                        for k in range(max(ratios) + 1)),
                           contact_radius=p.contact_radius or PATCH_START * p.spacing,
                           reach=p.reach)

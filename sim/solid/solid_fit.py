@@ -18,10 +18,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from core.bounds import Bound
 from sim.solid.elasticity import POISSON
 from sim.solid.measured_presses import MeasuredSet
 from sim.solid.solid_model import (
@@ -143,11 +145,13 @@ class Coordinates:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(low, high): below the mesh's spacing the patch is one node whatever the radius
         (a flat objective), so the contact radius stays within :data:`PATCH_SPACINGS`."""
-        radius = (max(CONTACT_RADIUS.min, PATCH_SPACINGS[0] * self.spacing),
-                  max(CONTACT_RADIUS.max, PATCH_SPACINGS[1] * self.spacing))
+        radius_min, radius_max = _limits(CONTACT_RADIUS)
+        reach_min, reach_max = _limits(REACH)
+        radius = (max(radius_min, PATCH_SPACINGS[0] * self.spacing),
+                  max(radius_max, PATCH_SPACINGS[1] * self.spacing))
         pairs = [(-np.inf, np.inf), tuple(np.log(STIFFENING_FIT)), tuple(np.log(radius))] + \
-            ([(np.log(REACH.min), np.log(REACH.max))] if self.reach else []) + \
-            ([(POISSON.min, POISSON.max)] if self.poisson else []) + \
+            ([(np.log(reach_min), np.log(reach_max))] if self.reach else []) + \
+            ([_limits(POISSON)] if self.poisson else []) + \
             [tuple(np.log(RATIO_FIT))] * len(self.labels)
         return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
@@ -168,6 +172,13 @@ class Coordinates:
         return SolidMaterial(modulus=float(np.exp(x[0])), stiffening=float(np.exp(x[1])),
                              contact_radius=float(np.exp(x[2])), reach=reach, poisson=poisson,
                              ratios=tuple(ratios))
+
+
+def _limits(bound: Bound) -> tuple[float, float]:
+    """A bound's (min, max): both are stated for the settings fitted here."""
+    if bound.min is None or bound.max is None:
+        raise ValueError(f"{bound} lacks a limit")
+    return bound.min, bound.max
 
 
 def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int],
@@ -191,7 +202,7 @@ def fit_solid(data: MeasuredSet, responses: Responses, fit_labels: Sequence[int]
 
 
 def _least_squares(data: MeasuredSet, responses: Responses, coords: Coordinates,
-                   start: SolidMaterial) -> object:
+                   start: SolidMaterial) -> Any:
     """One bounded least squares over ``coords`` from ``start`` (scipy's OptimizeResult)."""
     def fun(x: np.ndarray) -> np.ndarray:
         m = coords.unpack(x)
@@ -202,7 +213,7 @@ def _least_squares(data: MeasuredSet, responses: Responses, coords: Coordinates,
                          x_scale=1.0, xtol=1e-8, ftol=1e-10, gtol=1e-10)
 
 
-def _uncertainty(sol: object, per_press: list[np.ndarray], names: list[str]
+def _uncertainty(sol: Any, per_press: list[np.ndarray], names: list[str]
                  ) -> dict[str, float]:
     """One sd per parameter: the press-clustered sandwich on the fitted coordinates, carried
     to the parameters (all but the Poisson ratio are fitted as logarithms)."""
@@ -236,10 +247,10 @@ def _scored(data: MeasuredSet, per_press: list[np.ndarray], material: SolidMater
     ok_m, ok_t = ok[:, :-1], ok[:, -1]
     s = np.concatenate(still)
     per_marker = np.array([markers[ok_m[:, j], j].mean() for j in range(markers.shape[1])])
-    per_press = np.array([di[ok_i].mean() for di, ok_i in zip(dist, valid, strict=True)])
+    press_mm = np.array([di[ok_i].mean() for di, ok_i in zip(dist, valid, strict=True)])
     return SolidFit(material=material, sd=sd, marker_mm=float(markers[ok_m].mean() * 1e3),
                     tip_mm=float(tips[ok_t].mean() * 1e3), all_mm=float(d[ok].mean() * 1e3),
                     still_mm=float(np.nanmean(np.where(ok_m, s, np.nan)) * 1e3),
-                    per_marker_mm=per_marker * 1e3, per_press_mm=per_press * 1e3,
+                    per_marker_mm=per_marker * 1e3, per_press_mm=press_mm * 1e3,
                     evaluations=evaluations,
                     factorisations=factorisations)

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from core.bounds import Bound, check_bounds
 from sim.twin.marker_layout import (
@@ -39,6 +39,7 @@ from sim.twin.twin_scene import (
     MAX_DRIFT_PPM,
     MAX_OFFSET_S,
     PIVOT_SECONDS,
+    PLACES,
     PRESS_SECONDS,
     RATE_HZ,
     TwinParams,
@@ -60,7 +61,7 @@ class SynthParams:
     bounds or the session could not be."""
 
     seed: int = T.seed
-    locations: int | str = T.locations              # N drawn at random, or a grid "RxC"
+    locations: int | str = PLACES                   # N drawn at random, or a grid "RxC"
     repeats: int = T.repeats
     press_seconds: float | None = T.press_seconds   # None: about 6 s a press
     pivot_seconds: float = T.pivot_seconds
@@ -118,7 +119,7 @@ class SynthParams:
         return (tuple(parse_inclusion(t) for t in self.inclusions),
                 None if self.layer is None else parse_layer(self.layer))
 
-    def session_fields(self) -> dict[str, object]:
+    def session_fields(self) -> dict[str, Any]:
         """The fields :class:`TwinParams` takes (all but the layout's, the regions' and the
         recording's), the places parsed."""
         return {"locations": parse_locations(self.locations), **{k: getattr(self, k) for k in (

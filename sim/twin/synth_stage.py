@@ -67,7 +67,7 @@ def phantom_spec(markers: str = SynthParams.markers,
     base = PhantomSpec()
     size_m = (*parse_size(size), base.size[2])
     top = None if shape is None else parse_shape(shape, size_m)
-    if top is not None and not shape.startswith(DOME):
+    if top is not None and shape is not None and not shape.startswith(DOME):
         height = float(np.ptp(top.shape.vertices[:, 2]))
         size_m = (*top.footprint, height)
     return replace(base, size=size_m, shape=top,
@@ -100,15 +100,16 @@ def write_twin(twin: Twin, folder: str | Path, params: SynthParams,
     earlier = (folder / FILES["truth"]).is_file()
     keys = file_keys(twin)
     finals = [folder / FILES[k] for k in keys]
-    cal = None if calibration_name(twin) is None else folder / calibration_name(twin)
+    cal_name = calibration_name(twin)
+    cal = None if cal_name is None else folder / cal_name
     if rrd is not None and Path(rrd).resolve() in {f.resolve() for f in finals}:
         raise BadInput(rrd, "--rrd names one of the session files synth writes")
     provenance = make_provenance("synth", asdict(params), [], TRUTH.name, TRUTH.version)
     with atomic_outputs(*finals, cal, rrd) as tmps:
-        out = dict(zip([*keys, "cal", "rrd"], tmps, strict=True))
+        out = {k: t for k, t in zip([*keys, "cal", "rrd"], tmps, strict=True) if t is not None}
         write_lab_files(twin, out)
         write_truth(out["truth"], twin, provenance)
-        if out["rrd"] is not None:
+        if "rrd" in out:
             write_twin_recording(twin, out["rrd"], params.view_press)
     if earlier:
         _remove_stale(folder, [*finals, cal, rrd])

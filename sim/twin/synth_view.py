@@ -45,10 +45,11 @@ from sim.twin.twin import Twin
 APP_ID = "phantom-synth"
 VIEW_HZ = 50.0
 TIMELINE = "mocap_time"
-COLORS = {"truth": (40, 180, 90), "truth_line": (40, 180, 90, 120),
-          "measured": (245, 140, 30), "tip": (220, 40, 40),
-          "shaft": (200, 200, 200), "states": (230, 60, 230), "places": (150, 150, 150),
-          "stiffer": (230, 60, 40, 90), "softer": (50, 110, 230, 90)}
+COLORS: dict[str, tuple[int, ...]] = {
+    "truth": (40, 180, 90), "truth_line": (40, 180, 90, 120),
+    "measured": (245, 140, 30), "tip": (220, 40, 40),
+    "shaft": (200, 200, 200), "states": (230, 60, 230), "places": (150, 150, 150),
+    "stiffer": (230, 60, 40, 90), "softer": (50, 110, 230, 90)}
 RADIUS_M = 0.0015        # the 3 mm marker spheres
 BOX_M = 0.0025           # half side of the cube drawn around a true marker
 OUTLINE_LIFT_M = 0.0005  # an inclusion's outline this far above the rest surface
@@ -162,7 +163,7 @@ def log_regions(rec: rr.RecordingStream, twin: Twin) -> None:
             fill_mode="majorwireframe", radii=[0.0004]), static=True)
 
 
-def _region_color(ratio: float) -> tuple[int, int, int, int]:
+def _region_color(ratio: float) -> tuple[int, ...]:
     return COLORS["stiffer"] if ratio >= 1.0 else COLORS["softer"]
 
 
@@ -171,7 +172,7 @@ def _ns(time_s: np.ndarray) -> np.ndarray:
 
 
 def _log_points(rec: rr.RecordingStream, path: str, xyz: np.ndarray, ns: np.ndarray,
-                color: tuple[int, int, int], radius: float = RADIUS_M) -> None:
+                color: tuple[int, ...], radius: float = RADIUS_M) -> None:
     """Points per frame (T, N, 3); NaN points are left out of their frame."""
     rec.log(path, rr.Points3D.from_fields(colors=[color], radii=[radius]), static=True)
     ok = np.isfinite(xyz).all(axis=2)

@@ -88,7 +88,7 @@ def calibration_name(twin: Twin) -> str | None:
 
 def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
     """Every lab file of the session (all but the truth) to the paths ``out`` names by
-    :data:`FILES` key, and the calibration to ``out["cal"]`` (None: no calibration)."""
+    :data:`FILES` key, and the calibration to ``out["cal"]`` (absent: no calibration)."""
     p, m = twin.params, twin.mocap
     stamp, mat_date = _stamp(p.seed)
     write_qtm_3d(out["trial"], _marker_names(twin), m.measured, p.rate_hz, stamp, m.events)
@@ -109,6 +109,8 @@ def write_lab_files(twin: Twin, out: dict[str, Path]) -> None:
         labels, affine, _ = interior_volume(twin.phantom.spec)
         write_interior(out["interior"], labels, affine)
     if out.get("shape") is not None:
+        if twin.phantom.spec.shape is None:
+            raise ValueError("a flat twin has no shape file to write")
         write_stl(out["shape"], twin.phantom.spec.shape.shape)
     write_session_toml(out["session"], *_session_tables(twin, calibration_name(twin)))
 

@@ -36,6 +36,7 @@ RATE_HZ = (10.0, 2000.0)            # Hz, the mocap frame rates a lab runs (--mo
 MAX_DRIFT_PPM = 1000.0              # |--drift|: beyond it is no clock
 MAX_OFFSET_S = 3600.0               # |--offset|: beyond an hour is not plausible
 PLACE_GAP_M = 0.015                 # places at least this far apart (sync tells them apart)
+PLACES = 5                          # --locations: places drawn at random by default
 MAX_GRID_PLACES = 25                # --locations RxC: at most this many places
 
 Lab = Callable[[np.ndarray], np.ndarray]    # phantom-frame points (..., 3) -> lab
@@ -46,7 +47,7 @@ class TwinParams:
     """Everything that shapes a synthetic session."""
 
     seed: int = 0
-    locations: int | tuple[int, int] = 5   # N places drawn at random, or (rows, cols) of a grid
+    locations: int | tuple[int, int] = PLACES   # N places drawn at random, or a grid (rows, cols)
     repeats: int = 4
     press_seconds: float | None = None   # mean duration of one press cycle (None: ~6 s)
     pivot_seconds: float = 20.0
@@ -128,10 +129,13 @@ def parse_locations(value: int | str) -> int | tuple[int, int]:
     else:
         grid = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
         number = re.fullmatch(r"\s*(\d+)\s*", value)
-        if not (grid or number):
+        if grid:
+            locations = (int(grid[1]), int(grid[2]))
+        elif number:
+            locations = int(number[1])
+        else:
             raise BadInput("--locations", f"{value!r}: must be a number N (places drawn at "
                                           "random) or a grid RxC (e.g. 3x3)")
-        locations = (int(grid[1]), int(grid[2])) if grid else int(number[1])
     if not _locations_ok(locations):
         raise BadInput("--locations", f"{value}: must be at least 1, or a grid RxC of at most "
                                       f"{MAX_GRID_PLACES} places")

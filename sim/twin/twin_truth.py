@@ -83,6 +83,8 @@ def shape_arrays(twin: Twin) -> dict[str, np.ndarray]:
     for k, press in enumerate(presses):
         at = m.press == k
         depth[at] = (twin.contacts[press.location] - m.points[at, -1]) @ normals[k]
+    if ph.spec.shape is None:
+        raise ValueError("shape_arrays: a flat twin has no shape")
     to_shape = ph.spec.shape.to_shape()
     return {"phantom/shape_to_lab": twin.to_lab @ np.linalg.inv(to_shape),
             "phantom/rest_surface": twin.lab(ph.rest[ph.grid[:, :, -1]]),

@@ -8,9 +8,11 @@ from scipy.spatial.transform import Rotation
 
 from calib.rigid import cluster_reference, fit_rigid
 from core.errors import BadInput
+from sync.sync_params import SyncParams
 
 # An asymmetric 4-marker cluster (metres), like an indenter's marker tree.
 CLUSTER = np.array([[0.0, 0.0, 0.0], [0.045, 0.0, 0.0], [0.0, 0.030, 0.0], [0.012, 0.015, 0.038]])
+MAX_RMS = SyncParams().max_fit_rms_m      # sync's tolerance of a cluster fit
 
 
 def _poses(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -25,7 +27,7 @@ def _observe(rot: np.ndarray, trans: np.ndarray, ref: np.ndarray = CLUSTER) -> n
 
 def test_recovers_known_poses_exactly() -> None:
     rot, trans = _poses(50, seed=1)
-    fit = fit_rigid(CLUSTER, _observe(rot, trans))
+    fit = fit_rigid(CLUSTER, _observe(rot, trans), MAX_RMS)
     np.testing.assert_allclose(fit.rotation, rot, atol=1e-12)
     np.testing.assert_allclose(fit.translation, trans, atol=1e-12)
     assert np.all(fit.rms < 1e-12) and not fit.poor.any()
@@ -37,7 +39,7 @@ def test_three_of_four_markers_suffice() -> None:
     obs = _observe(rot, trans)
     hidden = np.arange(40) % 4
     obs[np.arange(40), hidden] = np.nan
-    fit = fit_rigid(CLUSTER, obs)
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS)
     assert (fit.n_markers == 3).all()
     np.testing.assert_allclose(fit.rotation, rot, atol=1e-12)
     tip = np.array([0.01, 0.02, -0.08])
@@ -48,7 +50,7 @@ def test_matches_scipy_align_vectors_on_noisy_markers() -> None:
     rng = np.random.default_rng(3)
     rot, trans = _poses(30, seed=3)
     obs = _observe(rot, trans) + rng.normal(0, 0.3e-3, size=(30, 4, 3))
-    fit = fit_rigid(CLUSTER, obs)
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS)
     for k in range(30):
         ref_c = CLUSTER - CLUSTER.mean(axis=0)
         obs_c = obs[k] - obs[k].mean(axis=0)
@@ -63,9 +65,9 @@ def test_collinear_markers_are_flagged() -> None:
     rot, trans = _poses(5, seed=4)
     obs = _observe(rot, trans, line)
     obs[:, 3] = np.nan                      # the three markers left are nearly on a line
-    fit = fit_rigid(line, obs)
+    fit = fit_rigid(line, obs, MAX_RMS)
     assert fit.ill_conditioned.all() and fit.poor.all()
-    full = fit_rigid(line, _observe(rot, trans, line))
+    full = fit_rigid(line, _observe(rot, trans, line), MAX_RMS)
     assert not full.ill_conditioned.any()
 
 
@@ -73,7 +75,7 @@ def test_too_few_markers_give_no_pose() -> None:
     rot, trans = _poses(3, seed=5)
     obs = _observe(rot, trans)
     obs[:, :2] = np.nan
-    fit = fit_rigid(CLUSTER, obs)
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS)
     assert not fit.valid.any()
     assert np.isnan(fit.rotation).all() and np.isnan(fit.apply(np.zeros(3))).all()
 
@@ -82,7 +84,7 @@ def test_large_residual_is_poor() -> None:
     rot, trans = _poses(4, seed=6)
     obs = _observe(rot, trans)
     obs[:, 2] += 0.005                      # one marker 5 mm off (a swap or a reflection)
-    fit = fit_rigid(CLUSTER, obs, max_rms=1e-3, drop_outlier=False)
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS, drop_outlier=False)
     assert fit.poor.all() and not fit.ill_conditioned.any()
 
 
@@ -90,11 +92,11 @@ def test_an_outlying_marker_is_dropped() -> None:
     rot, trans = _poses(6, seed=9)
     obs = _observe(rot, trans)
     obs[:, 1] += 0.005
-    fit = fit_rigid(CLUSTER, obs, max_rms=1e-3)
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS)
     assert not fit.poor.any() and (fit.n_markers == 3).all()
     np.testing.assert_allclose(fit.rotation, rot, atol=1e-12)
     obs[:, [2, 3]] = obs[:, [3, 2]]         # and a swap: no 3-subset fits, stays poor
-    assert fit_rigid(CLUSTER, obs, max_rms=1e-3).poor.all()
+    assert fit_rigid(CLUSTER, obs, MAX_RMS).poor.all()
 
 
 def test_the_refit_with_the_smallest_residual_wins() -> None:
@@ -105,8 +107,8 @@ def test_the_refit_with_the_smallest_residual_wins() -> None:
     obs[:, 3] += 0.004 * rot[0] @ (np.ones(3) / np.sqrt(3))
     without_0 = obs.copy()
     without_0[:, 0] = np.nan
-    assert fit_rigid(CLUSTER, without_0, max_rms=1e-3, drop_outlier=False).rms[0] < 1e-3
-    fit = fit_rigid(CLUSTER, obs, max_rms=1e-3)
+    assert fit_rigid(CLUSTER, without_0, MAX_RMS, drop_outlier=False).rms[0] < 1e-3
+    fit = fit_rigid(CLUSTER, obs, MAX_RMS)
     assert not fit.poor[0] and fit.n_markers[0] == 3 and fit.rms[0] < 1e-12
     np.testing.assert_allclose(fit.rotation, rot, atol=1e-12)
 
@@ -163,8 +165,8 @@ def test_robust_reweighting_resists_heavy_tailed_noise() -> None:
     def err(fit):
         return np.sqrt(np.mean(np.sum((fit.apply(tip) - truth) ** 2, axis=1)))
 
-    plain = err(fit_rigid(CLUSTER, obs))
-    robust = err(fit_rigid(CLUSTER, obs, robust_scale=0.3e-3))
+    plain = err(fit_rigid(CLUSTER, obs, MAX_RMS))
+    robust = err(fit_rigid(CLUSTER, obs, MAX_RMS, robust_scale=0.3e-3))
     assert robust < 0.95 * plain
-    exact = fit_rigid(CLUSTER, _observe(rot, trans), robust_scale=0.3e-3)
+    exact = fit_rigid(CLUSTER, _observe(rot, trans), MAX_RMS, robust_scale=0.3e-3)
     np.testing.assert_allclose(exact.rotation, rot, atol=1e-12)

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from core.errors import BadInput
-from data_schema.json_docs import METRICS, validate_metrics
+from data_schema.metrics_doc import METRICS, Scores, validate_metrics
 
 
 def _values(ld: float | None = 0.3) -> dict[str, Any]:
@@ -161,3 +161,53 @@ def test_intervals_are_checked_and_may_be_absent(tmp_path, keys, value, words) -
             validate_metrics(_write(tmp_path, doc))
     validate_metrics(_write(tmp_path, _set(_doc(), ("overall", 0, "intervals"), None)))
     validate_metrics(_write(tmp_path, _set(_doc(), ("schema_version",), "1.1")))
+
+
+WRITTEN = {"runs": ("run", "label", "variant", "fold", "test_set", "metrics", "references",
+                    "gain", "intervals", "lump"),
+           "overall": ("label", "variant", "test_set", "folds", "fold_ids", "metrics",
+                       "fold_ld_mean_sd_mm", "references", "gain",
+                       "folds_not_beating_references", "intervals")}
+
+
+def _full_doc() -> dict[str, Any]:
+    """The fixture with every later field: intervals on a run (with its calibration, bands
+    and the tip's point) and none on the pooled row, a lump with one part empty, and a
+    model's scarcity row beside a reference's."""
+    doc = _doc()
+    given = _intervals()
+    given["levels"][0] |= {"band": [0.85, 0.95], "force_band": [0.8, 1.0]}
+    given["tip_point"] = {"from_mm": 0.0, "to_mm": 0.1, "points": 2, "coverage": 0.5,
+                          "mean_radius_mm": 0.2}
+    intervals = {k: given[k] for k in ("levels", "by_distance", "radius_to_ld", "tip_point",
+                                       "calibration")}
+    part = {"metrics": _values(), "references": REFERENCES, "gain": GAIN, "intervals": None}
+    doc["runs"][0] |= {"intervals": intervals,
+                       "lump": {"centre_mm": [50.0, 40.0], "radius_mm": 12.0,
+                                "reach_mm": 10.0, "over": part, "away": None}}
+    doc["overall"][0]["intervals"] = None
+    for table, order in WRITTEN.items():          # the order eval writes them in
+        doc[table] = [{k: row[k] for k in order} for row in doc[table]]
+    doc["scarcity"].insert(0, {"fold": 0, "groups": 1, "predictor": "TL", "ld_mean_mm": 0.3,
+                               "ld_max_mm": 0.9, "force_abs_n": 0.2, "points_90": 0.9,
+                               "force_90": None, "points_90_low": 0.8,
+                               "points_90_high": 0.95, "force_90_low": None,
+                               "force_90_high": None})
+    return doc
+
+
+def test_the_rows_read_and_write_the_document_as_it_is(tmp_path) -> None:
+    """A valid document read into its rows and written back is the same text, key for key
+    and in order; a row's fields are its keys."""
+    doc = _full_doc()
+    validate_metrics(_write(tmp_path, doc))
+    scores = Scores.from_json(doc)
+    assert json.dumps(scores.to_doc(doc["provenance"])) == json.dumps(doc)
+    run = scores.runs[0]
+    assert run.metrics.all.ld_mean_mm == 0.3 and run.metrics.multi is None
+    assert run.references["force, linear"].ld_mean_mm is None
+    assert run.gain.force_reference == "force, linear" and run.lump.away is None
+    assert run.intervals.at(0.9).band == [0.85, 0.95] and run.intervals.calibration.presses == 3
+    model, reference = scores.scarcity
+    assert model.shares.by_score() == {"points": (0.9, [0.8, 0.95]), "force": (None, None)}
+    assert reference.shares is None

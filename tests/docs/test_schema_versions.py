@@ -7,7 +7,8 @@ import re
 from pathlib import Path
 
 from data_schema import session
-from data_schema.json_docs import FOLDS, METRICS, MSM_PARAMS, SOLID_PARAMS
+from data_schema.json_docs import FOLDS, MSM_PARAMS, SOLID_PARAMS
+from data_schema.metrics_doc import METRICS
 from data_schema.raw_mcap import RAW_MCAP
 from data_schema.states import STATES
 from data_schema.synced import SYNCED

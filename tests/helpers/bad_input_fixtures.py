@@ -14,6 +14,7 @@ import pytest
 from helpers.bad_input_checks import TINY_RUN, cli
 from helpers.cgnn_data import write_dent_states
 from helpers.raw_sessions import analytic_session
+from ingest.ingest_params import IngestParams
 from ingest.mcap_io import write_raw_mcap
 
 
@@ -21,7 +22,7 @@ from ingest.mcap_io import write_raw_mcap
 def clean_lab(tmp_path_factory) -> Path:
     """A two-press analytic session: MCAP -> synced file -> states (the lab path)."""
     d = tmp_path_factory.mktemp("lab")
-    write_raw_mcap(d / "s.mcap", analytic_session(0, presses=2), {})
+    write_raw_mcap(d / "s.mcap", analytic_session(0, presses=2), {}, IngestParams().compression)
     assert cli("sync", d / "s.mcap", "--out", d / "synced.h5", "--no-rrd").exit_code == 0
     assert cli("extract", d / "synced.h5", "--out", d / "st.h5", "--no-rrd").exit_code == 0
     return d

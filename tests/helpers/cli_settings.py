@@ -32,8 +32,8 @@ from train.training.recipes import PAPER
 from train.training.train_params import TrainOptions, TrainParams
 
 LAB = demo_plan.Lab
-# (default, bound) of the options no dataclass holds, by the option's name
-Named = Mapping[str, tuple[Any, Bound | None]]
+# (default, bound[, enum]) of the options no dataclass holds, by the option's name
+Named = Mapping[str, tuple[Any, Bound | None] | tuple[Any, Bound | None, type]]
 
 SETTINGS: dict[str, tuple[type | Named, ...]] = {
     "synth": (SynthParams,),
@@ -51,7 +51,8 @@ SETTINGS: dict[str, tuple[type | Named, ...]] = {
     "replay": (ReplayParams,),
     "inspect": (),
     "demo": ({"out": (demo_plan.OUT, None), "seed": (SynthParams.seed, None),
-              "device": (TrainParams.device, None), "pretraining": (demo_plan.SHIPPED_MODEL, None),
+              "device": (TrainParams.device, None),
+              "pretraining": (demo_plan.Pretraining.SHIPPED, None, demo_plan.Pretraining),
               "jobs": (None, WORKERS), "markers": (LAB.markers, None),
               "marker_pitch": (LAB.marker_pitch_mm, SynthParams.BOUNDS["marker_pitch_mm"]),
               "size": (LAB.size_mm, None),

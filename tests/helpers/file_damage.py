@@ -31,6 +31,7 @@ import torch
 from data_schema.hdf5 import H5Schema
 from data_schema.states import STATES
 from helpers.raw_sessions import analytic_session
+from ingest.ingest_params import IngestParams
 from ingest.mcap_io import write_raw_mcap
 
 REFUSE, SAME, VALID = "refuse", "same", "valid"
@@ -312,7 +313,7 @@ def mcap_mutations(session_seed: int) -> list[Mutation]:
         def apply(p: Path) -> None:
             session = analytic_session(session_seed, presses=2)
             edit(session)
-            write_raw_mcap(p, session, {})
+            write_raw_mcap(p, session, {}, IngestParams().compression)
         return apply
 
     def flip(p: Path) -> None:

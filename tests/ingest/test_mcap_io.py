@@ -13,9 +13,11 @@ from mcap.writer import Writer
 from core.errors import BadInput
 from core.series import AtiCalibration, BodySeries, ForceSeries, MarkerSeries, RawSession
 from data_schema.raw_mcap import BLOCK_HEADER, RAW_MCAP, validate_raw_mcap
+from ingest.ingest_params import IngestParams
 from ingest.mcap_io import read_raw_mcap, write_raw_mcap
 
 PROV = {"stage": "ingest", "code_version": "test", "inputs": {"a.tsv": "0" * 64}}
+COMPRESSION = IngestParams().compression      # ingest's default
 
 
 def make_session(frames: int = 1234, gauge: bool = True, extras: bool = True) -> RawSession:
@@ -104,7 +106,7 @@ def test_block_layout_matches_the_documentation(tmp_path):
     """Decode the file with the MCAP library and struct alone, as the schema doc describes."""
     s = make_session(frames=1234)
     path = tmp_path / "s.mcap"
-    write_raw_mcap(path, s, {"provenance": PROV})
+    write_raw_mcap(path, s, {"provenance": PROV}, COMPRESSION)
     with open(path, "rb") as fh:
         reader = make_reader(fh)
         summary = reader.get_summary()
@@ -142,7 +144,7 @@ def test_rerun_reads_the_file(tmp_path):
     from rerun.chunk import McapReader
 
     path = tmp_path / "s.mcap"
-    write_raw_mcap(path, make_session(), {"provenance": PROV})
+    write_raw_mcap(path, make_session(), {"provenance": PROV}, COMPRESSION)
     reader = McapReader(path)
     assert sum(1 for _ in reader.stream()) > 0
     info = reader.info()
@@ -210,7 +212,7 @@ def test_session_record_lacking_a_key_is_bad_input(tmp_path, damage):
     else:
         record["mocap"]["events"] = 5
     path = tmp_path / "s.mcap"
-    write_raw_mcap(path, s, {"provenance": PROV, "session": record})
+    write_raw_mcap(path, s, {"provenance": PROV, "session": record}, COMPRESSION)
     with pytest.raises(BadInput, match="not a readable raw MCAP file") as e:
         read_raw_mcap(path)
     assert e.value.path == str(path)
@@ -220,5 +222,5 @@ def test_decreasing_time_is_refused_on_write(tmp_path):
     s = make_session(frames=100, extras=False)
     s.force.time_ns[50] = s.force.time_ns[49]
     with pytest.raises(BadInput, match="not increasing"):
-        write_raw_mcap(tmp_path / "s.mcap", s, {"provenance": PROV})
+        write_raw_mcap(tmp_path / "s.mcap", s, {"provenance": PROV}, COMPRESSION)
     assert not list(tmp_path.iterdir())

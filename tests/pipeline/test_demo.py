@@ -18,7 +18,7 @@ from data_schema.states import validate_states
 from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
-from pipeline.demo_plan import GENERIC, NETWORKS, QUICK, RECIPE, SMOKE, Lab, demo_steps
+from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, SMOKE, Lab, Pretraining, demo_steps
 from train.generic_model import SHIPPED
 
 
@@ -26,7 +26,8 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
     """The generic pre-training made here: one model, pre-trained once on the prior's MSM
     data, is where every fold's TL run starts."""
     out = tmp_path / "demo"
-    generic = ["-q", "demo", "--smoke", "--pretraining", GENERIC, "--out", str(out)]
+    generic = ["-q", "demo", "--smoke", "--pretraining", Pretraining.GENERIC, "--out",
+               str(out)]
     res = CliRunner().invoke(cli, generic)
     assert res.exit_code == 0, res.output
     assert (out / "session" / "truth.h5").is_file()
@@ -59,7 +60,7 @@ def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
         if line.strip().startswith("MISSED"):
             assert "sync" not in line, line
     assert "transfer learning, pooled over folds" in res.output
-    steps = demo_steps(out, 0, SMOKE, pretraining=GENERIC)
+    steps = demo_steps(out, 0, SMOKE, pretraining=Pretraining.GENERIC)
     times = json.loads((out / "demo_times.json").read_text())     # every step timed, once
     assert sorted(tuple(s["args"]) for s in times["steps"]) == sorted(s.args for s in steps)
     assert not any(s["skipped"] for s in times["steps"])
@@ -128,16 +129,24 @@ def test_the_per_fold_pretraining_fits_each_fold_on_another_labs_phantom(tmp_pat
 
 
 def test_a_pretraining_the_plan_does_not_know_is_refused_not_run_as_another(tmp_path):
-    with pytest.raises(ValueError, match="'per_fold' is not one of shipped, generic"):
-        demo_steps(tmp_path, 0, SMOKE, pretraining="per_fold")
+    """The plan knows its pre-trainings as an enum; the command line refuses any other word
+    in one line naming the option and the words it takes, before any step."""
+    out = tmp_path / "demo"
+    res = CliRunner().invoke(cli, ["demo", "--smoke", "--pretraining", "per_fold", "--out",
+                                   str(out)])
+    assert res.exit_code == 2 and not out.exists()
+    assert res.output.strip() == ("error: --pretraining 'per_fold': must be one of shipped, "
+                                  "generic, per-fold, solid")
+    assert [p.value for p in Pretraining] == ["shipped", "generic", "per-fold", "solid"]
 
 
 @pytest.mark.parametrize("network", list(NETWORKS))
 def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, network):
     """``--network`` adds its flags after the recipe's to every training run (pre-training
     and both fine-tunings); every other step is the same."""
-    ours = demo_steps(tmp_path, 0, SMOKE, pretraining=GENERIC)
-    other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network], pretraining=GENERIC)
+    ours = demo_steps(tmp_path, 0, SMOKE, pretraining=Pretraining.GENERIC)
+    other = demo_steps(tmp_path, 0, SMOKE, recipe=NETWORKS[network],
+                       pretraining=Pretraining.GENERIC)
     trains = [(a.args, b.args) for a, b in zip(ours, other, strict=True) if a.args[0] == "train"]
     assert len(trains) == 1 + 2 * SMOKE.folds              # pre-training and two fine-tunings
     extra = NETWORKS[network][len(RECIPE):]
@@ -153,7 +162,8 @@ def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
     commands whatever the lab's markers, footprint or rate and the demo's seed; a fine-tuning
     starts from it."""
     def generic(seed: int, lab: Lab) -> list[tuple[str, ...]]:
-        return [s.args for s in demo_steps(tmp_path, seed, QUICK, lab=lab, pretraining=GENERIC)
+        return [s.args for s in demo_steps(tmp_path, seed, QUICK, lab=lab,
+                                           pretraining=Pretraining.GENERIC)
                 if s.stage in ("simulate --prior", "train (pre-training)")
                 or s.args[:2] == ("split", str(tmp_path / "msm" / "prior.h5"))]
 
@@ -161,7 +171,7 @@ def test_every_lab_and_seed_fine_tunes_from_the_same_generic_model(tmp_path):
     assert len(mine) == 3
     assert generic(2, Lab(markers="6x6", marker_pitch_mm=12, mocap_rate_hz=300)) == mine
     assert generic(1, Lab(markers="scattered:20", size_mm="150x80")) == mine
-    tl = [s for s in demo_steps(tmp_path, 1, QUICK, pretraining=GENERIC)
+    tl = [s for s in demo_steps(tmp_path, 1, QUICK, pretraining=Pretraining.GENERIC)
           if "exp_tl_fold3" in str(s.outputs[0])]
     assert tl[0].inputs[-1] == tmp_path / "runs" / "generic" / "best.pt"
 
@@ -221,7 +231,7 @@ def test_another_network_than_the_shipped_models_is_refused_before_any_step(tmp_
 def test_the_quick_demo_fine_tunes_longer_than_its_scarcity_study_retrains(tmp_path):
     """Every fold's TL and scratch run trains QUICK.finetune_epochs; the scarcity study's
     runs are retrained for QUICK.scarcity_epochs (fewer: 16 runs a demo)."""
-    steps = demo_steps(tmp_path, 0, QUICK, pretraining=GENERIC)
+    steps = demo_steps(tmp_path, 0, QUICK, pretraining=Pretraining.GENERIC)
     tunes = [s.args for s in steps if s.stage == "train (fine-tuning)"]
     assert len(tunes) == 2 * QUICK.folds
     assert all(a[a.index("--epochs") + 1] == str(QUICK.finetune_epochs) for a in tunes)
@@ -238,7 +248,7 @@ def test_the_solid_pretraining_runs_beside_the_shipped_models(tmp_path):
     pressed at the lab's markers, the shipped model pre-trained on it, and a third run per
     fold fine-tuned from there; eval scores the three, over the lump too."""
     lab = Lab(inclusions=("72,23,10,12,3",))
-    steps = demo_steps(tmp_path, 0, QUICK, lab=lab, pretraining="solid")
+    steps = demo_steps(tmp_path, 0, QUICK, lab=lab, pretraining=Pretraining.SOLID)
     fits = [s.args for s in steps if s.args[0] == "fit-solid"]
     assert len(fits) == QUICK.folds
     for k, args in enumerate(fits):
@@ -267,7 +277,7 @@ def test_a_curved_lab_is_not_given_a_flat_simulator(tmp_path) -> None:
 
     lab = Lab(shape="dome:30")
     with pytest.raises(BadInput, match="flat"):
-        demo_steps(tmp_path, 0, SMOKE, lab=lab, pretraining="per-fold")
+        demo_steps(tmp_path, 0, SMOKE, lab=lab, pretraining=Pretraining.PER_FOLD)
     synth = demo_steps(tmp_path, 0, SMOKE, lab=lab)[0].args
     at = synth.index("--shape")
     assert synth[0] == "synth" and synth[at + 1] == "dome:30"

@@ -5,43 +5,51 @@ presses alike, each inside its fold's range."""
 
 from __future__ import annotations
 
-import copy
+from dataclasses import replace
 
+from helpers.metrics_rows import level, pooled_row, run_row, variant
+
+from data_schema.intervals_doc import DistanceBin, IntervalLevel, Intervals
+from data_schema.metrics_doc import RunRow, ScarcityRow, ScarcityShares, Scores
 from pipeline.demo_targets import _intervals, _scarce_intervals
 
-TL = {"pretrained": {"model": "cGNN"}, "train_data": "Exp"}
-SCRATCH = {"pretrained": None, "train_data": "Exp"}
+TL = variant(pretrained=variant("MSM"))
+SCRATCH = variant()
 
 
 def _levels(shift: float = 0.0, force_shift: float = 0.0, band: float | None = 0.04
-            ) -> list[dict]:
+            ) -> list[IntervalLevel]:
     """Each reported level's shares (the level plus a shift) with bands of +- ``band``
     around the level (none where None)."""
-    out = []
-    for q in (0.8, 0.9, 0.95):
-        v = {"level": q, "coverage": q + shift, "force_coverage": q + force_shift}
-        if band is not None:
-            v |= {"band": [q - band, q + band], "force_band": [q - 2 * band, q + 2 * band]}
-        out.append(v)
-    return out
+    return [level(level=q, coverage=q + shift, force_coverage=q + force_shift,
+                  band=None if band is None else [q - band, q + band],
+                  force_band=None if band is None else [q - 2 * band, q + 2 * band])
+            for q in (0.8, 0.9, 0.95)]
 
 
-def _run(fold: int, ratio: float = 2.0, far_mm: float = 0.1, variant: dict = TL) -> dict:
-    near = [{"mean_radius_mm": 0.5}, {"mean_radius_mm": far_mm}]
-    return {"run": f"runs/exp_{'tl' if variant['pretrained'] else 'notl'}_fold{fold}",
-            "fold": fold, "variant": variant,
-            "intervals": {"levels": _levels(shift=-0.1), "radius_to_ld": ratio,
-                          "by_distance": near}}
+def _bin(mean_radius_mm: float) -> DistanceBin:
+    return DistanceBin(from_mm=10.0, to_mm=20.0, points=10, coverage=0.9,
+                       mean_radius_mm=mean_radius_mm)
 
 
-def _doc(runs: list[dict], **pooled: float | None) -> dict:
+def _run(fold: int, ratio: float = 2.0, far_mm: float = 0.1, variant: dict = TL) -> RunRow:
+    near = [_bin(0.5), _bin(far_mm)]
+    return run_row(run=f"runs/exp_{'tl' if variant['pretrained'] else 'notl'}_fold{fold}",
+                   fold=fold, variant=variant,
+                   intervals=Intervals(levels=_levels(shift=-0.1), radius_to_ld=ratio,
+                                       by_distance=near))
+
+
+def _doc(runs: list[RunRow], **pooled: float | None) -> Scores:
     """Runs (each fold's shares far off: only the pooled rows are held to the bands) and
     the pooled rows of TL and scratch."""
-    rows = [{"variant": v, "intervals": {"levels": _levels(**pooled)}} for v in (TL, SCRATCH)]
-    return {"runs": runs, "overall": rows}
+    rows = [pooled_row(variant=v, intervals=Intervals(levels=_levels(**pooled),
+                                                      by_distance=[], radius_to_ld=None))
+            for v in (TL, SCRATCH)]
+    return Scores(runs=runs, overall=rows)
 
 
-def _ok(doc: dict) -> list[bool]:
+def _ok(doc: Scores) -> list[bool]:
     return [ok for _, ok, _ in _intervals(doc)]
 
 
@@ -60,22 +68,24 @@ def test_each_way_to_miss_is_named() -> None:
     assert _ok(_doc(runs, band=None))[:2] == [False, False]           # no band measured
     assert _ok(_doc([_run(0, ratio=3.5)]))[2] is False                # covering by size
     assert _ok(_doc([_run(0, far_mm=0.9)]))[3] is False               # far not smaller
-    none = copy.deepcopy(_run(0))
-    none["intervals"] = None
+    none = replace(_run(0), intervals=None)
     ((name, ok, text),) = _intervals(_doc([none]))
     assert not ok and "absent" in text
 
 
 def _scarce(groups: int, points: float | None, force: float | None, predictor: str = "TL",
-            band: tuple[float, float] | None = (0.85, 0.95)) -> dict:
+            band: tuple[float, float] | None = (0.85, 0.95)) -> ScarcityRow:
     low, high = band or (None, None)
-    return {"fold": 0, "groups": groups, "predictor": predictor, "points_90": points,
-            "force_90": force, "points_90_low": low, "points_90_high": high,
-            "force_90_low": low, "force_90_high": high}
+    return ScarcityRow(fold=0, groups=groups, predictor=predictor, ld_mean_mm=0.2,
+                       ld_max_mm=0.5, force_abs_n=0.1,
+                       shares=ScarcityShares(points_90=points, force_90=force,
+                                             points_90_low=low, points_90_high=high,
+                                             force_90_low=low, force_90_high=high))
 
 
 def test_the_scarcity_studys_fewest_presses_are_held_to_their_bands() -> None:
-    refs = {"fold": 0, "groups": 1, "predictor": "nothing moves"}     # no intervals
+    refs = ScarcityRow(fold=0, groups=1, predictor="nothing moves", ld_mean_mm=0.3,
+                       ld_max_mm=0.9, force_abs_n=0.5)                # no intervals
     met = [_scarce(1, 0.91, 0.88), _scarce(1, 0.89, 0.93, "no TL"), _scarce(2, 0.5, 0.5),
            refs]
     ((name, ok, text),) = _scarce_intervals(met)

@@ -3,23 +3,37 @@ least 30 % below the best reference there; a fold with none is named, not counte
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+from helpers.metrics_rows import gain, metrics, run_row, variant
+
+from data_schema.metrics_doc import LumpPart, LumpRow, RunRow, Scores
 from pipeline.demo_targets import _over_lump, _solid_over_lump, variant_of
 
 
-def _part(gain: float | None, n: int = 12) -> dict:
-    return {"metrics": {"n": n}, "gain": {"ld_gain": gain}}
+def _part(ld_gain: float | None, n: int = 12) -> LumpPart:
+    return LumpPart(metrics=metrics(n=n), references={}, gain=gain(ld_gain=ld_gain),
+                    intervals=None)
 
 
-def _run(fold: int, over: dict | None, away: dict | None, pretrained: bool = True) -> dict:
-    return {"run": f"runs/exp_{'tl' if pretrained else 'notl'}_fold{fold}", "fold": fold,
-            "variant": {"pretrained": {"model": "cGNN"} if pretrained else None,
-                        "train_data": "Exp"},
-            "lump": {"centre_mm": [72.0, 23.0], "radius_mm": 12.0, "over": over,
-                     "away": away}}
+def _lump(over: LumpPart | None, away: LumpPart | None) -> LumpRow:
+    return LumpRow(centre_mm=[72.0, 23.0], radius_mm=12.0, reach_mm=10.0, over=over,
+                   away=away)
 
 
-def _checks(runs: list[dict]) -> dict[str, tuple[bool, str]]:
-    return {name: (ok, text) for name, ok, text in _over_lump({"runs": runs})}
+def _run(fold: int, over: LumpPart | None, away: LumpPart | None, pretrained: bool = True
+         ) -> RunRow:
+    return run_row(run=f"runs/exp_{'tl' if pretrained else 'notl'}_fold{fold}", fold=fold,
+                   variant=variant(pretrained=variant("MSM") if pretrained else None),
+                   lump=_lump(over, away))
+
+
+def _scores(runs: list[RunRow]) -> Scores:
+    return Scores(runs=runs, overall=[])
+
+
+def _checks(runs: list[RunRow]) -> dict[str, tuple[bool, str]]:
+    return {name: (ok, text) for name, ok, text in _over_lump(_scores(runs))}
 
 
 def test_every_fold_over_and_away_meets_the_target() -> None:
@@ -43,20 +57,19 @@ def test_one_fold_short_over_the_lump_misses_and_none_there_misses() -> None:
 
 
 def test_runs_without_a_lump_add_no_target() -> None:
-    plain = _run(0, None, None)
-    del plain["lump"]
-    assert _over_lump({"runs": [plain]}) == []
+    plain = replace(_run(0, None, None), lump=None)
+    assert _over_lump(_scores([plain])) == []
 
 
-def _over(ld: float, force: float, n: int) -> dict:
-    return {"metrics": {"n": n, "ld_mean_mm": ld, "force_abs_n": force}, "gain": {"ld_gain": 0.5}}
+def _over(ld: float, force: float, n: int) -> LumpPart:
+    return LumpPart(metrics=metrics(n=n, ld_mean_mm=ld, force_abs_n=force), references={},
+                    gain=gain(ld_gain=0.5), intervals=None)
 
 
-def _from(fold: int, source: str, over: dict | None) -> dict:
-    return {"run": f"runs/exp_{source}_fold{fold}", "fold": fold,
-            "variant": {"pretrained": {"model": "cGNN", "train_data": source},
-                        "train_data": "Exp"},
-            "lump": {"over": over, "away": _over(0.1, 0.1, 50)}}
+def _from(fold: int, source: str, over: LumpPart | None) -> RunRow:
+    return run_row(run=f"runs/exp_{source}_fold{fold}", fold=fold,
+                   variant=variant(pretrained=variant(source)),
+                   lump=_lump(over, _over(0.1, 0.1, 50)))
 
 
 def test_tl_from_the_solid_is_held_to_15_percent_below_the_shipped_models_over_the_lump(
@@ -65,11 +78,11 @@ def test_tl_from_the_solid_is_held_to_15_percent_below_the_shipped_models_over_t
     runs = [_from(0, "MSM", _over(0.20, 0.3, 10)), _from(1, "MSM", _over(0.10, 0.2, 30)),
             _from(0, "Solid", _over(0.15, 0.2, 10)), _from(1, "Solid", _over(0.08, 0.1, 30)),
             _from(2, "Solid", None)]
-    (name, ok, text), = _solid_over_lump({"runs": runs})
+    (name, ok, text), = _solid_over_lump(_scores(runs))
     # generic: (0.2 * 10 + 0.1 * 30) / 40 = 0.125; solid: (0.15 * 10 + 0.08 * 30) / 40 = 0.0975
     assert ok and "0.0975 against 0.1250 mm (+22%)" in text
     assert "TL from the solid" in name
     runs[3] = _from(1, "Solid", _over(0.11, 0.1, 30))          # (1.5 + 3.3) / 40 = 0.12: 4 %
-    assert not _solid_over_lump({"runs": runs})[0][1]
-    assert _solid_over_lump({"runs": runs[:2]}) == []           # no solid runs: no target
+    assert not _solid_over_lump(_scores(runs))[0][1]
+    assert _solid_over_lump(_scores(runs[:2])) == []            # no solid runs: no target
     assert {variant_of(r) for r in runs} == {"tl", "solid"}

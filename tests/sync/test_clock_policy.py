@@ -19,9 +19,8 @@ from helpers.raw_sessions import DRIFT, LOG_RATE, OFFSET, RATE, analytic_session
 
 from core.errors import BadInput
 from core.series import SHARED_CLOCK, RawSession
-from sync.clock import ClockFit
+from sync.clock import MIN_PULSES, ClockFit
 from sync.clock_policy import (
-    MIN_PULSES,
     SHARED,
     check_overlap,
     clock_reason,

@@ -24,6 +24,7 @@ from click.testing import CliRunner
 from calib.force_tare import noise_sigma
 from core.errors import BadInput
 from core.series import RawSession
+from ingest.ingest_params import IngestParams
 from ingest.mcap_io import read_raw_mcap, write_raw_mcap
 from pipeline.cli import cli
 from sim.twin.synth_params import SynthParams
@@ -33,6 +34,7 @@ from sync.sync import sync_session
 from sync.sync_params import SyncParams
 
 OFFSET_S = 36.0
+COMPRESSION = IngestParams().compression      # ingest's default
 TWIN = {"locations": 2, "repeats": 4, "trigger": False, "pivot_seconds": 5.0}
 PRESSES = 8
 
@@ -64,7 +66,7 @@ def twin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
 def _sync_variant(twin: dict, tmp_path: Path, raw: RawSession, *extra: str):
     """Write ``raw`` as an MCAP under ``tmp_path`` and sync it through the CLI."""
     mcap = tmp_path / "v.mcap"
-    write_raw_mcap(mcap, raw, {})
+    write_raw_mcap(mcap, raw, {}, COMPRESSION)
     out = tmp_path / "v.h5"
     return _cli("sync", mcap, "--out", out, "--no-rrd", *extra), out
 

@@ -17,6 +17,7 @@ from core.recording import rrd_entities, rrd_has_blueprint
 from core.series import RawSession
 from data_schema.hdf5 import validate_h5
 from data_schema.synced import SYNCED
+from ingest.ingest_params import IngestParams
 from ingest.mcap_io import write_raw_mcap
 from pipeline.cli import cli
 from sync.gaps import MISSING
@@ -27,7 +28,7 @@ from sync.synced_file import write_synced
 
 def _mcap(tmp_path: Path, session: RawSession, name: str = "s.mcap") -> Path:
     path = tmp_path / name
-    write_raw_mcap(path, session, {})
+    write_raw_mcap(path, session, {}, IngestParams().compression)
     return path
 
 

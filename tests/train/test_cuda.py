@@ -16,8 +16,8 @@ import pytest
 import torch
 from helpers.cgnn_data import dent_fold
 
-from train.evaluation.evaluate import evaluate_runs
 from train.evaluation.references import DISPLACEMENT
+from train.evaluation.scoring import evaluate_runs
 from train.inference.predictor import Predictor
 from train.model.config import CGNNConfig
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
@@ -53,7 +53,7 @@ def test_training_on_cuda_follows_the_cpu_run(dent, tmp_path) -> None:
 def test_eval_and_predictor_on_cuda_give_the_cpu_answers(dent, tmp_path) -> None:
     run = tmp_path / "run"
     run_train(TrainInputs(*dent), run, TrainParams(OPTIONS, SMALL, "cpu"))
-    on = {d: evaluate_runs([run], device=d)["runs"][0] for d in ("cpu", "cuda")}
+    on = {d: evaluate_runs([run], device=d).to_json()["runs"][0] for d in ("cpu", "cuda")}
     assert on["cuda"]["metrics"]["all"]["ld_mean_mm"] == pytest.approx(
         on["cpu"]["metrics"]["all"]["ld_mean_mm"], rel=1e-4)
     for name in DISPLACEMENT:

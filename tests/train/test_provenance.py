@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from helpers.cgnn_data import dent_fold
 
 from core.provenance import sha256_file
-from data_schema.json_docs import METRICS, validate_metrics
+from data_schema.metrics_doc import METRICS, validate_metrics
 from pipeline.cli import cli
 from train.training.checkpoint import load_checkpoint
 from train.training.run_files import LOG_FIELDS

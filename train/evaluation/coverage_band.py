@@ -48,7 +48,7 @@ def redrawn_counts(held: Residuals, press: np.ndarray, calibrating: int, fold: i
     return out
 
 
-def _scores(r: Residuals) -> tuple[np.ndarray, ...]:
+def _scores(r: Residuals) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A calibration's inputs to :meth:`IntervalTable.fit` (the force's score is |dF error|)."""
     return r.point_error, r.point_features, np.abs(r.force_error), r.force_features
 

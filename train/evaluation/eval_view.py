@@ -22,7 +22,7 @@ import rerun.blueprint as rrb
 
 from core.recording import colormap, declare_up, phantom_view, recording
 from train.data import Batch
-from train.evaluation.lump import REACH_M
+from train.evaluation.lump import LUMP_REACH_M, Lump
 from train.model.si_units import BatchPrediction
 
 APP_ID = "phantom-eval"
@@ -75,7 +75,7 @@ def write_eval_recording(path: str | Path, shown: list[tuple[Batch, BatchPredict
     ``ratios`` (per batch (B, N): each point's error over its 90 % radius) where the run
     keeps intervals, ``table`` (the Markdown scores of every run beside the references),
     and ``footprint`` (the test places (K, 2) m, their mean L_d (K,) m, the lump or None:
-    :func:`train.evaluation.evaluate.footprint_errors`)."""
+    :func:`train.evaluation.scoring.footprint_errors`)."""
     first = shown[0][0].target[0][shown[0][0].mask[0]].cpu().numpy() if shown else np.zeros((1, 3))
     size = max(float(np.ptp(first[:, :2], axis=0).max()), 0.02)
     view = blueprint(first.mean(axis=0), size, name, ratios is not None,
@@ -126,9 +126,10 @@ def _example(rec: rr.RecordingStream, b: Batch, p: BatchPrediction, j: int) -> N
     rec.log("force/predicted", rr.Scalars(float(p.dforce[j])))
 
 
-def _footprint(rec: rr.RecordingStream, xy: np.ndarray, ld: np.ndarray, lump: object) -> None:
+def _footprint(rec: rr.RecordingStream, xy: np.ndarray, ld: np.ndarray, lump: Lump | None
+               ) -> None:
     """Each test place on the footprint (mm), coloured and sized by its mean L_d; the lump's
-    radius and its reach (radius + 10 mm) as circles."""
+    radius and its reach (radius + :data:`~train.evaluation.lump.LUMP_REACH_M`) as circles."""
     top = max(float(ld.max()), 1e-12)
     rec.log("footprint/places", rr.Points2D(xy * 1e3, radii=1.0 + 3.0 * ld / top,
                                             colors=colormap(ld / top),
@@ -136,6 +137,6 @@ def _footprint(rec: rr.RecordingStream, xy: np.ndarray, ld: np.ndarray, lump: ob
     if lump is not None:
         angle = np.linspace(0, 2 * np.pi, 65)
         rings = [np.c_[lump.x + r * np.cos(angle), lump.y + r * np.sin(angle)] * 1e3
-                 for r in (lump.radius, lump.radius + REACH_M)]
+                 for r in (lump.radius, lump.radius + LUMP_REACH_M)]
         rec.log("footprint/lump", rr.LineStrips2D(rings, colors=[(220, 40, 40), (250, 160, 60)],
                                                   radii=[0.4]), static=True)

@@ -3,10 +3,16 @@ should not look fine.
 
 A lump (the twin's ``synth --inclusion``, or one a user names) is a centre on the footprint
 (phantom frame, m) and a radius. A test example is *over* it where its press is within the
-radius plus :data:`REACH_M` of the centre (the tip's (x, y) at the example's first state: where
-the press is on the surface), else *away*. Each part gets the model's metrics beside the
+radius plus :data:`LUMP_REACH_M` of the centre (the tip's (x, y) at the example's first state:
+where the press is on the surface), else *away*. Each part gets the model's metrics beside the
 no-learning references on the same examples, the gain over the best of them, and the
-intervals' coverage where the run keeps intervals.
+intervals' coverage where the run keeps intervals (a row's
+:class:`~data_schema.metrics_doc.LumpRow`).
+
+The reach is how far from the lump a press still deforms the surface the lump shapes, as L_d
+measures it over the whole surface: a press beside the lump sinks a dent that reaches over it.
+It is not fit-msm --map's :data:`sim.msm.msm_map_fit.REGION_REACH_M` (5 mm), which says which
+presses tell a region's stiffness by how deep their tip sinks there, a nearer question.
 """
 
 from __future__ import annotations
@@ -20,11 +26,11 @@ import numpy as np
 import torch
 
 from core.errors import BadInput
+from data_schema.metrics_doc import LumpPart, LumpRow
 from data_schema.truth import read_regions
 from train.data import StateTensors
 
-REACH_M = 0.010            # m beyond the lump's radius that still counts as over it
-PARTS = ("over", "away")
+LUMP_REACH_M = 0.010       # m beyond the lump's radius that still counts as over it
 
 
 @dataclass(frozen=True)
@@ -37,11 +43,12 @@ class Lump:
 
     def over(self, xy: np.ndarray) -> np.ndarray:
         """Which presses at (x, y) (E, 2) are over the lump (within radius + reach)."""
-        return np.hypot(xy[:, 0] - self.x, xy[:, 1] - self.y) <= self.radius + REACH_M
+        return np.hypot(xy[:, 0] - self.x, xy[:, 1] - self.y) <= self.radius + LUMP_REACH_M
 
-    def as_doc(self) -> dict:
-        return {"centre_mm": [self.x * 1e3, self.y * 1e3], "radius_mm": self.radius * 1e3,
-                "reach_mm": REACH_M * 1e3}
+    def row(self, over: LumpPart | None, away: LumpPart | None) -> LumpRow:
+        """The lump (mm) with its two parts, as a metrics row keeps them."""
+        return LumpRow(centre_mm=[self.x * 1e3, self.y * 1e3], radius_mm=self.radius * 1e3,
+                       reach_mm=LUMP_REACH_M * 1e3, over=over, away=away)
 
 
 def parse_lump(text: str) -> Lump:

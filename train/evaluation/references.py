@@ -16,10 +16,12 @@ shipping, whatever its absolute number (docs/ARCHITECTURE.md, "Scoring a model")
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
-from data_schema.json_docs import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, REFERENCES
+from data_schema.metrics_doc import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, REFERENCES, Metrics
 from train.data import Batch, StateTensors, make_batch
 from train.model.si_units import BatchPrediction
 
@@ -69,13 +71,16 @@ class References:
         raise KeyError(name)
 
 
-def best_reference(refs: dict[str, dict], key: str, names: tuple[str, ...]
-                   ) -> tuple[str | None, float | None]:
-    """The name and value of the lowest ``key`` among ``names`` (metrics per reference);
-    (None, None) where none has a value."""
-    scored = [(refs[n][key], n) for n in names
-              if n in refs and refs[n].get(key) is not None and np.isfinite(refs[n][key])]
+def best_reference(refs: dict[str, Metrics], value: Callable[[Metrics], float | None],
+                   names: tuple[str, ...]) -> tuple[str | None, float | None]:
+    """The name and ``value`` of the reference among ``names`` whose ``value`` (of its
+    metrics, by name in ``refs``) is lowest; (None, None) where none has a finite one."""
+    scored = [(value(refs[n]), n) for n in names if n in refs and _finite(value(refs[n]))]
     if not scored:
         return None, None
-    value, name = min(scored)
-    return name, value
+    lowest, name = min(scored)
+    return name, lowest
+
+
+def _finite(value: float | None) -> bool:
+    return value is not None and bool(np.isfinite(value))

@@ -17,33 +17,32 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from core.progress import say
+from data_schema.metrics_doc import ScarcityRow, ScarcityShares
 from train.evaluation.coverage import SHOWN
 from train.evaluation.coverage_band import band, counts_of
-from train.evaluation.evaluate import (
+from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from train.evaluation.run_coverage import coverage_and_band, fold_coverage
+from train.evaluation.run_errors import (
     ExampleErrors,
     LoadedRun,
-    coverage_and_band,
     example_errors,
-    fold_coverage,
     load_run,
-    metrics,
     reference_errors,
 )
-from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from train.evaluation.scoring import metrics
 from train.intervals.levels import REPORTED
 from train.model.config import CGNNConfig
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
 
-FIELDS = ("fold", "groups", "predictor", "ld_mean_mm", "ld_max_mm", "force_abs_n",
-          "points_90", "force_90", "points_90_low", "points_90_high", "force_90_low",
-          "force_90_high")
+FIELDS = ScarcityRow.keys()      # the CSV's columns: a row's keys, its model's shares last
 MODELS = {False: "no TL", True: "TL"}
 
 
@@ -81,7 +80,7 @@ class Retraining:
 
 
 def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str = "cpu",
-                  most: int | None = None) -> list[dict]:
+                  most: int | None = None) -> list[ScarcityRow]:
     """Retrain ``run_dir``'s fold on 1..n groups (at most ``most``), with and without its
     --init, and score each beside the references fitted on the same groups."""
     again = Retraining.of(run_dir, epochs)
@@ -93,39 +92,47 @@ def scarcity_rows(run_dir: Path, out_dir: Path, epochs: int | None, device: str 
             tag = f"fold{opts.fold}_n{n:02d}_{'tl' if init else 'notl'}"
             say(f"scarcity: {tag}")
             run = again.train(n, init, out_dir / tag, device)
-            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0])
-                        | _covered(run, out_dir / tag, with_band=n == 1))
+            rows.append(_row(opts.fold, n, MODELS[init is not None], example_errors(run)[0],
+                             _covered(run, out_dir / tag, with_band=n == 1)))
         rows += [_row(opts.fold, n, name, errs) for name, errs in reference_errors(run).items()]
     return rows
 
 
-def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors) -> dict:
-    m = metrics(errors)["all"]
-    return {"fold": fold, "groups": groups, "predictor": predictor,
-            "ld_mean_mm": m["ld_mean_mm"], "ld_max_mm": m["ld_max_mm"],
-            "force_abs_n": m["force_abs_n"]}
+def _row(fold: int, groups: int, predictor: str, errors: ExampleErrors,
+         shares: ScarcityShares | None = None) -> ScarcityRow:
+    m = metrics(errors).all
+    return ScarcityRow(fold=fold, groups=groups, predictor=predictor, ld_mean_mm=m.ld_mean_mm,
+                       ld_max_mm=m.ld_max_mm, force_abs_n=m.force_abs_n, shares=shares)
 
 
-def _covered(run: LoadedRun, run_dir: Path, with_band: bool) -> dict:
+def _covered(run: LoadedRun, run_dir: Path, with_band: bool) -> ScarcityShares:
     """The shares of the fold's test points and examples inside the run's intervals at
     :data:`~train.evaluation.coverage.SHOWN` (None where it keeps none); ``with_band``, also
     the range each falls in by chance (:mod:`train.evaluation.coverage_band`)."""
     c, redrawn = coverage_and_band(run, run_dir) if with_band \
         else (fold_coverage(run, run_dir), None)
+    if c is None:
+        return ScarcityShares(points_90=None, force_90=None)
     k = REPORTED.index(SHOWN)
-    shares = {"points_90": None, "force_90": None} if c is None else {
-        "points_90": float(c.inside[k] / c.points[k]),
-        "force_90": float(c.force_inside[k] / c.examples[k])}
-    b = None if redrawn is None else band(counts_of(c), redrawn)
-    return shares | {f"{what}_90_{end}": None if b is None else b[what][k][i]
-                     for what in ("points", "force") for i, end in enumerate(("low", "high"))}
+    low_high: tuple[float | None, ...]
+    if redrawn is None:
+        low_high = (None, None, None, None)
+    else:
+        b = band(counts_of(c), redrawn)
+        low_high = (*b["points"][k], *b["force"][k])
+    return ScarcityShares(points_90=float(c.inside[k] / c.points[k]),
+                          force_90=float(c.force_inside[k] / c.examples[k]),
+                          points_90_low=low_high[0], points_90_high=low_high[1],
+                          force_90_low=low_high[2], force_90_high=low_high[3])
 
 
-def curve(rows: list[dict], predictor: str, key: str) -> tuple[list[int], list[float]]:
-    """Training groups and the mean of ``key`` over folds for one predictor (None skipped)."""
-    sel = [r for r in rows if r["predictor"] == predictor and r[key] is not None]
-    groups = sorted({r["groups"] for r in sel})
-    return groups, [float(np.mean([r[key] for r in sel if r["groups"] == g])) for g in groups]
+def curve(rows: list[ScarcityRow], predictor: str,
+          value: Callable[[ScarcityRow], float | None]) -> tuple[list[int], list[float]]:
+    """Training groups and the mean of ``value`` over folds for one predictor (None
+    skipped)."""
+    sel = [r for r in rows if r.predictor == predictor and value(r) is not None]
+    groups = sorted({r.groups for r in sel})
+    return groups, [float(np.mean([value(r) for r in sel if r.groups == g])) for g in groups]
 
 
 LINES = (("no TL", "tab:red", "o-"), ("TL", "tab:blue", "o-"),
@@ -133,15 +140,15 @@ LINES = (("no TL", "tab:red", "o-"), ("TL", "tab:blue", "o-"),
          (FORCE_LINEAR, "tab:olive", "v--"))
 
 
-def write_csv(path: Path, rows: list[dict]) -> None:
+def write_csv(path: Path, rows: list[ScarcityRow]) -> None:
     """The curve as CSV, written to ``path`` (the runner's temporary file)."""
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
-        w.writerows(rows)
+        w.writerows(r.to_json() for r in rows)
 
 
-def plot(path: Path, rows: list[dict]) -> None:
+def plot(path: Path, rows: list[ScarcityRow]) -> None:
     """Three panels like the paper's figure: mean L_d, max L_d, force error over groups (log
     scale: a linear fit to one press can be off by newtons), one legend for all; written to
     ``path`` (the runner's temporary file)."""
@@ -152,11 +159,12 @@ def plot(path: Path, rows: list[dict]) -> None:
     from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(1, 3, figsize=(12, 4.0))
-    panels = (("ld_mean_mm", "mean $L_d$ [mm]"), ("ld_max_mm", "max $L_d$ [mm]"),
-              ("force_abs_n", "force absolute error [N]"))
-    for ax, (key, label) in zip(axes, panels, strict=True):
+    panels: tuple[tuple[Callable[[ScarcityRow], float | None], str], ...] = (
+        (lambda r: r.ld_mean_mm, "mean $L_d$ [mm]"), (lambda r: r.ld_max_mm, "max $L_d$ [mm]"),
+        (lambda r: r.force_abs_n, "force absolute error [N]"))
+    for ax, (value, label) in zip(axes, panels, strict=True):
         for name, color, style in LINES:
-            groups, mean = curve(rows, name, key)
+            groups, mean = curve(rows, name, value)
             if groups:
                 ax.plot(groups, mean, style, color=color, label=name)
         ax.set_xlabel("training groups (presses)")

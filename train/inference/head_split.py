@@ -53,8 +53,8 @@ def scene_terms(model: CGNN, local: torch.Tensor, mask: torch.Tensor | None = No
     """Each head's first layer on what the press does not change (bias in): the features
     (B, N, F), and their max- and mean-pooled ones. ``displacement=False``: force only."""
     check_split(model)
-    return HeadTerms(model.disp_head[0].leading(local) if displacement else None,
-                     model.force_head[0].leading(pool(local, mask)))
+    return HeadTerms(model.disp_head.first.leading(local) if displacement else None,
+                     model.force_head.first.leading(pool(local, mask)))
 
 
 def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor,
@@ -70,7 +70,10 @@ def pressed_heads(model: CGNN, terms: HeadTerms, cond: torch.Tensor,
     enc = model.encoded(points, cond) if points is not None else None
     pooled = None
     if model.offsets.in_heads:
-        pooled = pool(model.encoded(surface, cond) if surface is not None else enc, mask)
+        offsets = model.encoded(surface, cond) if surface is not None else enc
+        if offsets is None:
+            raise ValueError("a network with head offsets reads the scene's points per press")
+        pooled = pool(offsets, mask)
     force = _after(model.force_head, terms.force, cond, pooled)
     if terms.disp is None:
         return None, force.squeeze(-1)
@@ -81,4 +84,4 @@ def _after(head: ConditionedMLP, part: torch.Tensor, cond: torch.Tensor,
            enc: torch.Tensor | None) -> torch.Tensor:
     """The head's output from its first layer's surface part: the press's part added, then
     the rest."""
-    return head.after_first(head[0].press(part, cond, enc))
+    return head.after_first(head.first.press(part, cond, enc))

@@ -153,8 +153,10 @@ class Predictor:
         index = self._level_index(level)
         press = self._press(points, condition, region)
         deformed, df = self._ways[region is not None](press, False)
+        if deformed is None:                 # asked with force_only False: never
+            raise RuntimeError("the network gave no deformed points")
         df = self._flag(press, df, NOT_HOLDING if level is not None else "")
-        if index is None:
+        if index is None or level is None or self._table is None:   # all three or none
             return Prediction(deformed, df)
         return Prediction(deformed, df, press.scene.lookup.interval(
             self._table, level, index, press.tips, df, not self.extrapolating))
@@ -169,7 +171,7 @@ class Predictor:
         press = self._press(points, condition, region)
         df = self._flag(press, self._ways[region is not None](press, True)[1],
                         NOT_HOLDING if level is not None else "")
-        if index is None:
+        if index is None or self._table is None:     # both or neither
             return df
         return df, press.scene.lookup.force_interval(self._table, index, press.tips, df)
 
@@ -219,6 +221,8 @@ class Predictor:
         """The whole network on the points near the tip's path and the rings of neighbours
         its layers read; the rest stay where they are."""
         scene = press.scene
+        if press.radius is None:
+            raise ValueError("a press in a region needs its radius")
         core, used = region(scene.points, scene.neighbours, press.c[0, :3], press.c[0, 3:],
                             press.radius, self.hops)
         sub = scene.points[used]
@@ -291,8 +295,7 @@ class Predictor:
             if far > EXTRAPOLATION_FACTOR * self._extent:
                 outside.append(f"input reaches {far / self._extent:.1f} times the training "
                                "extent")
-            if self.norm.envelope is not None:
-                outside += self._beyond(start, end, scene)
+            outside += self._beyond(start, end, scene)
         return CheckedPress(scene, c[None], radius, still, outside, v)
 
     def _tip_reach(self, c: np.ndarray, start: list[float], end: list[float], scene: Scene
@@ -307,8 +310,12 @@ class Predictor:
 
     def _beyond(self, start: list[float], end: list[float], scene: Scene) -> list[str]:
         """Where a press (its tip start and end, m) lies outside the training envelope
-        (press length, depth, the tip start's distance from the surface), in words."""
-        env, out = self.norm.envelope, []
+        (press length, depth, the tip start's distance from the surface), in words; nothing
+        where the checkpoint keeps no envelope."""
+        env = self.norm.envelope
+        out: list[str] = []
+        if env is None:
+            return out
         length = math.dist(start, end)
         slack = MARGIN * env.press_max
         if length > env.press_max + slack:
@@ -350,7 +357,8 @@ class Predictor:
     @cached_property
     def _centre(self) -> tuple[float, float, float]:
         """The training data's centre (m), as plain floats."""
-        return tuple(float(v) for v in self.norm.centre)
+        x, y, z = (float(v) for v in self.norm.centre)
+        return x, y, z
 
     def _mm_tip(self, tips: np.ndarray, scene: Scene) -> bool:
         """Whether a tip given in millimetres would fit: divided by 1000 it lies within the

@@ -59,6 +59,8 @@ class SIModel(nn.Module):
         model the split does not hold for)."""
         terms = scene_terms(self.model, self.model.features(self.norm.points(points), None,
                                                             None, neighbours))
+        if terms.disp is None:              # scene_terms gives it unless told not to
+            raise ValueError("no displacement head terms")
         return terms.disp, terms.force
 
     def scene_and_press(self, points: torch.Tensor, neighbours: torch.Tensor,
@@ -79,6 +81,8 @@ class SIModel(nn.Module):
         disp, df = pressed_heads(self.model, HeadTerms(disp_terms, force_terms),
                                  n.condition(condition), n.points(points) if reads else None,
                                  n.points(surface) if reads and surface is not None else None)
+        if disp is None:                    # the terms hold the displacement head's
+            raise ValueError("no displacement from the scene's head terms")
         return in_metres(n, points, disp, df, condition)
 
     def pressed_force(self, force_terms: torch.Tensor, condition: torch.Tensor,
@@ -159,8 +163,8 @@ def example_inputs(si: SIModel, entry: str, n: int = 26) -> tuple[torch.Tensor, 
             "condition": torch.rand(1, 6) * 0.1,
             "neighbours": torch.cdist(points, points).topk(si.model.config.k,
                                                            largest=False).indices,
-            "disp_terms": torch.rand(1, n, si.model.disp_head[0].out_features),
-            "force_terms": torch.rand(1, si.model.force_head[0].out_features)}
+            "disp_terms": torch.rand(1, n, si.model.disp_head.first.out_features),
+            "force_terms": torch.rand(1, si.model.force_head.first.out_features)}
     return tuple(made[name] for name in ENTRIES[entry].inputs)
 
 
@@ -174,6 +178,8 @@ def to_onnx(si: SIModel, out: str | Path | io.BytesIO, entry: str = "export",
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)     # the TorchScript exporter
         torch.onnx.export(Call(si, entry).eval(), example_inputs(si, entry, example_points),
-                          out if isinstance(out, io.BytesIO) else str(out),
+                          # the TorchScript exporter (dynamo=False) also writes to a BytesIO,
+                          # which torch's annotation (str | PathLike | None; not 2.4's) leaves out
+                          out if isinstance(out, io.BytesIO) else str(out),  # type: ignore[arg-type, unused-ignore]
                           input_names=list(e.inputs), output_names=list(e.outputs),
                           opset_version=OPSET, dynamic_axes=axes, dynamo=False)

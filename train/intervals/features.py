@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -65,6 +66,10 @@ def path_distance(points: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.
     return np.sqrt(((rel - t[..., None] * axis) ** 2).sum(-1))
 
 
+@overload
+def press_depth(c: np.ndarray) -> np.ndarray: ...
+@overload
+def press_depth(c: Sequence[float]) -> float: ...
 def press_depth(c: Sequence[float] | np.ndarray) -> float | np.ndarray:
     """How far the tip moves, |tip end - tip start| (m), of C's six numbers along the first
     axis: a press's plain floats (a float back, in microseconds) or an array (6, ...) (an

@@ -41,7 +41,7 @@ class Bins:
         """The width at level index ``level`` for each value of ``features`` (one array or
         scalar per feature, broadcast together)."""
         flat = self.width[..., level].ravel()
-        i = 0
+        i: int | np.ndarray = 0
         for e, f in zip(self.edges, features, strict=True):
             i = i * (len(e) + 1) + np.searchsorted(e, f, side="right")
         return flat[i]
@@ -49,7 +49,8 @@ class Bins:
     def to_dict(self) -> dict:
         """Plain types (an unbounded width as None)."""
         return {"edges": [list(e) for e in self.edges],
-                "width": np.where(np.isfinite(self.width), self.width, None).tolist(),
+                # numpy 2's stubs refuse None as a choice of where (an object array here)
+                "width": np.where(np.isfinite(self.width), self.width, None).tolist(),  # type: ignore[call-overload, unused-ignore]
                 "count": self.count.tolist()}
 
     @classmethod

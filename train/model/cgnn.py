@@ -86,7 +86,11 @@ class ConditionedLinear(nn.Linear):
         (``enc`` (B, ..., E), where the layer reads one) and ``W_C C``."""
         if not self.conditioned:
             return part
+        if cond is None:
+            raise ValueError("the layer reads C: the press's condition is needed")
         if self.encoding:
+            if enc is None:
+                raise ValueError("the layer reads the offsets' encoding e: it is needed")
             f = self.features
             part = part + enc @ self.weight[:, f:f + self.encoding].T
         add = cond @ self.weight[:, -CONDITION:].T                          # (B, H)
@@ -113,6 +117,15 @@ class ConditionedMLP(nn.Sequential):
     def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None,
                 enc: torch.Tensor | None = None) -> torch.Tensor:
         return self.after_first(self[0](x, cond, enc))
+
+    @property
+    def first(self) -> ConditionedLinear:
+        """The first layer, on ``[x, e, C]``."""
+        layer = self[0]
+        if not isinstance(layer, ConditionedLinear):
+            raise TypeError(f"the head starts with a {type(layer).__name__}, not a "
+                            "ConditionedLinear")
+        return layer
 
     def after_first(self, x: torch.Tensor) -> torch.Tensor:
         """The layers after the first on its output."""
@@ -149,6 +162,8 @@ class CGNN(nn.Module):
         [p, p - c_start, p - c_end] (B, N, 9)."""
         if self.offsets is not Offsets.GRAPH:
             return points
+        if cond is None:
+            raise ValueError("a network with graph offsets reads the press: cond is needed")
         tips = cond.reshape(-1, 1, 2, 3)
         return torch.cat([points, points - tips[:, :, 0], points - tips[:, :, 1]], dim=-1)
 
@@ -157,6 +172,8 @@ class CGNN(nn.Module):
         network that does not read them in its heads."""
         if self.encoder is None:
             return None
+        if cond is None:
+            raise ValueError("a network with head offsets reads the press: cond is needed")
         d = points.unsqueeze(2) - cond.reshape(-1, 1, 2, 3)             # (B, N, 2, 3)
         r = torch.cat([d.flatten(2), torch.linalg.vector_norm(d, dim=-1)], dim=-1)
         return torch.relu(self.encoder(r))

@@ -17,6 +17,8 @@ themselves, so the layer's output does not depend on the order of the points.
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 from torch import nn
 
@@ -48,7 +50,7 @@ class DynamicEdgeConv(nn.Module):
         """Features (B, N, F) -> (B, N, O); ``neighbours`` (B, N, k), when the caller already
         knows the kNN of ``x`` (the first layer's, from 3-D points), skips the search; ``key``
         (B, N) breaks the search's ties (:func:`train.model.knn.knn`)."""
-        first, _, second = self.mlp
+        first, second = cast(nn.Linear, self.mlp[0]), self.mlp[2]    # as __init__ builds them
         f = x.shape[-1]
         w_centre, w_offset = first.weight[:, :f], first.weight[:, f:]    # (H, F) each
         own = x @ (w_centre - w_offset).T + first.bias                    # (B, N, H)

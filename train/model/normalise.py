@@ -15,7 +15,9 @@ of a version that did not keep it) only the distance checks apply.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -67,6 +69,18 @@ def tip_height(tip: np.ndarray, points: np.ndarray) -> float:
     return float(tip[2] - other[np.argmin(((other[:, :2] - tip[:2]) ** 2).sum(1)), 2])
 
 
+def _xyz(values: Iterable[float]) -> tuple[float, float, float]:
+    """Three numbers (a point) as plain floats."""
+    x, y, z = (float(v) for v in values)
+    return x, y, z
+
+
+def _floats(env: dict[str, Any]) -> dict[str, Any]:
+    """An :class:`Envelope`'s fields from its :meth:`Normaliser.to_dict` form: plain floats
+    (None where unknown)."""
+    return {f: None if env[f] is None else float(env[f]) for f in Envelope.__dataclass_fields__}
+
+
 @dataclass(frozen=True)
 class Normaliser:
     """The statistics (plain floats, so a checkpoint needs no unpickling)."""
@@ -87,7 +101,7 @@ class Normaliser:
         centre = p.mean(axis=0)
         spread = np.linalg.norm(p - centre, axis=1)
         d = np.linalg.norm(disp[valid & np.isfinite(disp).all(-1)], axis=1)
-        return cls(centre=tuple(float(v) for v in centre),
+        return cls(centre=_xyz(centre),
                    scale=float(max(np.sqrt(np.mean(spread**2)), 1e-9)),
                    disp_scale=float(max(np.sqrt(np.mean(d**2)), 1e-9)),
                    force_scale=float(max(np.sqrt(np.mean(np.square(dforce))), 1e-9)),
@@ -104,12 +118,10 @@ class Normaliser:
     def from_dict(cls, d: dict) -> Normaliser:
         """From :meth:`to_dict`'s form."""
         env = d["envelope"]
-        return cls(centre=tuple(float(v) for v in d["centre"]), scale=float(d["scale"]),
+        return cls(centre=_xyz(d["centre"]), scale=float(d["scale"]),
                    disp_scale=float(d["disp_scale"]), force_scale=float(d["force_scale"]),
                    extent=float(d["extent"]),
-                   envelope=None if env is None else Envelope(
-                       **{f: None if env[f] is None else float(env[f])
-                          for f in Envelope.__dataclass_fields__}))
+                   envelope=None if env is None else Envelope(**_floats(env)))
 
     def points(self, p: torch.Tensor) -> torch.Tensor:
         """Points (..., 3) in metres -> network units."""

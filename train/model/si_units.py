@@ -16,6 +16,7 @@ scale instead.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import overload
 
 import torch
 from torch import nn
@@ -62,6 +63,12 @@ def in_si(model: nn.Module, norm: Normaliser, points: torch.Tensor, condition: t
     return in_metres(norm, points, disp, df, condition)
 
 
+@overload
+def in_metres(norm: Normaliser, points: torch.Tensor, disp: torch.Tensor,
+              df: torch.Tensor, condition: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]: ...
+@overload
+def in_metres(norm: Normaliser, points: torch.Tensor, disp: None,
+              df: torch.Tensor, condition: torch.Tensor) -> tuple[None, torch.Tensor]: ...
 def in_metres(norm: Normaliser, points: torch.Tensor, disp: torch.Tensor | None,
               df: torch.Tensor, condition: torch.Tensor
               ) -> tuple[torch.Tensor | None, torch.Tensor]:

@@ -41,8 +41,8 @@ from train.training.migrate import migrate
 
 SCHEMA = ("phantom.checkpoint", "1.0")     # the name and version its provenance records
 REQUIRED = ("model", "config", "norm", "meta")
-META_TYPES = {"options": dict, "config": dict, "data": dict, "splits": str,
-              "init": (str, type(None))}
+META_TYPES: dict[str, type | tuple[type, ...]] = {
+    "options": dict, "config": dict, "data": dict, "splits": str, "init": (str, type(None))}
 
 
 def load_checkpoint(path: str | Path, device: str | torch.device = "cpu") -> dict[str, Any]:

@@ -213,6 +213,8 @@ def resume(run: Run, last: Path, device: torch.device) -> None:
 def update_average(run: Run, decay: float) -> None:
     """One step of the exponential average: avg <- decay avg + (1 - decay) weights, over all
     parameters in one call."""
+    if run.averaged is None:
+        raise ValueError("no averaged weights to update: the run keeps no average (ema)")
     torch._foreach_lerp_(list(run.averaged.parameters()), list(run.model.parameters()),
                          1.0 - decay)
 
@@ -270,7 +272,7 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         run.optimizer.zero_grad(set_to_none=True)
         (loss * ctx.world / len(rows)).backward()     # DDP averages: the global batch's mean
         run.optimizer.step()
-        if run.averaged is not None:
+        if run.averaged is not None and opts.ema is not None:     # both or neither
             update_average(run, opts.ema)
         total += torch.stack([loss.detach(), torch.tensor(float(len(mine)), device=device)])
     total = ctx.total(total)

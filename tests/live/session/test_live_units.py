@@ -14,6 +14,9 @@ from data_schema.session import read_session
 from live.protocol.parameters import AnalogDevice, QtmParameters
 from live.session.journal import FORCE, MARKERS, Journal, read_journal
 from live.session.layout import live_layout
+from live.session.presses import PressTracker
+from sync.presses import MERGE_S, MIN_PRESS_S, PressRule, segment_presses
+from sync.sync_params import SyncParams
 
 SOURCE = "QTM RT 127.0.0.1:1"
 
@@ -59,15 +62,13 @@ def test_the_session_is_held_against_qtms_labels_and_boards(twin_session: Path) 
 def test_presses_are_found_as_the_samples_arrive() -> None:
     """Three raised cosines on a 1 kHz force, fed a frame (2 samples) at a time: peaks 6, 0.4
     (below detect: a touch) and 3 N, a flicker below contact inside the first (one contact)."""
-    from live.session.presses import PressTracker
-
     rate, t = 1000.0, np.arange(12000) / 1000.0
     force = np.zeros_like(t)
     for start, peak in ((1.0, 6.0), (5.0, 0.4), (8.0, 3.0)):
         inside = (t >= start) & (t < start + 2.0)
         force[inside] = peak * 0.5 * (1 - np.cos(np.pi * (t[inside] - start)))
     force[1500:1510] = 0.0                        # 10 ms below contact: the same contact
-    tracker, done = PressTracker(rate, detect_n=0.5, contact_n=0.05), []
+    tracker, done = PressTracker(rate, PressRule(SyncParams().detect_n, SyncParams().contact_n)), []
     times = np.round(t * 1e9).astype(np.int64)
     for i in range(0, len(t), 2):
         done += tracker.add(times[i:i + 2], force[i:i + 2])
@@ -75,3 +76,30 @@ def test_presses_are_found_as_the_samples_arrive() -> None:
     assert [round(d.peak_n, 3) for d in done] == [6.0, 3.0]
     assert [d.peak_ns for d in done] == [2_000_000_000, 9_000_000_000]
     assert abs(done[0].start_ns - 1.0e9) < 0.2e9 and abs(done[1].end_ns - 10.0e9) < 0.2e9
+
+
+def test_the_stream_and_the_whole_series_find_presses_by_one_rule() -> None:
+    """Flat contacts at 1 kHz (a touch shorter than MIN_PRESS_S, contacts a flicker shorter
+    than MERGE_S apart, two further apart, one below the detection level), fed to the tracker
+    a frame (4 samples) at a time and to sync's segmentation whole: the same four presses,
+    where they were made."""
+    rate, level = 1000.0, SyncParams().detect_n
+    contacts = [(1.0, 1.0 + 0.5 * MIN_PRESS_S, 4 * level), (2.0, 2.5, 4 * level),
+                (4.0, 4.4, 6 * level), (4.4 + 0.5 * MERGE_S, 4.8, 4 * level),
+                (6.0, 6.4, 4 * level), (6.4 + 2 * MERGE_S, 6.8, 8 * level),
+                (8.0, 10.0, 0.5 * level)]
+    truth = [(2.0, 2.5), (4.0, 4.8), (6.0, 6.4), (6.4 + 2 * MERGE_S, 6.8)]
+    force = np.zeros(12000)
+    for start, stop, f in contacts:
+        force[round(start * rate):round(stop * rate)] = f
+    rule = PressRule(SyncParams().detect_n, SyncParams().contact_n)
+    tracker, done = PressTracker(rate, rule), []
+    times = np.arange(len(force)) * 1_000_000
+    for i in range(0, len(force), 4):
+        done += tracker.add(times[i:i + 4], force[i:i + 4])
+    whole, _ = segment_presses(force, rate, rule)
+    assert [(d.start_ns, d.end_ns + 1_000_000) for d in done] == \
+        [(round(a * 1e9), round(b * 1e9)) for a, b in truth]
+    assert [(p.onset, p.release) for p in whole] == \
+        [(round(a * rate), round(b * rate)) for a, b in truth]
+    assert [d.peak_n for d in done] == [4 * level, 6 * level, 4 * level, 8 * level]

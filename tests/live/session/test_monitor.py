@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from helpers.live_frames import LiveInputs, frames, live_inputs
 
-from live.session.calibration import TARE_S
+from calib.force_tare import TARE_S
 from live.session.model import ModelRefusal
 from live.session.monitor import Monitor
 from sync.force_conditioning import rails

@@ -114,11 +114,19 @@ def test_the_finest_grid_holds_a_place_in_every_region_s_middle(places, footprin
     assert finest_grid(places, footprint) == shape
 
 
-def test_places_are_the_mean_tips_of_presses_within_5_mm(tmp_path):
-    sequences, _ = read_measured(_made(tmp_path / "flat.h5", None))
+def test_places_are_the_states_file_s_locations_centred_on_their_tips(tmp_path):
+    """Each MSM location (a loaded mass) is a place; a press twice is the same place; the
+    file's ids decide, not how near the tips rest (one id for all: one place at their mean)."""
+    path = _made(tmp_path / "flat.h5", None)
+    sequences, _ = read_measured(path)
+    with h5py.File(path) as f:
+        locations = set(f["states/location"][()].tolist())
     centres = place_centres(sequences + sequences)        # each press twice: the same places
-    assert len(centres) == len(place_centres(sequences)) == len(
+    assert len(centres) == len(place_centres(sequences)) == len(locations) == len(
         {tuple(np.round(s.rest[s.is_tip][0, :2], 6)) for s in sequences})
+    tips = np.array([s.rest[s.is_tip][0, :2] for s in sequences])
+    one = place_centres([replace(s, location=7) for s in sequences])
+    np.testing.assert_allclose(one, [tips.mean(axis=0)])
 
 
 def _map(factors: list[list[float]], held: tuple[tuple[int, int], ...] = ()) -> MapResult:

@@ -15,6 +15,7 @@ from data_schema.states import validate_states
 from pipeline.cli import cli
 from sim.msm.msm import MSM
 from sim.msm.msm_prior import PRIOR, draw_phantom
+from sim.msm.msm_prior_data import PriorRun, simulate_prior
 from sim.msm.msm_sampling import contact_masses
 
 BLOCKS = range(24)
@@ -70,8 +71,46 @@ def test_impossible_ranges_are_refused() -> None:
     crowded = replace(PRIOR, side=(0.06, 0.06), pitch=(0.025, 0.025), markers=(60, 64))
     with pytest.raises(BadInput, match="no phantom"):       # 60 markers 25 mm apart on 6 cm
         draw_phantom(crowded, 0, 0, 1, 1)
-    with pytest.raises(BadInput, match="k_fixed"):
-        replace(PRIOR, k_fixed=(5.0, 1.0)).check()
+    with pytest.raises(BadInput, match=r"^k_fixed \(5, 1\): not a range"):
+        replace(PRIOR, k_fixed=(5.0, 1.0))
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"k_between": (0.0, 420.0)}, "k_between 0.0 N/m: must be in [1, 100000] N/m"),
+    ({"markers": (3, 64)}, "markers 3: must be >= 4"),
+    ({"side": (0.06, 3.0)}, "side 3.0 m: must be in (0, 2] m"),
+    ({"max_angle_deg": (0.0, 95.0)}, "max_angle_deg 95.0 deg: must be in [0, 90] deg"),
+    ({"missing": (0.0, 1.0)}, "missing 1.0: must be in [0, 1)"),
+    ({"pitch": (0.0, 0.025)}, "pitch 0.0 m: must be > 0 m"),
+])
+def test_a_range_out_of_its_bound_is_refused_in_one_line(change, words) -> None:
+    """The prior's ranges are checked by their bounds, as every setting is, when it is
+    made."""
+    from core.errors import BadInput
+
+    with pytest.raises(BadInput) as refused:
+        replace(PRIOR, **change)
+    assert str(refused.value).startswith(words) and "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize(("counts", "option"), [((0, 2, 1), "--prior 0: must be >= 1"),
+                                                ((3, 0, 1), "--locations 0: must be >= 1"),
+                                                ((3, 2, -1), "--directions -1: must be >= 1")])
+def test_a_run_of_no_phantoms_is_refused_naming_the_option_that_sets_it(counts, option):
+    """A library caller is refused in the words of ``pipeline simulate``'s option (the count of
+    phantoms is ``--prior``), as the command line refuses it."""
+    from core.errors import BadInput
+
+    with pytest.raises(BadInput) as refused:
+        simulate_prior(PriorRun(PRIOR, *counts, seed=0))
+    assert str(refused.value) == option
+
+
+def test_the_command_line_refuses_no_places_in_one_line(tmp_path) -> None:
+    res = CliRunner().invoke(cli, ["-q", "simulate", "--prior", "2", "--locations", "0",
+                                   "--out", str(tmp_path / "x.h5")])
+    assert res.exit_code == 2 and not (tmp_path / "x.h5").exists()
+    assert res.stderr.strip() == "error: --locations 0: must be >= 1"
 
 
 def _simulate(out: Path, *extra: str) -> None:

@@ -10,8 +10,11 @@ import pytest
 import torch
 from helpers.interval_table import FAR, HALF, NEAR, known_table
 
+from data_schema.intervals_doc import Intervals
+from data_schema.metrics_doc import Gain, Metrics, PooledRow, RunRow, Scores, SetMetrics
 from train.data import Batch
-from train.evaluation.coverage import coverage, coverage_doc, coverage_table
+from train.evaluation.coverage import coverage, coverage_doc
+from train.evaluation.coverage_table import coverage_table
 from train.evaluation.eval_view import write_eval_recording
 from train.model.si_units import BatchPrediction
 from train.training.calibrate import Residuals
@@ -27,8 +30,13 @@ def _residuals() -> Residuals:
                      np.array([[1e-3, 0.0], [1e-3, 0.0]]))
 
 
+def _doc(*args, **kwargs) -> dict:
+    """:func:`coverage_doc` as metrics.json keeps it."""
+    return coverage_doc(*args, **kwargs).to_json()
+
+
 def test_coverage_counts_points_inside_their_radius() -> None:
-    doc = coverage_doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)
+    doc = _doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)
     for level in doc["levels"]:
         assert level["points"] == 8 and level["coverage"] == pytest.approx(5 / 8)
         assert level["mean_radius_mm"] == pytest.approx((4 * NEAR + 4 * FAR) / 8 * 1e3)
@@ -50,7 +58,7 @@ def test_the_tips_own_point_is_reported_apart() -> None:
     r.point_error = np.r_[r.point_error, 2e-3, 0.5e-3]
     r.point_features = np.r_[r.point_features, [[0.0, 1e-3, 0.0], [5e-5, 1e-3, 0.0]]]
     r.point_example = np.r_[r.point_example, 0, 1]
-    doc = coverage_doc(coverage(known_table(), r), ld_mean_mm=0.275)
+    doc = _doc(coverage(known_table(), r), ld_mean_mm=0.275)
     assert doc["levels"][1]["points"] == 10 and doc["levels"][1]["coverage"] == 0.6
     assert [b["points"] for b in doc["by_distance"]] == [4, 4]
     tip = doc["tip_point"]
@@ -60,7 +68,7 @@ def test_the_tips_own_point_is_reported_apart() -> None:
 
 def test_folds_pool_by_adding() -> None:
     one = coverage(known_table(), _residuals())
-    doc = coverage_doc(one + one, ld_mean_mm=0.275)
+    doc = _doc(one + one, ld_mean_mm=0.275)
     assert doc["levels"][1]["points"] == 16 and doc["levels"][1]["coverage"] == 5 / 8
 
 
@@ -69,33 +77,46 @@ def test_each_share_carries_its_band_into_the_document_and_the_table() -> None:
     none was measured (a run whose presses cannot be re-drawn)."""
     bands = {"points": [[0.5, 0.7], [0.55, 0.75], [0.6, 0.8]],
              "force": [[0.3, 0.9], [0.35, 0.95], [0.4, 1.0]]}
-    doc = coverage_doc(coverage(known_table(), _residuals()), 0.275, bands)
+    intervals = coverage_doc(coverage(known_table(), _residuals()), 0.275, bands)
+    doc = intervals.to_json()
     assert [v["band"] for v in doc["levels"]] == bands["points"]
     assert [v["force_band"] for v in doc["levels"]] == bands["force"]
-    variant = {"model": "cGNN"}
-    table = coverage_table({"overall": [{"variant": variant, "test_set": "Exp",
-                                         "intervals": doc}], "runs": []}, lambda r, o: "TL")
+    table = coverage_table(Scores(runs=[], overall=[_pooled("Exp", intervals)]),
+                           lambda r, o: "TL")
     assert "| TL | Exp | all | 62.5% (50-70 %) / " in table and "50.0% (35-95 %) / " in table
-    plain = coverage_doc(coverage(known_table(), _residuals()), 0.275)
+    plain = _doc(coverage(known_table(), _residuals()), 0.275)
     assert "band" not in plain["levels"][0] and "force_band" not in plain["levels"][0]
 
 
 def test_the_table_names_runs_that_share_a_fold_by_their_folder() -> None:
     """Each lab fold's MSM set is fold 0 of its own manifest: its rows name the run."""
     doc = coverage_doc(coverage(known_table(), _residuals()), ld_mean_mm=0.275)
-    variant = {"model": "cGNN"}
 
-    def runs(names: list[str], folds: list[int]) -> list[dict]:
-        return [{"run": f"out/runs/{n}", "fold": f, "variant": variant, "test_set": "MSM",
-                 "intervals": doc} for n, f in zip(names, folds, strict=True)]
+    def runs(names: list[str], folds: list[int]) -> list[RunRow]:
+        return [RunRow(run=f"out/runs/{n}", fold=f, test_set="MSM", intervals=doc,
+                       **_ROW) for n, f in zip(names, folds, strict=True)]
 
-    overall = [{"variant": variant, "test_set": "MSM", "intervals": doc}]
-    shared = coverage_table({"overall": overall, "runs": runs(["msm_fold1", "msm_fold0"],
-                                                              [0, 0])}, lambda r, o: "MSM")
+    overall = [_pooled("MSM", doc)]
+    shared = coverage_table(Scores(overall=overall, runs=runs(["msm_fold1", "msm_fold0"],
+                                                              [0, 0])), lambda r, o: "MSM")
     assert _fold_cells(shared) == ["all", "msm_fold0", "msm_fold1"]
-    apart = coverage_table({"overall": overall, "runs": runs(["tl_b", "tl_a"], [1, 0])},
+    apart = coverage_table(Scores(overall=overall, runs=runs(["tl_b", "tl_a"], [1, 0])),
                            lambda r, o: "MSM")
     assert _fold_cells(apart) == ["all", "0", "1"]
+
+
+_METRICS = Metrics(n=1, force_mse_n2=0.0, force_abs_n=0.0, force_abs_sd_n=0.0,
+                   ld_mean_mm=0.275, ld_mean_sd_mm=0.0, ld_max_mm=0.5, ld_max_sd_mm=0.0)
+_ROW = {"label": "MSM", "variant": {"model": "cGNN"}, "metrics": SetMetrics(all=_METRICS),
+        "references": {}, "gain": Gain(ld_reference=None, ld_reference_mm=None, ld_gain=None,
+                                       force_reference=None, force_reference_n=None,
+                                       force_gain=None)}
+
+
+def _pooled(test_set: str, intervals: Intervals) -> PooledRow:
+    """A variant's row on ``test_set`` with ``intervals`` (the rest beside the point)."""
+    return PooledRow(test_set=test_set, folds=1, fold_ids=[0], fold_ld_mean_sd_mm=0.0,
+                     folds_not_beating_references=[], intervals=intervals, **_ROW)
 
 
 def _fold_cells(table: str) -> list[str]:

@@ -13,18 +13,18 @@ from click.testing import CliRunner
 
 from core.errors import BadInput
 from core.recording import rrd_entities
-from data_schema.json_docs import validate_metrics
+from data_schema.metrics_doc import validate_metrics
 from pipeline.cli import cli
 from tests.helpers.cgnn_data import dent_fold
-from train.evaluation.lump import REACH_M, Lump, parse_lump
+from train.evaluation.lump import LUMP_REACH_M, Lump, parse_lump
 
 TINY = ("--epochs", "1", "--batch", "8", "--device", "cpu", "--no-rrd")
 
 
 def test_a_press_within_radius_plus_reach_is_over_the_lump():
     lump = Lump(0.05, 0.04, 0.012)
-    xy = np.array([[0.05, 0.04], [0.05 + 0.012 + REACH_M - 1e-6, 0.04],
-                   [0.05, 0.04 + 0.012 + REACH_M + 1e-6], [0.0, 0.0]])
+    xy = np.array([[0.05, 0.04], [0.05 + 0.012 + LUMP_REACH_M - 1e-6, 0.04],
+                   [0.05, 0.04 + 0.012 + LUMP_REACH_M + 1e-6], [0.0, 0.0]])
     np.testing.assert_array_equal(lump.over(xy), [True, True, False, False])
 
 
@@ -55,7 +55,7 @@ def _truth_over(data: Path, splits: Path, lump: Lump) -> int:
         for s in ("single", "multi"):
             start = f[f"{s}/start"][()][np.asarray(doc["folds"][0]["test"][s], dtype=int)]
             gap = np.hypot(tips[start, 0] - lump.x, tips[start, 1] - lump.y)
-            count += int((gap <= lump.radius + REACH_M).sum())
+            count += int((gap <= lump.radius + LUMP_REACH_M).sum())
     return count
 
 

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 from helpers.cgnn_data import TINY, dent_fold
 
+from data_schema.metrics_doc import ScarcityRow
 from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
-from train.evaluation.scarcity import FIELDS, curve, scarcity_rows, write_csv
+from train.evaluation.scarcity import curve, scarcity_rows, write_csv
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train
@@ -26,7 +27,7 @@ OPTS = TrainOptions(epochs=1, batch=8, rotate=True)
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory) -> tuple[Path, list[dict], Path]:
+def study(tmp_path_factory) -> tuple[Path, list[ScarcityRow], Path]:
     """A run fine-tuned (one epoch) from another, and its study on its first group."""
     d = tmp_path_factory.mktemp("scarcity")
     data, splits = dent_fold(d)
@@ -40,14 +41,16 @@ def study(tmp_path_factory) -> tuple[Path, list[dict], Path]:
 def test_each_group_count_has_both_models_and_the_three_references(study) -> None:
     _, rows, _ = study
     names = ["no TL", "TL", NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR]
-    assert [(r["groups"], r["predictor"]) for r in rows] == \
-        [(1, p) for p in names]
-    assert all(r["fold"] == 0 for r in rows)
+    assert [(r.groups, r.predictor) for r in rows] == [(1, p) for p in names]
+    assert all(r.fold == 0 for r in rows)
     for r in rows:
-        if r["predictor"] in ("TL", "no TL"):
-            assert 0 <= r["points_90"] <= 1 and 0 <= r["force_90"] <= 1
+        row = r.to_json()                         # as metrics.json and the CSV keep it
+        if r.predictor in ("TL", "no TL"):
+            assert 0 <= row["points_90"] <= 1 and 0 <= row["force_90"] <= 1
             for what in ("points", "force"):      # one press: the range it falls in by chance
-                assert 0 <= r[f"{what}_90_low"] <= r[f"{what}_90_high"] <= 1
+                assert 0 <= row[f"{what}_90_low"] <= row[f"{what}_90_high"] <= 1
+        else:                                     # a reference keeps no intervals
+            assert "points_90" not in row and r.shares is None
 
 
 def test_each_retraining_is_the_run_on_its_subset_with_its_init_or_none(study) -> None:
@@ -72,21 +75,30 @@ def test_the_reference_that_learns_nothing_is_the_test_examples_displacement(stu
                                 for s in ("single", "multi")])
     moved = np.linalg.norm(points[pairs[:, 1]] - points[pairs[:, 0]], axis=2)
     want = float(moved.mean(axis=1).mean()) * 1e3
-    still = [r for r in rows if r["predictor"] == NOTHING_MOVES]
-    assert [r["ld_mean_mm"] for r in still] == pytest.approx([want], rel=1e-5)
-    assert still[0]["ld_max_mm"] == pytest.approx(float(moved.max(axis=1).mean()) * 1e3,
-                                                  rel=1e-5)
+    still = [r for r in rows if r.predictor == NOTHING_MOVES]
+    assert [r.ld_mean_mm for r in still] == pytest.approx([want], rel=1e-5)
+    assert still[0].ld_max_mm == pytest.approx(float(moved.max(axis=1).mean()) * 1e3,
+                                               rel=1e-5)
 
 
 def test_the_curve_averages_the_folds_per_group_and_skips_what_is_missing() -> None:
-    rows = [{"fold": f, "groups": g, "predictor": "TL", "ld_mean_mm": v}
+    rows = [ScarcityRow(fold=f, groups=g, predictor="TL", ld_mean_mm=v, ld_max_mm=None,
+                        force_abs_n=0.1)
             for f, g, v in ((0, 1, 2.0), (1, 1, 4.0), (0, 2, 1.0), (1, 2, None))]
-    assert curve(rows, "TL", "ld_mean_mm") == ([1, 2], [3.0, 1.0])
-    assert curve(rows, "no TL", "ld_mean_mm") == ([], [])
+    assert curve(rows, "TL", lambda r: r.ld_mean_mm) == ([1, 2], [3.0, 1.0])
+    assert curve(rows, "no TL", lambda r: r.ld_mean_mm) == ([], [])
+
+
+HEADER = ("fold,groups,predictor,ld_mean_mm,ld_max_mm,force_abs_n,points_90,force_90,"
+          "points_90_low,points_90_high,force_90_low,force_90_high")
 
 
 def test_the_csv_has_the_study_s_fields(study, tmp_path) -> None:
+    """The CSV's columns, as the study has always written them; a reference's row leaves
+    its model's columns empty."""
     _, rows, _ = study
     write_csv(tmp_path / "s.csv", rows)
     lines = (tmp_path / "s.csv").read_text().splitlines()
-    assert lines[0].split(",") == list(FIELDS) and len(lines) == len(rows) + 1
+    assert lines[0] == HEADER and len(lines) == len(rows) + 1
+    reference = lines[1 + [r.predictor for r in rows].index(NOTHING_MOVES)].split(",")
+    assert reference[:3] == ["0", "1", NOTHING_MOVES] and reference[6:] == [""] * 6

@@ -79,16 +79,17 @@ def test_a_flag_given_overrides_the_recipe(resolved) -> None:
 
 
 def test_the_demo_trains_with_recipe_ours(resolved, tmp_path) -> None:
-    from pipeline.demo_plan import GENERIC, NETWORKS, QUICK, RECIPE, demo_steps
+    from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, Pretraining, demo_steps
 
     networks = {"head-offsets": {"offsets": "heads"}, "tip-offsets": {"offsets": "graph"},
                 "paper": {"offsets": "none"}}
     for flags, network in ((RECIPE, {}), *((NETWORKS[n], networks[n]) for n in NETWORKS)):
         trains = [s for s in demo_steps(tmp_path / "demo", 0, QUICK, "cpu", flags,
-                                        pretraining=GENERIC) if s.args[0] == "train"]
+                                        pretraining=Pretraining.GENERIC)
+                  if s.args[0] == "train"]
         assert {s.stage for s in trains} == {"train (pre-training)", "train (fine-tuning)"}
         for step in trains:
-            epochs, lr = (QUICK.generic_epochs, QUICK.generic_lr) \
+            epochs, lr = (QUICK.generic.epochs, QUICK.generic.lr) \
                 if step.stage == "train (pre-training)" else (QUICK.finetune_epochs, QUICK.lr)
             args = [a for a in step.args[step.args.index("--epochs"):] if a != "--init"]
             got = resolved(*(a for a in args if not a.endswith(".pt")))

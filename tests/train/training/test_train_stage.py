@@ -16,7 +16,8 @@ from helpers.cgnn_data import dent_fold, write_dent_states
 from core.errors import BadInput
 from core.recording import rrd_entities
 from pipeline.cli import cli
-from train.evaluation.evaluate import evaluate_runs, table2
+from train.evaluation.metrics_table import table2
+from train.evaluation.scoring import evaluate_runs
 from train.model.config import CGNNConfig
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
@@ -162,7 +163,7 @@ def test_eval_of_a_do_nothing_model_measures_the_true_displacement(dent, tmp_pat
         if key.startswith(("disp_head.2.", "force_head.6.")):
             state["model"][key].zero_()
     torch.save(state, best)
-    result = evaluate_runs([tmp_path / "run"])
+    result = evaluate_runs([tmp_path / "run"]).to_json()     # as metrics.json keeps it
     doc = json.loads(splits.read_text())
     with h5py.File(data) as f:
         pts, force = f["states/points"][()], f["states/force"][()]
@@ -255,7 +256,7 @@ def test_a_run_records_its_variant_and_a_fine_tuned_one_its_pre_training(dent, t
                        "pretrained": {"model": "cGNN", "train_data": "Exp", "rotate": False,
                                       "aug": True, "pretrained": None, "offsets": "none"},
                        "offsets": "none"}
-    result = evaluate_runs([run])
+    result = evaluate_runs([run]).to_json()
     assert result["runs"][0]["variant"] == variant
     assert result["overall"][0]["label"] == "cGNN/aug Exp (TL)"
 
@@ -271,13 +272,14 @@ def test_fine_tuned_runs_that_differ_only_in_rotation_are_not_pooled(dent, tmp_p
         runs.append(tmp_path / f"tl_rot{rotate}")
         run_train(TrainInputs(data, splits, pre / "best.pt"), runs[-1],
                   TrainParams(TrainOptions(epochs=1, batch=8, rotate=rotate), SMALL, "cpu"))
-    result = evaluate_runs(runs)
+    scores = evaluate_runs(runs)
+    result = scores.to_json()
     assert [r["label"] for r in result["overall"]] == ["cGNN/Exp (TL)"] * 2
     assert [r["variant"]["rotate"] for r in result["overall"]] == [False, True]
     assert [r["folds"] for r in result["overall"]] == [1, 1]
     for row, run in zip(result["overall"], result["runs"], strict=True):
         assert row["metrics"]["all"]["ld_mean_mm"] == run["metrics"]["all"]["ld_mean_mm"]
-    table = table2(result)
+    table = table2(scores)
     assert "| cGNN/Exp from cGNN/Exp | Exp |" in table
     assert "| cGNN/rot Exp from cGNN/Exp | Exp |" in table
 

@@ -1,0 +1,41 @@
+"""Static states read off one press: a level the force reaches only to within rounding is
+still read (it used to be counted as reached and never crossed), at the frame that reaches it;
+a level reached properly is read where the linear ramp crosses it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from extract.extract_params import ExtractParams
+from extract.static_states import PressSeries, press_states
+
+RATE = 100.0
+
+
+def ramp_press(peak_n: float) -> PressSeries:
+    """A still surface of one point and a tip, 1 s of rest, then a force rising linearly
+    to ``peak_n`` over 1 s (its peak at t = 2 s, exactly ``peak_n``) and falling as fast."""
+    t = np.arange(300) / RATE
+    force = np.clip(1.0 - np.abs(t - 2.0), 0.0, None) * peak_n
+    peak = int(round(2.0 * RATE))
+    force[peak] = peak_n
+    points = np.zeros((len(t), 2, 3))
+    points[:, 1, 2] = -t * 1e-3            # the tip sinks 1 mm a second
+    onset = int(np.flatnonzero(force > 0)[0])
+    return PressSeries(time_s=t, points=points, force=force, onset=onset, peak=peak)
+
+
+def test_a_level_reached_only_to_rounding_is_read_at_the_frame_that_reaches_it() -> None:
+    press = ramp_press(1.0 * (1 - 1e-12))     # 2 levels of 0.5 N, the top a hair short
+    states = press_states(press, ExtractParams())
+    assert list(states.step) == [0, 1, 2]
+    assert states.time_s[2] == press.time_s[press.peak]
+    assert abs(states.time_s[1] - 1.5) < 1e-9         # 0.5 N: halfway up the ramp
+
+
+def test_a_level_between_frames_is_read_where_the_ramp_crosses_it() -> None:
+    press = ramp_press(0.8)                   # 0.5 N at t = 1.625 s, between two frames
+    states = press_states(press, ExtractParams())
+    assert list(states.step) == [0, 1]
+    assert abs(states.time_s[1] - 1.625) < 1e-9
+    assert abs(states.points[1, 1, 2] + 1.625e-3) < 1e-9    # the tip read at that instant
