@@ -39,10 +39,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from data_schema.metrics_doc import RunRow, Scores  # noqa: E402
+from data_schema.metrics_doc import (  # noqa: E402
+    FORCE_LINEAR,
+    NEAREST_PRESS,
+    NOTHING_MOVES,
+    REFERENCES,
+    RunRow,
+    Scores,
+)
 from pipeline.demo_plan import NETWORKS  # noqa: E402
 from pipeline.demo_targets import scarcity_rows, variant_of  # noqa: E402
-from train.evaluation.references import FORCE_LINEAR, NAMES, NEAREST_PRESS, NOTHING_MOVES  # noqa: E402
 from train.evaluation.scarcity import curve  # noqa: E402
 
 
@@ -71,7 +77,7 @@ def reference_row(runs: list[RunRow]) -> str:
     ld = [np.mean([r.references[ref].ld_mean_mm for r in runs])
           for ref in (NOTHING_MOVES, NEAREST_PRESS)]
     force = np.mean([r.references[FORCE_LINEAR].force_abs_n for r in runs])
-    return (f"| {' / '.join(NAMES)} | {ld[0]:.3f} / {ld[1]:.3f} | – "
+    return (f"| {' / '.join(REFERENCES)} | {ld[0]:.3f} / {ld[1]:.3f} | – "
             f"| – | {force:.3f} (linear) |")
 
 

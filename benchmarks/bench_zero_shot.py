@@ -2,7 +2,7 @@
 predictors that learn nothing, on the same test examples.
 
     python benchmarks/bench_zero_shot.py [--generic RUN/best.pt] [--labs default 6x6 scattered] \
-        [--seeds 0 1 2] [--out DIR]
+        [--seeds 0 1 2] [--out DIR] [--rings]
 
 ``--generic``: a checkpoint, or (the default) the generic model shipped with the package.
 
@@ -14,6 +14,12 @@ moves" needs no data and "nearest press" is fitted on the fold's training presse
 ``pipeline eval``. Printed per lab and seed: each fold's mean L_d (mm) of the model and the two
 references, whether the model beats "nothing moves" in every fold, and in which folds it beats
 "nearest press"; then a pooled line per lab.
+
+``--rings`` adds, per lab and seed, where the error comes from: over every fold's test
+examples, the phantom's points (the tip's aside) in rings of distance from the tip's start
+(in x, y), each ring's mean true displacement, the model's predicted displacement and its
+error (a ring whose error exceeds its true displacement does worse than "nothing moves"
+there), and the tip's own point apart.
 """
 
 from __future__ import annotations
@@ -73,6 +79,55 @@ def fold_rows(generic: Path, states: Path, splits: Path) -> list[dict[str, float
     return rows
 
 
+RINGS_MM = (0, 10, 20, 40, 1000)
+
+
+def ring_rows(generic: Path, states: Path, splits: Path) -> list[tuple[str, float, float,
+                                                                         float, int]]:
+    """Over every fold's test examples: per ring of distance from the tip's start (and the
+    tip's own point), the mean true and predicted displacement and error (mm), and the count."""
+    import torch
+
+    from train.data import SETS, make_batch
+    from train.evaluation.run_errors import on_lab
+    from train.model.si_units import predict
+    from train.training.checkpoint import load_checkpoint
+
+    state = load_checkpoint(generic, "cpu")
+    moved: list[torch.Tensor] = []   # per batch (B, N, 4): distance, true, predicted, error
+    masks: list[torch.Tensor] = []
+    for fold in range(FOLDS):
+        run = on_lab(state, states, splits, fold)
+        for name in SETS:
+            b = make_batch(run.states, run.states.pairs[name][torch.as_tensor(run.test[name])])
+            with torch.no_grad():
+                p = predict(run.model, run.norm, b)
+            r = (b.points[..., :2] - b.cond[:, None, :2]).norm(dim=2)
+            moved.append(torch.stack([r, (b.target - b.points).norm(dim=2),
+                                      (p.deformed - b.points).norm(dim=2),
+                                      (p.deformed - b.target).norm(dim=2)], -1) * 1e3)
+            masks.append(b.mask)
+    d, m = torch.cat(moved), torch.cat(masks)
+    tip = torch.zeros_like(m)
+    tip[:, -1] = True
+    rows = []
+    for lo, hi in zip(RINGS_MM[:-1], RINGS_MM[1:], strict=True):
+        keep = m & ~tip & (d[..., 0] >= lo) & (d[..., 0] < hi)
+        rows.append((f"{lo}-{hi} mm" if hi < RINGS_MM[-1] else f"beyond {lo} mm",
+                     *(float(d[..., k][keep].mean()) for k in (1, 2, 3)), int(keep.sum())))
+    keep = m & tip
+    rows.append(("the tip's point", *(float(d[..., k][keep].mean()) for k in (1, 2, 3)),
+                 int(keep.sum())))
+    return rows
+
+
+def print_rings(lab: str, seed: int, rows: list[tuple[str, float, float, float, int]]) -> None:
+    print(f"\n{lab}, seed {seed}: the generic model's points by distance from the tip\n"
+          "| ring | true displacement | predicted | error | points |\n|---|---|---|---|---|")
+    for ring, true, pred, err, n in rows:
+        print(f"| {ring} | {true:.3f} mm | {pred:.3f} mm | {err:.3f} mm | {n} |")
+
+
 def pooled(rows: list[dict[str, float]], key: str) -> float:
     return sum(r[key] * r["n"] for r in rows) / sum(r["n"] for r in rows)
 
@@ -84,6 +139,8 @@ def main() -> None:
     ap.add_argument("--labs", nargs="+", choices=list(LABS), default=list(LABS))
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_zero_shot"))
+    ap.add_argument("--rings", action="store_true",
+                    help="also where the error comes from: rings of distance from the tip")
     a = ap.parse_args()
     import torch
 
@@ -95,9 +152,13 @@ def main() -> None:
           "moves | beats nearest press |")
     print("|---|---|---|---|---|---|")
     by_lab: dict[str, list[dict[str, float]]] = {}
+    rings = []
     for lab in a.labs:
         for seed in a.seeds:
-            rows = fold_rows(resolve(a.generic), *session(a.out, lab, seed))
+            files = session(a.out, lab, seed)
+            rows = fold_rows(resolve(a.generic), *files)
+            if a.rings:
+                rings.append((lab, seed, ring_rows(resolve(a.generic), *files)))
             by_lab.setdefault(lab, []).extend(rows)
             show = {k: " ".join(f"{r[k]:.3f}" for r in rows)
                     for k in ("generic", NOTHING_MOVES, NEAREST_PRESS)}
@@ -109,6 +170,8 @@ def main() -> None:
     for lab, rows in by_lab.items():
         print(f"| {lab} | {pooled(rows, 'generic'):.3f} mm | {pooled(rows, NOTHING_MOVES):.3f} "
               f"mm | {pooled(rows, NEAREST_PRESS):.3f} mm |")
+    for lab, seed, table in rings:
+        print_rings(lab, seed, table)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after the backend is chosen
 
 from core.atomic import atomic_output  # noqa: E402
-from train.evaluation.references import NOTHING_MOVES  # noqa: E402
+from data_schema.metrics_doc import NOTHING_MOVES  # noqa: E402
 
 
 def table(rows: list[dict], cols: list[tuple[str, str, str]]) -> str:

@@ -12,15 +12,16 @@
 - :data:`THICKNESS_M`: the phantom's thickness, 32 mm (the twin's block): a surface pressed
   deeper than this went through the phantom (simulate counts the MSM's states beyond it).
 
-- :func:`top_level`: the highest level a force reaches, ``floor(force / step)`` with room for
-  the rounding of a force that lands on a level (7.5 N / 0.5 N is level 15, not 14): a force
-  :data:`LEVEL_ROUNDING` of a step short of a level is on it.
+- :func:`top_level`, :func:`reaches`: the highest level a force reaches, ``floor(force /
+  step)`` with room for the rounding of a force that lands on a level (7.5 N / 0.5 N is level
+  15, not 14): a force :data:`LEVEL_ROUNDING` of a step short of a level is on it.
 
 Plain numbers and the standard library: command-line defaults read them without loading a
 stage.
 """
 
 import math
+from typing import Any
 
 from core.bounds import Bound
 
@@ -32,6 +33,13 @@ LEVEL_ROUNDING = 1e-9            # of a step: a force this short of a level is o
 
 
 def top_level(force_n: float, step_n: float) -> int:
-    """The highest force level (index k of ``k * step_n``) that ``force_n`` reaches; a force
-    short of a level by less than 1e-9 of a step (rounding) counts as on it."""
+    """The highest force level (index k of ``k * step_n``) that ``force_n`` reaches
+    (:func:`reaches`)."""
     return math.floor(force_n / step_n + LEVEL_ROUNDING)
+
+
+def reaches(force_n: Any, level: int, step_n: float) -> Any:
+    """Whether each force reaches level ``level`` (``level * step_n``); a force short of it
+    by less than :data:`LEVEL_ROUNDING` of a step (rounding) counts as on it. The one test
+    :func:`top_level` and a crossing both make, so a level counted as reached is crossed."""
+    return force_n / step_n + LEVEL_ROUNDING >= level   # a float or a numpy array alike

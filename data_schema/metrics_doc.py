@@ -91,6 +91,12 @@ class Gain(JsonRow):
     force_gain: float | None
 
 
+def beats(gain: float | None) -> bool:
+    """Whether a gain over the best reference (a :class:`Gain`'s ``ld_gain`` or
+    ``force_gain``) is one (above zero, and there)."""
+    return gain is not None and gain > 0
+
+
 @dataclass(frozen=True, kw_only=True)
 class LumpPart(JsonRow):
     """The test examples over a lump, or away from it: the model's metrics, the references'
@@ -158,8 +164,8 @@ Row = RunRow | PooledRow
 @dataclass(frozen=True, kw_only=True)
 class ScarcityShares(JsonRow):
     """A scarcity model's shares of test points and examples inside its 90 % intervals (1.3;
-    None where it keeps none) and the range each falls in by chance (1.5; None unless
-    measured)."""
+    a model's row has both, each None where it keeps none) and the range each falls in by
+    chance (1.5; None unless measured)."""
 
     points_90: float | None
     force_90: float | None
@@ -251,6 +257,9 @@ def validate_metrics(path: str | Path) -> dict[str, Any]:
     for i, row in enumerate(doc.get("scarcity", [])):
         where, kinds = f"scarcity[{i}]", ScarcityRow.kinds()
         typed_keys(path, row, kinds, where, optional=shares)
+        if any(k in row for k in shares):     # a model's row: both of its shares (null or not)
+            typed_keys(path, row, ScarcityShares.kinds(), where,
+                       optional=ScarcityShares.optional())
         check_numbers(path, {k: row[k] for k, kind in kinds.items()    # a reference may
                              if k not in shares and kind is not str    # have no L_d
                              and row[k] is not None}, where)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.protocol import LEVEL_ROUNDING, top_level
+from core.protocol import reaches, top_level
 from extract.extract_params import ExtractParams
 
 
@@ -49,19 +49,20 @@ class PressStates:
     dropped: dict[str, int] = field(default_factory=dict)
 
 
-def crossing_time(time_s: np.ndarray, force: np.ndarray, level: float, rounding: float
+def crossing_time(time_s: np.ndarray, force: np.ndarray, level: int, step_n: float
                   ) -> float | None:
-    """First time ``force`` reaches ``level`` (linear between frames), or None if never; a
-    force ``rounding`` short of the level reaches it (at that frame: the level
-    :func:`~core.protocol.top_level` counts as reached is always crossed)."""
-    hit = np.flatnonzero(force >= level - rounding)
+    """First time ``force`` reaches level ``level`` (``level * step_n``, linear between
+    frames), or None if never. It reaches it as :func:`~core.protocol.top_level` counts
+    (:func:`~core.protocol.reaches`): a force short of it by rounding only does so at its
+    frame, so a level counted as reached is always crossed."""
+    hit = np.flatnonzero(reaches(force, level, step_n))
     if hit.size == 0:
         return None
     i = int(hit[0])
     if i == 0:
         return float(time_s[0])
     f0, f1 = force[i - 1], force[i]
-    share = min(1.0, (level - f0) / (f1 - f0))
+    share = min(1.0, (level * step_n - f0) / (f1 - f0))
     return float(time_s[i - 1] + share * (time_s[i] - time_s[i - 1]))
 
 
@@ -114,9 +115,8 @@ def press_states(press: PressSeries, p: ExtractParams, levels: bool = True) -> P
         if k == 0:
             window, at = rest, float(t[rest].mean()) if rest.any() else float("nan")
         else:
-            crossed = crossing_time(t[loading], f[loading], k * p.step_n,
-                                    LEVEL_ROUNDING * p.step_n)
-            if crossed is None:     # cannot be: top_level counts what crossing_time finds
+            crossed = crossing_time(t[loading], f[loading], k, p.step_n)
+            if crossed is None:     # cannot be: top_level and crossing_time share reaches()
                 raise ValueError(f"level {k * p.step_n:g} N counted as reached, never crossed")
             at = crossed
             window = np.abs(t - at) <= p.half_window_s

@@ -45,7 +45,6 @@ from data_schema.metrics_doc import (
     NEAREST_PRESS,
     NOTHING_MOVES,
     LumpPart,
-    LumpRow,
     Metrics,
     Row,
     RunRow,
@@ -181,17 +180,17 @@ def _ld_gain(row: RunRow | LumpPart) -> float:
     return -1.0 if gain is None else gain
 
 
-LUMP_PARTS: tuple[tuple[Callable[[LumpRow], LumpPart | None], str], ...] = (
-    (lambda lump: lump.over, "over the lump"), (lambda lump: lump.away, "away from the lump"))
+# A lump's parts, by their names in the document (LumpRow.parts), in words
+LUMP_WORDS = {"over": "over the lump", "away": "away from the lump"}
 
 
 def _over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
     """Where eval split the test presses by a lump: TL and scratch, every fold that has test
     presses there, over the lump and away from it, beside the best reference there."""
     checks = []
-    for part, where in LUMP_PARTS:
+    for part, where in LUMP_WORDS.items():
         for variant, name in FINE_TUNED:
-            folds = sorted(((r.fold, part(r.lump)) for r in scores.runs
+            folds = sorted(((r.fold, r.lump.parts()[part]) for r in scores.runs
                             if variant_of(r) == variant and r.lump),
                            key=lambda fold_rows: fold_rows[0])
             held = [(k, rows) for k, rows in folds if rows]
@@ -366,16 +365,19 @@ def _scarcity(out: Path) -> list[tuple[str, bool, str]]:
 def _scarce_intervals(rows: list[ScarcityRow]) -> list[tuple[str, bool, str]]:
     """The intervals of the scarcity study's models with the fewest training presses: the
     points' and the force's share inside their 90 % intervals, each inside the range its
-    fold's re-drawn calibration presses give by chance (none where no row says)."""
+    fold's re-drawn calibration presses give by chance (none where no row says; a model's
+    row with one share and not the other misses it, naming the missing one)."""
     fewest = min(r.groups for r in rows)
-    runs = [(r, r.shares) for r in rows if r.groups == fewest and r.shares is not None
-            and r.shares.points_90 is not None]
-    if not runs:
+    kept = [(r, r.shares.by_score()) for r in rows
+            if r.groups == fewest and r.shares is not None]
+    shares = [(r, what, share, band) for r, scores in kept
+              if any(value is not None for value, _ in scores.values())   # intervals kept
+              for what, (share, band) in scores.items()]
+    if not shares:
         return []
-    shares = [(r, what, share, band) for r, s in runs
-              for what, (share, band) in s.by_score().items() if share is not None]
-    ok = all(_inside(share, band) for _, _, share, band in shares)
-    text = "; ".join(f"fold {r.fold} {r.predictor}: {what} " + _in_band(share, band)
+    ok = all(share is not None and _inside(share, band) for _, _, share, band in shares)
+    text = "; ".join(f"fold {r.fold} {r.predictor}: {what} "
+                     + ("share missing" if share is None else _in_band(share, band))
                      for r, what, share, band in shares)
     return [(f"intervals with {fewest} training press{'es' if fewest > 1 else ''} (scarcity "
              "study), 90 %", ok, text + " (target: inside the range re-drawn calibration "

@@ -249,20 +249,6 @@ def xcorr_curve(
     return lag_s[order], xc[order]
 
 
-def xcorr_lag(
-    t_mocap_s: np.ndarray, signal_m: np.ndarray, signal_f_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float, rate_hz: float = 200.0,
-) -> tuple[float, float]:
-    """Lag (logger minus mocap time, s) that best matches a mocap signal to a logger signal
-    (:func:`xcorr_curve`), refined by a parabola through the peak, and the normalised
-    correlation there."""
-    lags, xc = xcorr_curve(t_mocap_s, signal_m, signal_f_at, t_logger_span, max_lag_s, rate_hz)
-    peaks = curve_peaks(lags, xc, 1, 0.0)
-    if not peaks:
-        raise ValueError("no admissible lag")
-    return peaks[0]
-
-
 def curve_peaks(lags: np.ndarray, xc: np.ndarray, count: int, min_gap_s: float
                 ) -> list[tuple[float, float]]:
     """The ``count`` highest local maxima of a correlation curve at least ``min_gap_s`` apart,
@@ -318,16 +304,6 @@ def contact_lags(
     if not best[1]:
         raise ValueError("no admissible lag")
     return best[1]
-
-
-def contact_lag(
-    t_mocap_s: np.ndarray, depth: np.ndarray, force_at: Callable[[np.ndarray], np.ndarray],
-    t_logger_span: tuple[float, float], max_lag_s: float, force_level: float = 0.25,
-    levels: int = 24,
-) -> float:
-    """The best of :func:`contact_lags`."""
-    return contact_lags(t_mocap_s, depth, force_at, t_logger_span, max_lag_s, force_level,
-                        levels, count=1)[0][0]
 
 
 def press_lag(

@@ -138,11 +138,6 @@ def noise_level(wrench: np.ndarray, tare: Tare) -> float:
     return float(np.max(wrench[tare.start:tare.stop, :3].std(axis=0)))
 
 
-def over_range(raw: RawSession, sampled: np.ndarray) -> np.ndarray:
-    """Samples (T, 6) beyond the calibration's rated load on any axis."""
-    return beyond_rating(sampled, raw.calibration)
-
-
 def beyond_rating(wrench: np.ndarray, calibration: AtiCalibration | None) -> np.ndarray:
     """Samples of a wrench (T, 6) beyond ``calibration``'s rated load on any axis (none
     without a calibration, which alone states the rating); NaN is never beyond it."""

@@ -47,10 +47,11 @@ class PressRule:
         joins the contacts either side of it into one."""
         return gap_samples < MERGE_S * rate_hz
 
-    def is_press(self, peak_n: float, duration_s: float) -> bool:
-        """Whether a contact that peaked at ``peak_n`` (N) and lasted ``duration_s`` is a
+    def is_press(self, peak_n: float, samples: int, rate_hz: float) -> bool:
+        """Whether a contact that peaked at ``peak_n`` (N) over ``samples`` samples at
+        ``rate_hz`` (from its first sample above contact to its last, both counted) is a
         press."""
-        return peak_n > self.detect_n and duration_s >= MIN_PRESS_S
+        return peak_n > self.detect_n and samples / rate_hz >= MIN_PRESS_S
 
 
 @dataclass
@@ -96,7 +97,7 @@ def segment_presses(force_magnitude: np.ndarray, rate_hz: float, rule: PressRule
             spans.append([a, b])
     presses, cut = [], 0
     for a, b in spans:
-        if not rule.is_press(float(f[a:b].max()), (b - a) / rate_hz):
+        if not rule.is_press(float(f[a:b].max()), b - a, rate_hz):
             continue
         if a == 0 or b == len(f) or not known[a - 1 : b + 1].all():
             cut += 1

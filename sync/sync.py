@@ -45,11 +45,11 @@ from sync.clock import IDENTITY, ClockFit
 from sync.clock_policy import check_overlap, clock_reason, estimate_clock
 from sync.force_conditioning import (
     ConditionedForce,
+    beyond_rating,
     condition_force,
     near_samples,
     on_rail,
     output_rails,
-    over_range,
 )
 from sync.gaps import LOST, MISSING, fill_gaps
 from sync.holes import (
@@ -135,7 +135,7 @@ def sync_session(raw: RawSession, params: SyncParams | None = None) -> SyncResul
     t_log = clock.to_logger(t_m)
     on = frame_force(force_at, cf, raw, holes, t_log, p)
     rail = on_rail(raw)
-    force_q = force_bits(on.sampled, over_range(raw, on.sampled),
+    force_q = force_bits(on.sampled, beyond_rating(on.sampled, raw.calibration),
                          near_samples(cf.time_s, rail, t_log,
                                       _filter_reach_s(cf.time_s, rate, p.passband)),
                          on.in_force_hole)

@@ -21,7 +21,7 @@ from core.errors import BadInput
 from core.series import frame_times_ns, time_to_ns
 from data_schema.states import validate_states
 from pipeline.cli import cli
-from sync.force_conditioning import over_range
+from sync.force_conditioning import beyond_rating
 from train.data import load_manifest, role_examples
 from train.evaluation.run_errors import example_errors, load_run
 from train.model.config import CGNNConfig
@@ -73,12 +73,12 @@ def test_forces_near_zero_train_to_finite_small_predictions(tmp_path) -> None:
 def test_forces_at_the_sensor_limit_are_kept_and_beyond_it_flagged() -> None:
     raw = SimpleNamespace(calibration=SimpleNamespace(max_load=NANO17_MAX))
     at_limit = np.vstack([NANO17_MAX, -NANO17_MAX, np.full(6, 1e-12), np.zeros(6)])
-    assert not over_range(raw, at_limit).any()
+    assert not beyond_rating(at_limit, raw.calibration).any()
     beyond = np.vstack([NANO17_MAX * (1 + 1e-6), -NANO17_MAX * (1 + 1e-6)])
-    assert over_range(raw, beyond).all()
+    assert beyond_rating(beyond, raw.calibration).all()
     one_axis = np.zeros((1, 6))
     one_axis[0, 2] = -35.001
-    assert over_range(raw, one_axis).all()
+    assert beyond_rating(one_axis, raw.calibration).all()
 
 
 def test_long_recordings_keep_exact_int64_nanoseconds() -> None:

@@ -3,8 +3,8 @@
 Sync's rule (:class:`sync.presses.PressRule`) applied sample by sample to the tared force
 magnitude: a contact begins above the contact level and ends once it has stayed below for
 longer than the rule bridges (noise flicker at the contact level is one contact); it is a
-press when the rule calls it one, its duration counted from its first sample above contact to
-its last (sync, on a whole series, counts its frames from onset to release). Where it landed,
+press when the rule calls it one, its duration counted in samples from its first above contact
+to its last, both counted, as sync counts its frames from onset to release. Where it landed,
 its location and its states follow once the session after it has arrived
 (:mod:`live.session.states`).
 """
@@ -68,7 +68,8 @@ class PressTracker:
         """The contact that began at ``start`` (ns) is over: the press it was, if any."""
         end, peak = self._last_above, self._peak
         self._start = None
-        if not self.rule.is_press(peak, (end - start) * 1e-9):
+        samples = round((end - start) * 1e-9 * self.rate_hz) + 1
+        if not self.rule.is_press(peak, samples, self.rate_hz):
             return []
         self.presses += 1
         return [PressDone(self.presses, peak, start, end, self._peak_t)]

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from core.errors import BadInput
-from data_schema.metrics_doc import METRICS, Scores, validate_metrics
+from data_schema.metrics_doc import METRICS, Scores, beats, validate_metrics
 
 
 def _values(ld: float | None = 0.3) -> dict[str, Any]:
@@ -89,7 +89,8 @@ CASES = [
     (("overall", 0, "fold_ids"), [0], "fold_ids must list"),
     (("overall", 0, "folds_not_beating_references"), [3], "only folds of them"),
     (("scarcity", 0, "force_abs_n"), None, "scarcity[0].force_abs_n"),
-    (("scarcity", 0, "force_90_high"), 1.5, "force_90_high is 1.5: not in [0, 1]"),
+    (("scarcity", 0), {**_doc()["scarcity"][0], "points_90": 0.9, "force_90": 0.9,
+                       "force_90_high": 1.5}, "force_90_high is 1.5: not in [0, 1]"),
     (("provenance",), _DROP, "'provenance' missing"),
     (("schema_version",), "2.0", "not compatible"),
     (("schema",), "phantom.folds", "not a phantom.metrics document"),
@@ -211,3 +212,41 @@ def test_the_rows_read_and_write_the_document_as_it_is(tmp_path) -> None:
     model, reference = scores.scarcity
     assert model.shares.by_score() == {"points": (0.9, [0.8, 0.95]), "force": (None, None)}
     assert reference.shares is None
+
+
+SHARE_ROWS = {                            # a scarcity row's shares: what eval may write, and not
+    "a reference's (none)": ({}, True),
+    "a model's": ({"points_90": 0.9, "force_90": 0.85}, True),
+    "a model's without intervals (both null)": ({"points_90": None, "force_90": None}, True),
+    "a model's with its bands (1.5)": ({"points_90": 0.9, "force_90": 0.85,
+                                        "points_90_low": 0.8, "points_90_high": 0.95}, True),
+    "the points' share alone": ({"points_90": 0.9}, False),
+    "the force's share alone": ({"force_90": 0.9}, False),
+    "a band alone": ({"points_90_low": 0.8, "points_90_high": 0.95}, False),
+}
+
+
+@pytest.mark.parametrize(("shares", "valid"), SHARE_ROWS.values(), ids=list(SHARE_ROWS))
+def test_a_scarcity_row_is_valid_exactly_where_its_row_reads(tmp_path, shares, valid) -> None:
+    """A model's row has both shares (each may be null), a reference's none: what the check
+    accepts reads into its row, and a row with one share and not the other is refused by
+    name rather than read as a crash."""
+    doc = _doc()
+    doc["scarcity"][0] |= shares
+    if valid:
+        validate_metrics(_write(tmp_path, doc))
+        row = Scores.from_json(doc).scarcity[0]
+        assert (row.shares is None) == (not shares)
+    else:
+        missing = next(k for k in ("points_90", "force_90") if k not in shares)
+        with pytest.raises(BadInput, match=re.escape(f"scarcity[0].{missing} missing")):
+            validate_metrics(_write(tmp_path, doc))
+        with pytest.raises(TypeError):      # what the check keeps from the reader
+            Scores.from_json(doc)
+
+
+def test_a_gain_beats_the_references_only_above_zero() -> None:
+    """What ``eval --strict`` and the pooled rows' ``folds_not_beating_references`` count: a
+    gain is one above zero; none at zero, below it, or where there is no gain (not finite)."""
+    assert beats(0.01) and beats(1.0)
+    assert not beats(0.0) and not beats(-0.2) and not beats(None)

@@ -39,3 +39,16 @@ def test_a_level_between_frames_is_read_where_the_ramp_crosses_it() -> None:
     assert list(states.step) == [0, 1]
     assert abs(states.time_s[1] - 1.625) < 1e-9
     assert abs(states.points[1, 1, 2] + 1.625e-3) < 1e-9    # the tip read at that instant
+
+
+def test_every_step_reads_a_level_reached_to_within_rounding() -> None:
+    """Steps whose levels are not exact in binary (0.05, 0.1, 0.3 N) at peaks a few ulps
+    either side of the rounding's edge: every level counted as reached is read."""
+    for step in (0.05, 0.1, 0.2, 0.3, 0.7):
+        k = 197 if step == 0.05 else 9
+        edge = (k - 1e-9) * step
+        for peak in np.nextafter(edge, [-np.inf] * 3 + [np.inf] * 3) + edge * np.array(
+                [-2e-16, 0, 2e-16, -2e-16, 0, 2e-16]):
+            states = press_states(ramp_press(float(peak)), ExtractParams(step_n=step))
+            assert states.step[-1] in (k - 1, k)
+            assert list(states.step) == list(range(states.step[-1] + 1))

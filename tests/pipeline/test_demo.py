@@ -140,6 +140,18 @@ def test_a_pretraining_the_plan_does_not_know_is_refused_not_run_as_another(tmp_
     assert [p.value for p in Pretraining] == ["shipped", "generic", "per-fold", "solid"]
 
 
+@pytest.mark.parametrize("pretraining", list(Pretraining))
+def test_every_pretraining_has_a_plan_by_its_member_or_its_word(tmp_path, pretraining):
+    """Each pre-training plans steps, the same by its word alone ("per-fold", a plain str) as
+    by its member; the shipped model's and the solid's fine-tune the shipped file."""
+    steps = demo_steps(tmp_path, 0, SMOKE, pretraining=pretraining)
+    word = str(pretraining.value)
+    assert type(word) is str and [s.args for s in steps] == \
+        [s.args for s in demo_steps(tmp_path, 0, SMOKE, pretraining=word)]
+    inits = {s.args[s.args.index("--init") + 1] for s in steps if "--init" in s.args}
+    assert (str(SHIPPED) in inits) == pretraining.from_shipped
+
+
 @pytest.mark.parametrize("network", list(NETWORKS))
 def test_network_changes_every_training_runs_network_and_nothing_else(tmp_path, network):
     """``--network`` adds its flags after the recipe's to every training run (pre-training

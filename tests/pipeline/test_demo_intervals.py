@@ -94,3 +94,12 @@ def test_the_scarcity_studys_fewest_presses_are_held_to_their_bands() -> None:
     assert not _scarce_intervals([_scarce(1, 0.90, 0.97), refs])[0][1]    # force off
     assert not _scarce_intervals([_scarce(1, 0.90, 0.90, band=None), refs])[0][1]
     assert _scarce_intervals([_scarce(1, None, None), refs]) == []        # none kept
+
+
+def test_a_scarcity_model_with_one_share_missing_misses_and_says_which() -> None:
+    """A model's row with the points' share and not the force's (or the reverse) misses the
+    target, naming the share it lacks, however well the other sits in its band."""
+    for points, force, missing in ((0.9, None, "force"), (None, 0.9, "points")):
+        ((_, ok, text),) = _scarce_intervals([_scarce(1, points, force)])
+        assert not ok and f"fold 0 TL: {missing} share missing" in text
+        assert "90.0% (85-95)" in text                                  # the other one shown

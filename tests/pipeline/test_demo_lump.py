@@ -8,7 +8,7 @@ from dataclasses import replace
 from helpers.metrics_rows import gain, metrics, run_row, variant
 
 from data_schema.metrics_doc import LumpPart, LumpRow, RunRow, Scores
-from pipeline.demo_targets import _over_lump, _solid_over_lump, variant_of
+from pipeline.demo_targets import LUMP_WORDS, _over_lump, _solid_over_lump, variant_of
 
 
 def _part(ld_gain: float | None, n: int = 12) -> LumpPart:
@@ -46,6 +46,15 @@ def test_every_fold_over_and_away_meets_the_target() -> None:
     assert all(ok for ok, _ in got.values())
     ok, text = got["TL over the lump: mean L_d below the best reference"]
     assert "fold 0: +50% (12 examples)" in text and "no test press there in fold(s) 1" in text
+
+
+def test_the_targets_name_every_part_of_a_lump_in_its_order() -> None:
+    """Each part the metrics document gives a lump (:meth:`LumpRow.parts`) has its words,
+    and the targets come in its order: over the lump, then away from it."""
+    parts = list(_lump(_part(0.5), None).parts())
+    assert list(LUMP_WORDS) == parts
+    got = [name for name, _, _ in _over_lump(_scores([_run(0, _part(0.5), _part(0.6))]))]
+    assert got == [f"TL {LUMP_WORDS[p]}: mean L_d below the best reference" for p in parts]
 
 
 def test_one_fold_short_over_the_lump_misses_and_none_there_misses() -> None:

@@ -9,7 +9,7 @@ from core.errors import BadInput
 from sync.clock import (
     ClockFit,
     clock_from_data,
-    contact_lag,
+    contact_lags,
     fit_offsets,
     match_trigger,
     rising_edges,
@@ -126,8 +126,8 @@ def _session(seed: int, presses: int = 6, depth_noise: float = 0.2e-3
 
 def _data_fit(s: dict[str, np.ndarray]) -> ClockFit:
     force_at = antialiased_interpolant(s["t_f"], s["force"], 500.0, SyncParams().passband)
-    lag0 = contact_lag(s["t_m"], s["depth"], force_at, (s["t_f"][0], s["t_f"][-1]),
-                       max_lag_s=5.0)
+    lag0 = contact_lags(s["t_m"], s["depth"], force_at, (s["t_f"][0], s["t_f"][-1]),
+                        max_lag_s=5.0)[0][0]
     assert abs(lag0 - (OFFSET + DRIFT * 1e-6 * s["t_m"].mean())) < 0.02
     loaded = force_at(s["t_m"] + lag0) > 0.3
     runs = np.flatnonzero(np.diff(loaded.astype(int)))

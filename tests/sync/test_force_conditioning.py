@@ -22,13 +22,13 @@ from sync.force_conditioning import (
     FLAT_RUN,
     FLAT_SIGMAS,
     RAIL_TOLERANCE,
+    beyond_rating,
     condition_force,
     force_times,
     near_samples,
     noise_level,
     on_rail,
     output_rails,
-    over_range,
     quantisation_step,
     rest_after_first_press,
     tare_and_calibrate,
@@ -116,7 +116,7 @@ def test_a_flat_top_far_from_the_channel_s_median_is_a_clip() -> None:
 
 
 def test_a_wrench_log_is_never_on_a_rail() -> None:
-    """Already in newtons: its limit is the rated load (``over_range``), not a voltage."""
+    """Already in newtons: its limit is the rated load (``beyond_rating``), not a voltage."""
     v = _noise(2000, 1e-3)
     v[100:120, 2] = 10.0
     assert not on_rail(_raw(v, "wrench", _cal(OutputRange="20"))).any()
@@ -125,7 +125,7 @@ def test_a_wrench_log_is_never_on_a_rail() -> None:
 def test_without_a_calibration_nothing_is_over_range() -> None:
     """A wrench log whose rating is unknown: no sample can be said to exceed it."""
     sampled = np.full((5, 6), 1e3)
-    out = over_range(_raw(np.zeros((5, 6)), "wrench"), sampled)
+    out = beyond_rating(sampled, _raw(np.zeros((5, 6)), "wrench").calibration)
     assert out.shape == (5,) and not out.any()
 
 

@@ -5,11 +5,10 @@ and the lines ``pipeline eval`` prints for a variant that does not beat the refe
 
 from __future__ import annotations
 
-from data_schema.metrics_doc import Metrics, PooledRow, Row, RunRow, Scores
+from data_schema.metrics_doc import Metrics, PooledRow, Row, RunRow, Scores, beats
 from train.evaluation.coverage import SHOWN
 from train.evaluation.coverage_table import coverage_table
 from train.evaluation.references import DISPLACEMENT, NAMES
-from train.evaluation.scoring import beats
 from train.training.variant import Variant
 
 

@@ -23,10 +23,15 @@ from pathlib import Path
 import numpy as np
 
 from core.progress import say
-from data_schema.metrics_doc import ScarcityRow, ScarcityShares
+from data_schema.metrics_doc import (
+    FORCE_LINEAR,
+    NEAREST_PRESS,
+    NOTHING_MOVES,
+    ScarcityRow,
+    ScarcityShares,
+)
 from train.evaluation.coverage import SHOWN
 from train.evaluation.coverage_band import band, counts_of
-from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
 from train.evaluation.run_coverage import coverage_and_band, fold_coverage
 from train.evaluation.run_errors import (
     ExampleErrors,

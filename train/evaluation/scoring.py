@@ -29,6 +29,7 @@ from data_schema.metrics_doc import (
     RunRow,
     Scores,
     SetMetrics,
+    beats,
 )
 from data_schema.places import place_ids
 from train.data import SETS, example_pairs
@@ -94,11 +95,6 @@ def gains(model: Metrics, refs: dict[str, Metrics]) -> Gain:
 
 def _gain(value: float | None, ref: float | None) -> float | None:
     return None if value is None or ref is None else (1 - value / ref if ref else 0.0)
-
-
-def beats(gain: float | None) -> bool:
-    """Whether a gain over the best reference is one (above zero, and there)."""
-    return gain is not None and gain > 0
 
 
 @dataclass

@@ -103,3 +103,18 @@ def test_the_stream_and_the_whole_series_find_presses_by_one_rule() -> None:
     assert [(p.onset, p.release) for p in whole] == \
         [(round(a * rate), round(b * rate)) for a, b in truth]
     assert [d.peak_n for d in done] == [4 * level, 6 * level, 4 * level, 8 * level]
+
+
+def test_the_stream_and_the_whole_series_agree_at_the_shortest_press() -> None:
+    """A contact of exactly MIN_PRESS_S at 1 kHz is a press for both; one sample shorter is
+    one for neither."""
+    rate = 1000.0
+    rule = PressRule(SyncParams().detect_n, SyncParams().contact_n)
+    shortest = round(MIN_PRESS_S * rate)
+    for samples, pressed in ((shortest, 1), (shortest - 1, 0)):
+        force = np.zeros(3000)
+        force[1000:1000 + samples] = 4 * SyncParams().detect_n
+        tracker = PressTracker(rate, rule)
+        done = tracker.add(np.arange(len(force)) * 1_000_000, force)
+        whole, _ = segment_presses(force, rate, rule)
+        assert (len(done), len(whole)) == (pressed, pressed)

@@ -11,15 +11,10 @@ import torch
 from click.testing import CliRunner
 from helpers.cgnn_data import SIGMA, write_dent_split, write_dent_states
 
+from data_schema.metrics_doc import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
 from pipeline.cli import cli
 from train.data import Batch, example_pairs, load_states, make_batch, role_examples
-from train.evaluation.references import (
-    FORCE_LINEAR,
-    NEAREST_PRESS,
-    NOTHING_MOVES,
-    References,
-    with_tip,
-)
+from train.evaluation.references import References, with_tip
 from train.model.config import CGNNConfig
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams
 from train.training.train_stage import run_train

@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 from helpers.cgnn_data import TINY, dent_fold
 
-from data_schema.metrics_doc import ScarcityRow
-from train.evaluation.references import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES
+from data_schema.metrics_doc import FORCE_LINEAR, NEAREST_PRESS, NOTHING_MOVES, ScarcityRow
 from train.evaluation.scarcity import curve, scarcity_rows, write_csv
 from train.training.checkpoint import load_checkpoint
 from train.training.train_params import TrainInputs, TrainOptions, TrainParams

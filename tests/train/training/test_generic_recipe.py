@@ -9,11 +9,20 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import demo_plan, generic_build
-from pipeline.demo_plan import NETWORKS, QUICK, RECIPE_NETWORK, Pretraining, demo_steps
+from pipeline import demo_plan
+from pipeline.demo_plan import (
+    NETWORKS,
+    QUICK,
+    RECIPE,
+    RECIPE_NETWORK,
+    Pretraining,
+    Settings,
+    Step,
+    demo_steps,
+)
 from pipeline.generic_build import build_steps, changes
 from train.generic_model import SHIPPED
-from train.model.config import CGNNConfig
+from train.model.config import CGNNConfig, Offsets
 from train.training.checkpoint import load_checkpoint
 from train.training.generic_recipe import SHIPPED_RECIPE
 from train.training.recipes import RECIPES
@@ -56,28 +65,60 @@ def test_the_demos_name_for_the_shipped_network_is_the_shipped_files() -> None:
     assert _value(list(flags), "--offsets") == network.offsets.value
 
 
+# The demo's own quick settings, every one changed (its generic model's recipe kept): its
+# fine-tuning's epochs, step size and batch, its per-fold pre-training and MSM set, its study
+DEMOS_OWN = replace(QUICK, lr=1e-2, batch=8, finetune_epochs=3, pretrain_epochs=2,
+                    msm_locations=4, msm_directions=1, fit_sequences=2, scarcity_epochs=1,
+                    scarcity_groups=2, solid_epochs=1)
+
+
+def _plan(s: Settings, recipe: tuple[str, ...] = RECIPE) -> list[Step]:
+    return demo_steps(WORK, 5, s, "cpu", recipe, pretraining=Pretraining.GENERIC)
+
+
+def _generic(plan: list[Step]) -> list[tuple[str, ...]]:
+    """The commands of the plan's generic model (msm/prior*, runs/generic)."""
+    return [s.args for s in plan if s.outputs[0].parent.name in ("msm", "generic")]
+
+
+def _tuning(plan: list[Step]) -> list[list[str]]:
+    """The commands of the plan's fine-tuning runs."""
+    return [list(s.args) for s in plan if s.stage == "train (fine-tuning)"]
+
+
 def test_the_quick_demos_generic_model_is_the_builds() -> None:
     """``demo --quick --pretraining generic`` runs the build's commands (on the CPU)."""
-    demo = [s.args for s in demo_steps(WORK, 5, QUICK, "cpu", pretraining=Pretraining.GENERIC)
-            if s.outputs[0].parent.name in ("msm", "generic")]
-    assert demo == [s.args for s in build_steps(WORK)]
+    assert _generic(_plan(QUICK)) == [s.args for s in build_steps(WORK)]
 
 
-def test_a_demo_setting_changes_neither_the_build_nor_the_rebuild_decision(shipped,
+def test_the_demos_own_settings_do_not_reach_its_generic_model() -> None:
+    """The quick settings' own knobs changed: the demo's generic model is still made by the
+    build's commands, while its fine-tuning takes the new epochs, step size and batch (so a
+    generic model that read them would differ)."""
+    assert DEMOS_OWN.generic == QUICK.generic
+    plan = _plan(DEMOS_OWN)
+    assert _generic(plan) == [s.args for s in build_steps(WORK)]
+    tuning = _tuning(plan)
+    assert len(tuning) == 2 * QUICK.folds and tuning != _tuning(_plan(QUICK))
+    for args in tuning:
+        assert (_value(args, "--epochs"), _value(args, "--lr"), _value(args, "--batch")) == \
+            ("3", "0.01", "8")
+
+
+def test_the_demos_flags_change_neither_the_build_nor_the_rebuild_decision(shipped,
                                                                             monkeypatch) -> None:
-    """The quick settings (its fine-tuning, its batch, even its generic model) and the
-    demo's training flags changed: the build runs the same commands and the shipped file is
-    still current; the demo's own plan does change."""
+    """The demo's quick settings and training flags replaced where the demo reads them
+    (``demo_plan.QUICK``, ``demo_plan.RECIPE``): the build runs the same commands and the
+    shipped file is still current, while the demo's own runs do take the new flags."""
     before = [s.args for s in build_steps(WORK)]
-    other = replace(QUICK, lr=1e-2, batch=8, finetune_epochs=3, pretrain_epochs=2,
-                    generic=replace(QUICK.generic, epochs=1, phantoms=3))
-    for module in (demo_plan, generic_build):
-        monkeypatch.setattr(module, "QUICK", other, raising=False)
-    monkeypatch.setattr(demo_plan, "RECIPE", ("--recipe", "paper"))
+    flags = NETWORKS["paper"]
+    assert flags != RECIPE
+    monkeypatch.setattr(demo_plan, "QUICK", DEMOS_OWN)
+    monkeypatch.setattr(demo_plan, "RECIPE", flags)
     assert [s.args for s in build_steps(WORK)] == before
     assert changes(shipped["provenance"]) == []
-    demo = demo_steps(WORK, 0, other, "cpu", pretraining=Pretraining.GENERIC)
-    assert [s.args for s in demo if s.stage == "train (pre-training)"] != before[-1:]
+    tuning = _tuning(_plan(demo_plan.QUICK, demo_plan.RECIPE))
+    assert tuning and all(_value(args, "--offsets") == Offsets.NONE.value for args in tuning)
 
 
 @pytest.mark.parametrize(("part", "edit"), [

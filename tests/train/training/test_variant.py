@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from data_schema.metrics_doc import OFFSETS, VARIANT, VARIANT_OPTIONAL
 from train.model.config import CGNNConfig, Offsets
 from train.training.migrate import migrate
 from train.training.train_params import TrainOptions
@@ -48,3 +49,11 @@ def test_networks_that_differ_only_in_their_offsets_are_told_apart() -> None:
     b = Variant("cGNN", "Exp", True, False, None, "heads")
     assert a != b and a.label == b.label and a.full_name != b.full_name
     assert "head offsets" in b.full_name and "tip offsets" in a.full_name
+
+
+def test_the_metrics_documents_check_of_a_variant_is_the_variants() -> None:
+    """``metrics.json``'s variant check (data_schema, which cannot import the trainer) names
+    exactly the keys :meth:`Variant.to_dict` writes and the values of :class:`Offsets`."""
+    tuned = Variant("cGNN", "Exp", True, False, Variant("cGNN", "MSM", True, True))
+    assert list(tuned.to_dict()) == [*VARIANT, *VARIANT_OPTIONAL]
+    assert OFFSETS == tuple(o.value for o in Offsets)
