@@ -65,6 +65,9 @@ class Step:
     stage: str = ""                  # the stage its time counts to (default: its command)
 
 
+PLACES, REPEATS = 5, 4   # the demo's session: presses at 5 places, 4 at each
+
+
 @dataclass(frozen=True)
 class Settings:
     """The knobs that make the demo quick or the paper's."""
@@ -84,6 +87,8 @@ class Settings:
     solid_directions: int = 3         # ... directions at each (within 20 degrees)
     solid_epochs: int = 40            # ... the shipped model pre-trained on them
     scarcity_epochs: int | None = None  # the scarcity study's runs (None: finetune_epochs)
+    places: int = PLACES              # the twin session's presses: at this many places, ...
+    repeats: int = REPEATS            # ... this many at each
 
 
 # The recipe the measurements support (docs/model.md, "Training that learns";
@@ -118,9 +123,11 @@ PAPER = Settings(msm_locations=paper.LOCATIONS, msm_directions=paper.DIRECTIONS,
                  generic=replace(SHIPPED_RECIPE, phantoms=100, locations=10,
                                  directions=paper.DIRECTIONS, epochs=cgnn_paper.EPOCHS,
                                  lr=cgnn_paper.LR))
-# Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set.
+# Only checks the wiring (the test suite runs it): 2 folds, 2 epochs, a tiny MSM set, a session
+# of 12 presses (4 places, 3 at each: every fold still tests one press at each place).
 SMOKE = Settings(msm_locations=6, msm_directions=2, pretrain_epochs=1, finetune_epochs=2,
-                 lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=2,
+                 lr=1e-3, folds=2, scarcity_folds=1, scarcity_groups=1, fit_sequences=1,
+                 places=4, repeats=3,
                  generic=replace(SHIPPED_RECIPE, phantoms=2, locations=3, directions=1,
                                  epochs=1, lr=1e-3),
                  solid_locations=10, solid_directions=1, solid_epochs=1)
@@ -159,7 +166,6 @@ class Lab:
 
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
 OUT = Path("out/demo")   # where the demo writes unless told
-PLACES, REPEATS = 5, 4   # the demo's session: presses at 5 places, 4 at each
 
 # Fine-tuning variants on the twin's states: transfer learning from the MSM run, and the
 # same training from scratch (the baseline).
@@ -223,7 +229,7 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
                        f"({Pretraining.SHIPPED}) or a generic one ({Pretraining.GENERIC})")
     sd = ("--seed", str(seed))
     states, splits = out / "session_states.h5", out / "splits.json"
-    session = session_steps(out, "session", seed, PLACES, REPEATS, lab) + [
+    session = session_steps(out, "session", seed, s.places, s.repeats, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
@@ -359,7 +365,7 @@ def _fit_step(out: Path, fold: int, states: Path, splits: Path, s: Settings,
               sd: tuple[str, ...]) -> Step:
     """fit-msm on fold ``fold``'s training presses (all of them: at most the session's)."""
     params = msm_dir(out, fold) / "params.json"
-    most = s.fit_sequences or PLACES * REPEATS
+    most = s.fit_sequences or s.places * s.repeats
     return Step(("fit-msm", str(states), "--splits", str(splits), "--fold", str(fold),
                  "--out", str(params), "--max-sequences", str(most), "--workers", "1", *sd),
                 (states, splits), (params,), parallel=True, batch=FOLDS)
