@@ -52,6 +52,21 @@ NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR = "nothing moves", "nearest press", "
 REFERENCES = (NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR)
 
 
+@dataclass(frozen=True)
+class VariantRow(JsonRow):
+    """A run's variant as written in ``metrics.json`` and a checkpoint's meta (the trainer's
+    :class:`~train.training.variant.Variant` reads and writes it): model, training data,
+    rotation, aug, the variant it was fine-tuned from, and where its network reads the tip's
+    offsets (1.1; one of :data:`OFFSETS`)."""
+
+    model: str
+    train_data: str
+    rotate: bool
+    aug: bool
+    pretrained: VariantRow | None
+    offsets: str | None = since_version()
+
+
 @dataclass(frozen=True, kw_only=True)
 class Metrics(JsonRow):
     """Table 2's numbers over one set of examples; L_d None for a predictor that moves no
@@ -220,9 +235,6 @@ METRICS = JsonSchema("phantom.metrics", "1.5", {
 })
 METRICS_OPTIONAL = {k: _TABLES[k] for k in Scores.optional()}
 ROW_TYPES: dict[str, type[Row]] = dict(zip(ROW_TABLES, (RunRow, PooledRow), strict=True))
-VARIANT = {"model": str, "train_data": str, "rotate": bool, "aug": bool,
-           "pretrained": (dict, type(None))}
-VARIANT_OPTIONAL = {"offsets": str}      # 1.1: where the network reads the tip's offsets
 # Where a network reads each point's offsets from the tip: nowhere (the paper's network), in
 # its first graph layer (tip offsets: every graph layer then reads the press), in its heads
 OFFSETS = ("none", "graph", "heads")
@@ -327,7 +339,7 @@ def _check_gain(path: str | Path, gain: dict, references: set[str], where: str) 
 def _check_variant(path: str | Path, variant: Any, where: str) -> None:
     """A run's variant: model, training data, rotation, aug, and the variant it was
     fine-tuned from (null, or a variant)."""
-    typed_keys(path, variant, {**VARIANT, **VARIANT_OPTIONAL}, where, optional=VARIANT_OPTIONAL)
+    typed_keys(path, variant, VariantRow.kinds(), where, optional=VariantRow.optional())
     if variant.get("offsets", "none") not in OFFSETS:
         raise BadInput(path, f"{where}.offsets is {variant['offsets']!r}, not one of "
                              f"{list(OFFSETS)}")

@@ -18,10 +18,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import h5py
 
 from data_schema.hdf5 import attr_text
+from data_schema.metrics_doc import VariantRow
 from train.model.config import CGNNConfig, Offsets
 from train.training.train_params import TrainOptions
 
@@ -39,19 +41,31 @@ class Variant:
     pretrained: Variant | None = None
     offsets: Offsets = Offsets.NONE
 
-    def to_dict(self) -> dict:
-        """The plain form kept in a checkpoint's meta and in ``metrics.json``."""
-        return {"model": self.model, "train_data": self.train_data, "rotate": self.rotate,
-                "aug": self.aug,
-                "pretrained": None if self.pretrained is None else self.pretrained.to_dict(),
-                "offsets": self.offsets.value}
+    def to_dict(self) -> dict[str, Any]:
+        """The plain form kept in a checkpoint's meta and in ``metrics.json`` (its keys are
+        :class:`~data_schema.metrics_doc.VariantRow`'s)."""
+        return self.row().to_json()
+
+    def row(self) -> VariantRow:
+        """As the documents write it."""
+        return VariantRow(self.model, self.train_data, self.rotate, self.aug,
+                          None if self.pretrained is None else self.pretrained.row(),
+                          self.offsets.value)
 
     @classmethod
-    def from_dict(cls, d: dict) -> Variant:
+    def from_dict(cls, d: dict[str, Any]) -> Variant:
         """From :meth:`to_dict`'s form."""
-        return cls(str(d["model"]), str(d["train_data"]), bool(d["rotate"]), bool(d["aug"]),
-                   cls.from_dict(d["pretrained"]) if d.get("pretrained") else None,
-                   Offsets(d["offsets"]))
+        return cls.from_row(VariantRow.from_json(d))
+
+    @classmethod
+    def from_row(cls, row: VariantRow) -> Variant:
+        """From a document's row (its offsets required: :mod:`train.training.migrate` gives
+        an old checkpoint's its network's)."""
+        if row.offsets is None:
+            raise KeyError("offsets")
+        return cls(str(row.model), str(row.train_data), bool(row.rotate), bool(row.aug),
+                   cls.from_row(row.pretrained) if row.pretrained else None,
+                   Offsets(row.offsets))
 
     @property
     def label(self) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from data_schema.metrics_doc import OFFSETS, VARIANT, VARIANT_OPTIONAL
+from data_schema.metrics_doc import OFFSETS
 from train.model.config import CGNNConfig, Offsets
 from train.training.migrate import migrate
 from train.training.train_params import TrainOptions
@@ -51,9 +51,16 @@ def test_networks_that_differ_only_in_their_offsets_are_told_apart() -> None:
     assert "head offsets" in b.full_name and "tip offsets" in a.full_name
 
 
-def test_the_metrics_documents_check_of_a_variant_is_the_variants() -> None:
-    """``metrics.json``'s variant check (data_schema, which cannot import the trainer) names
-    exactly the keys :meth:`Variant.to_dict` writes and the values of :class:`Offsets`."""
-    tuned = Variant("cGNN", "Exp", True, False, Variant("cGNN", "MSM", True, True))
-    assert list(tuned.to_dict()) == [*VARIANT, *VARIANT_OPTIONAL]
+def test_a_variant_is_written_as_the_documents_row_and_read_back() -> None:
+    """A variant's plain form is ``metrics.json``'s row (the keys and order every document
+    has kept), reads back equal, and the document's offsets are :class:`Offsets`' values."""
+    tuned = Variant("cGNN", "Exp", True, False, Variant("cGNN", "MSM", True, True),
+                    Offsets.HEADS)
+    plain = tuned.to_dict()
+    assert plain == {"model": "cGNN", "train_data": "Exp", "rotate": True, "aug": False,
+                     "pretrained": {"model": "cGNN", "train_data": "MSM", "rotate": True,
+                                    "aug": True, "pretrained": None, "offsets": "none"},
+                     "offsets": "heads"}
+    assert list(plain) == ["model", "train_data", "rotate", "aug", "pretrained", "offsets"]
+    assert Variant.from_dict(plain) == tuned
     assert OFFSETS == tuple(o.value for o in Offsets)
