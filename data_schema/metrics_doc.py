@@ -124,6 +124,9 @@ class LumpPart(JsonRow):
     intervals: Intervals | None
 
 
+LUMP_PARTS = ("over", "away")    # a lump row's parts, as its fields name them
+
+
 @dataclass(frozen=True, kw_only=True)
 class LumpRow(JsonRow):
     """A row's lump (1.4): where it is, and its two parts (None where no test press is)."""
@@ -135,8 +138,9 @@ class LumpRow(JsonRow):
     away: LumpPart | None
 
     def parts(self) -> dict[str, LumpPart | None]:
-        """Each part by its name in the document: over the lump, then away from it."""
-        return {"over": self.over, "away": self.away}
+        """Each part by its name in the document (:data:`LUMP_PARTS`): over the lump, then
+        away from it."""
+        return dict(zip(LUMP_PARTS, (self.over, self.away), strict=True))
 
 
 @dataclass(frozen=True, kw_only=True)

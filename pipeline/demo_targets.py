@@ -42,6 +42,7 @@ import click
 from data_schema.intervals_doc import DistanceBin, IntervalLevel
 from data_schema.metrics_doc import (
     FORCE_LINEAR,
+    LUMP_PARTS,
     NEAREST_PRESS,
     NOTHING_MOVES,
     LumpPart,
@@ -181,7 +182,7 @@ def _ld_gain(row: RunRow | LumpPart) -> float:
 
 
 # A lump's parts, by their names in the document (LumpRow.parts), in words
-LUMP_WORDS = {"over": "over the lump", "away": "away from the lump"}
+LUMP_WORDS = dict(zip(LUMP_PARTS, ("over the lump", "away from the lump"), strict=True))
 
 
 def _over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
