@@ -4,7 +4,9 @@ predictors that learn nothing, on the same test examples.
     python benchmarks/bench_zero_shot.py [--generic RUN/best.pt] [--labs default 6x6 scattered] \
         [--seeds 0 1 2] [--out DIR] [--rings]
 
-``--generic``: a checkpoint, or (the default) the generic model shipped with the package.
+``--generic``: a checkpoint, or (the default) the generic model shipped with the package for the
+lab: ``generic``, and on a curved lab (``dome``: a 30 mm dome; ``cylinder``: a half-cylinder
+50 mm in radius lying on its flat face, an OBJ the twin was not built around) ``generic-curved``.
 
 Each lab is a twin session made as ``pipeline demo`` makes its own (synth -> ingest -> sync ->
 extract -> split into 5 folds grouped by press, the lab's options and seed), into
@@ -33,7 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 LABS = {"default": (),
         "6x6": ("--markers", "6x6", "--marker-pitch", "12", "--mocap-rate", "300"),
         "scattered": ("--markers", "scattered:20", "--size", "150x80"),
-        "dome": ("--shape", "dome:30")}
+        "dome": ("--shape", "dome:30"),
+        "cylinder": ("--shape", "half_cylinder.obj")}   # written into the lab's folder
+CURVED = ("dome", "cylinder")
 FOLDS = 5
 
 
@@ -47,6 +51,11 @@ def session(out: Path, lab: str, seed: int) -> tuple[Path, Path]:
     if splits.is_file():
         return states, splits
     opts = dict(zip(LABS[lab][::2], LABS[lab][1::2], strict=True))
+    if opts.get("--shape", "").endswith(".obj"):          # a mould the twin was not built for
+        from benchmarks.bench_curved import write_half_cylinder
+
+        folder.mkdir(parents=True, exist_ok=True)
+        opts["--shape"] = str(write_half_cylinder(folder / opts["--shape"]))
     spec = Lab(markers=opts.get("--markers", Lab.markers),
                marker_pitch_mm=float(opts.get("--marker-pitch", Lab.marker_pitch_mm)),
                size_mm=opts.get("--size", Lab.size_mm),
@@ -134,8 +143,9 @@ def pooled(rows: list[dict[str, float]], key: str) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--generic", default="generic",
-                    help="the generic model's checkpoint [default: the one shipped]")
+    ap.add_argument("--generic", default=None,
+                    help="the generic model's checkpoint [default: the one shipped for the lab: "
+                         "generic, or generic-curved on a curved lab]")
     ap.add_argument("--labs", nargs="+", choices=list(LABS), default=list(LABS))
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_zero_shot"))
@@ -145,7 +155,7 @@ def main() -> None:
     import torch
 
     from data_schema.metrics_doc import NEAREST_PRESS, NOTHING_MOVES
-    from train.generic_model import resolve
+    from train.generic_model import CURVED_NAME, NAME, resolve
 
     torch.set_num_threads(1)
     print("| lab, seed | generic, per fold (mm) | nothing moves | nearest press | beats nothing "
@@ -156,9 +166,10 @@ def main() -> None:
     for lab in a.labs:
         for seed in a.seeds:
             files = session(a.out, lab, seed)
-            rows = fold_rows(resolve(a.generic), *files)
+            model = resolve(a.generic or (CURVED_NAME if lab in CURVED else NAME))
+            rows = fold_rows(model, *files)
             if a.rings:
-                rings.append((lab, seed, ring_rows(resolve(a.generic), *files)))
+                rings.append((lab, seed, ring_rows(model, *files)))
             by_lab.setdefault(lab, []).extend(rows)
             show = {k: " ".join(f"{r[k]:.3f}" for r in rows)
                     for k in ("generic", NOTHING_MOVES, NEAREST_PRESS)}

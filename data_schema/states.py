@@ -1,4 +1,4 @@
-"""``states.h5`` (``phantom.states`` 2.2): static states and the examples built from them.
+"""``states.h5`` (``phantom.states`` 2.3): static states and the examples built from them.
 
 One layout serves extracted lab states and MSM simulations, so our trainer and anybody else's
 read both alike. Everything is in the *phantom frame*: the rest surface at z = 0, +z out of the
@@ -34,7 +34,9 @@ means the same place in MSM and lab data.
 Version 2.0 added the frame, ``valid``, ``session``, ``mass``, ``speed``, the transforms and a
 validator of meaning (:func:`validate_states`); 2.1 the optional root attributes
 ``point_names`` and ``footprint_m`` (a 2.0 file is the paper's 100 mm square); 2.2 the
-optional ``states/phantom`` and ``phantoms/*`` of a prior's MSM. 1.0 files are refused:
+optional ``states/phantom`` and ``phantoms/*`` of a prior's MSM; 2.3 the moulds' ``phantoms/*``
+(cap, height, thickness, modulus, stiffening, reach, depth: ``simulate --prior --moulds``, the
+solid pressed on curved phantoms drawn from a prior). 1.0 files are refused:
 regenerate them.
 """
 
@@ -63,7 +65,7 @@ PLAUSIBLE_LAB_M = 50.0     # no lab frame's origin lies this far from the phanto
 
 STATES = H5Schema(
     name="phantom.states",
-    version="2.2",
+    version="2.3",
     root_attrs=("provenance", "source", "units_length", "units_force", "step_n", "frame",
                 "session_names"),
     doc=__doc__ or "",
@@ -96,6 +98,17 @@ STATES = H5Schema(
         Dataset("phantoms/scattered", "b1", ("B",), required=False),
         Dataset("phantoms/missing", "f8", ("B",), required=False, finite=True),
         Dataset("phantoms/max_angle_deg", "f8", ("B",), "deg", required=False, finite=True),
+        Dataset("phantoms/cap", "i4", ("B",), required=False,
+                doc="moulds: 0 a dome, 1 a ridge along x, 2 along y (mould_prior.Cap)"),
+        Dataset("phantoms/height", "f8", ("B",), "m", required=False, finite=True,
+                doc="moulds: the cap's height above the rim"),
+        Dataset("phantoms/thickness", "f8", ("B",), "m", required=False, finite=True,
+                doc="moulds: the block under the rim"),
+        Dataset("phantoms/modulus", "f8", ("B",), "Pa", required=False, finite=True),
+        Dataset("phantoms/stiffening", "f8", ("B",), "1/m^2", required=False, finite=True),
+        Dataset("phantoms/reach", "f8", ("B",), "m", required=False, finite=True),
+        Dataset("phantoms/depth", "f8", ("B",), "m", required=False, finite=True,
+                doc="moulds: how deep the centre press at 7.5 N goes"),
         Dataset("states/speed", "f4", ("S",), "m/s", required=False, limit=PLAUSIBLE_M_S,
                 doc="lab: mean surface-marker speed at the state (NaN: no marker seen)"),
         Dataset("sessions/transform", "f8", ("P", 4, 4), "m", required=False, finite=True,
@@ -174,10 +187,30 @@ FLAT_REST_M = 5e-3    # a flat phantom's markers rest within this of z = 0 in it
                       # refuses 1 mm RMS off their plane)
 
 
+def rest_off_flat(rest: np.ndarray) -> float:
+    """How far (m) rest markers (..., 3) lie off z = 0 at most: beyond :data:`FLAT_REST_M`,
+    a curved phantom's states (its shape's frame)."""
+    return float(np.nanmax(np.abs(rest[..., 2]))) if np.isfinite(rest[..., 2]).any() else 0.0
+
+
+def states_source(path: str | Path) -> str:
+    """Who made a states file: ``lab`` (extract), ``msm`` or ``solid`` (simulate)."""
+    with h5_reading(path), h5py.File(path, "r") as f:
+        return attr_text(f.attrs["source"])
+
+
+def is_curved(path: str | Path) -> bool:
+    """Whether a states file holds a curved phantom's states: its rest markers (level 0, the
+    tip aside) lie farther than :data:`FLAT_REST_M` off z = 0."""
+    with h5_reading(path), h5py.File(path, "r") as f:
+        rest = f["states/points"][np.flatnonzero(f["states/step"][()] == 0)]
+    return rest_off_flat(rest[:, :-1]) > FLAT_REST_M
+
+
 def check_flat_rest(rest: np.ndarray, path: str | Path) -> None:
     """Refuse the states of a curved phantom where a flat block is simulated (the MSM, the
     solid model): rest markers (..., 3) lying farther than :data:`FLAT_REST_M` off z = 0."""
-    off = float(np.nanmax(np.abs(rest[..., 2]))) if np.isfinite(rest[..., 2]).any() else 0.0
+    off = rest_off_flat(rest)
     if off > FLAT_REST_M:
         raise BadInput(path, f"its markers rest up to {off * 1e3:.1f} mm off z = 0: a curved "
                              "phantom's states (its shape's frame); the MSM and the solid model "

@@ -47,7 +47,7 @@ from core.errors import BadInput
 from sim.msm import paper
 from sim.twin.synth_params import SynthParams
 from train import paper as cgnn_paper
-from train.generic_model import SHIPPED
+from train.generic_model import SHIPPED, SHIPPED_CURVED
 from train.model.config import Offsets
 from train.training.generic_recipe import SHIPPED_RECIPE, GenericRecipe
 
@@ -164,6 +164,13 @@ class Lab:
         return tuple(a for opt, v, d in pairs if v is not None and v != d for a in (opt, v)) + \
             tuple(a for inclusion in self.inclusions for a in ("--inclusion", inclusion))
 
+    @property
+    def shipped(self) -> Path:
+        """The shipped generic model this lab starts from: the one for curved labs on a curved
+        phantom."""
+        return SHIPPED if self.shape is None else SHIPPED_CURVED
+
+
 FOLDS = "folds"          # the batch of every per-fold step: run as their inputs are ready
 OUT = Path("out/demo")   # where the demo writes unless told
 
@@ -235,10 +242,10 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
     tags = VARIANTS
     if pretraining.from_shipped:
-        inits = [SHIPPED] * s.folds
+        inits = [lab.shipped] * s.folds
         steps = [replace(step, parallel=True, batch=FOLDS) for step in session]
         if pretraining == Pretraining.SOLID:
-            steps += solid_steps(out, s, states, splits, (*train, *sd))
+            steps += solid_steps(out, s, states, splits, (*train, *sd), lab.shipped)
             tags = (*VARIANTS, SOLID_TAG)
     elif pretraining == Pretraining.GENERIC:
         pre = generic_steps(out, s.generic, device, recipe)
@@ -279,17 +286,24 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
 
 def generic_steps(out: Path, g: GenericRecipe, device: str = "auto",
                   recipe: tuple[str, ...] | None = None) -> list[Step]:
-    """The generic model made by ``g``: the prior's MSM data (``msm/prior.h5``), one fold of
-    it, and the pre-training (``runs/generic``), all with ``g.seed``; the last step's output
-    is the model every fold fine-tunes from. ``recipe``: the training flags (default: ``g``'s;
-    the demo's another network's)."""
+    """The generic model made by ``g``: the prior's MSM data (``msm/prior.h5``; with
+    ``g.moulds`` the moulds' solids, ``solid/moulds.h5``), one fold of it, and the
+    pre-training (``runs/generic``, ``runs/generic_curved``), all with ``g.seed``; the last
+    step's output is the model every fold fine-tunes from. ``recipe``: the training flags
+    (default: ``g``'s; the demo's another network's)."""
     sd = ("--seed", str(g.seed))
     flags = g.training_flags() if recipe is None else recipe
-    train = ("--device", device, "--lr", str(g.lr), "--batch", str(g.batch), *flags)
-    prior, splits, run = out / "msm" / "prior.h5", out / "msm" / "prior_splits.json", \
-        out / "runs" / "generic"
+    init = () if g.start is None else ("--init", g.start)
+    train = ("--device", device, "--lr", str(g.lr), "--batch", str(g.batch), *flags, *init)
+    if g.moulds:
+        prior, splits, run = out / "solid" / "moulds.h5", out / "solid" / "moulds_splits.json", \
+            out / "runs" / "generic_curved"
+    else:
+        prior, splits, run = out / "msm" / "prior.h5", out / "msm" / "prior_splits.json", \
+            out / "runs" / "generic"
+    moulds = ("--moulds",) if g.moulds else ()
     return [
-        Step(("simulate", "--prior", str(g.phantoms), "--locations", str(g.locations),
+        Step(("simulate", "--prior", str(g.phantoms), *moulds, "--locations", str(g.locations),
               "--directions", str(g.directions), "--workers", "1", "--out", str(prior), *sd),
              (), (prior,), parallel=True, batch=FOLDS, stage="simulate --prior"),
         Step(("split", str(prior), "--out", str(splits), "--folds", "1", *sd), (prior,),
@@ -323,9 +337,10 @@ def solid_pre_dir(out: Path, fold: int) -> Path:
 
 
 def solid_steps(out: Path, s: Settings, states: Path, splits: Path,
-                train: tuple[str, ...]) -> list[Step]:
+                train: tuple[str, ...], start: Path = SHIPPED) -> list[Step]:
     """Per fold: the solid fitted on its training presses (with the interior the session
-    names), pressed at the lab's markers, split, and the shipped model pre-trained on it."""
+    names), pressed at the lab's markers, split, and the shipped model ``start`` (the lab's:
+    :attr:`Lab.shipped`) pre-trained on it."""
     steps = []
     for fold in range(s.folds):
         d, run = solid_dir(out, fold), solid_pre_dir(out, fold)
@@ -342,8 +357,8 @@ def solid_steps(out: Path, s: Settings, states: Path, splits: Path,
             Step(("split", str(data), "--out", str(sp), "--folds", "1"), (data,), (sp,),
                  parallel=True, batch=FOLDS),
             Step(("train", "--data", str(data), "--splits", str(sp), "--out", str(run),
-                  "--epochs", str(s.solid_epochs), "--init", str(SHIPPED), *train),
-                 (data, sp, SHIPPED), (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
+                  "--epochs", str(s.solid_epochs), "--init", str(start), *train),
+                 (data, sp, start), (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
                  stage="train (pre-training)")]
     return steps
 

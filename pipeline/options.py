@@ -238,9 +238,10 @@ def _option_name(param: click.Parameter | None) -> str:
 
 class Checkpoint(click.ParamType):
     """A trained model: an existing checkpoint (or, with ``folder``, a run folder), or
-    ``generic``, the generic model shipped with the package (:mod:`train.generic_model`)."""
+    ``generic`` / ``generic-curved``, the generic models shipped with the package
+    (:mod:`train.generic_model`)."""
 
-    name = "PATH|generic"
+    name = "PATH|generic|generic-curved"
 
     def __init__(self, folder: bool = False) -> None:
         self.path = click.Path(exists=True, dir_okay=folder, path_type=Path)

@@ -10,6 +10,7 @@ import click
 
 from core.errors import BadInput
 from pipeline.options import SIZE_MM, Parsed, ranged, resolve_rrd, rrd_option, seed_option
+from sim.msm.mould_prior import MOULDS
 from sim.msm.msm_prior import PRIOR, PRIOR_DIRECTIONS, PRIOR_LOCATIONS
 from sim.msm.msm_protocol import Protocol, parse_shard
 from sim.msm.simulate_params import SimulateParams
@@ -45,6 +46,14 @@ def _mm(span: tuple[float, float]) -> str:
                    "one block of "
                    "--locations x --directions sequences each, sampled at its markers: the "
                    "data one pre-training for every lab learns from (0: one MSM).")
+@click.option("--moulds", is_flag=True, default=D.moulds,
+              help="With --prior: draw curved moulds instead (sim/msm/mould_prior.py: a dome or "
+                   f"a ridge {_mm(MOULDS.height)} mm high over a block "
+                   f"{_mm(MOULDS.thickness)} mm thick, the MSM prior's footprints and markers "
+                   "on the cap, each press about the place's normal) and press each one's "
+                   "solid (linear elasticity with the stiffening law, its modulus set by how deep "
+                   "its centre press at 7.5 N goes): what the generic model for curved labs "
+                   "learns from. source=\"solid\"; no --shard.")
 @click.option("--steps", type=ranged(B["steps"]), default=D.steps, show_default=True,
               help="Equal force steps up to --fmax.")
 @click.option("--fmax", type=ranged(B["fmax"]), default=D.fmax,
@@ -110,7 +119,7 @@ def _mm(span: tuple[float, float]) -> str:
 @seed_option(D.seed)
 @rrd_option
 def simulate(out: Path, locations: int | None, directions: int | None, prior: int,
-             steps: int, fmax: float,
+             moulds: bool, steps: int, fmax: float,
              size: tuple[float, float] | None, spacing_mm: float | None,
              k_between: float, k_fixed: float, thickness: float, params_file: Path | None,
              solid: Path | None, contact_radius: float, layout: Path | None,
@@ -140,6 +149,8 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
     With --prior B: B phantoms drawn from the prior instead of one MSM (one pre-training
     for every lab): states/points holds the largest marker count then the tip, the slots a
     phantom lacks valid False; states/phantom and phantoms/* record each phantom's draw.
+    With --prior B --moulds: B curved moulds' solids instead (their cap, height, thickness,
+    modulus, stiffening, reach and centre depth in phantoms/*), in the same layout.
 
     \b
     Sharded (cluster jobs), then merged into the same arrays as one run:
@@ -156,7 +167,8 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
         max_angle_deg=max_angle_deg, seed=seed, contact_radius=contact_radius,
         k_between=k_between, k_fixed=k_fixed, size=size,
         spacing=None if spacing_mm is None else spacing_mm * 1e-3, tol=tol, workers=workers,
-        shard=shard, thickness=thickness, rrd_sequences=rrd_sequences, prior=prior)
+        shard=shard, thickness=thickness, rrd_sequences=rrd_sequences, prior=prior,
+        moulds=moulds)
     if merge:
         if shard is not None:
             raise BadInput(None, "--merge and --shard exclude each other")
@@ -167,17 +179,26 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
             raise BadInput(None, "SHARDS are only read with --merge")
         run = run_simulate(SimulateInputs(layout=layout, params_file=params_file, solid=solid),
                            out, params, rrd_path)
-        sim = run.sim
-        unit = "phantoms of the prior" if prior else "locations"
-        what = (f"simulated {len(sim.locations)} {unit} with {run.workers} workers "
-                f"(max residual {sim.max_residual:.2g} N solved, "
-                f"{sim.stored_residual:.2g} N as stored in float32)") if sim is not None else \
-            "simulated the solid (linear elasticity, one factorisation)"
+        what = _what(run, prior, moulds)
     a = run.arrays
     click.echo(f"{out}: {len(a['states/step'])} states, {len(a['single/start'])} single-step and "
                f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s; "
                + _depths(run, thickness, bool(prior))
                + (f"; recording {rrd_path}" if rrd_path else ""))
+
+
+def _what(run: Simulation, prior: int, moulds: bool) -> str:
+    """The closing line's words on what was simulated."""
+    sim = run.sim
+    if moulds:
+        return (f"simulated {prior} moulds' solids (linear elasticity, one factorisation each) "
+                f"with {run.workers} workers")
+    if sim is None:
+        return "simulated the solid (linear elasticity, one factorisation)"
+    unit = "phantoms of the prior" if prior else "locations"
+    return (f"simulated {len(sim.locations)} {unit} with {run.workers} workers (max residual "
+            f"{sim.max_residual:.2g} N solved, {sim.stored_residual:.2g} N as stored in "
+            "float32)")
 
 
 def _depths(run: Simulation, thickness: float, prior: bool) -> str:

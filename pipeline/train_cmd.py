@@ -9,6 +9,7 @@ from click.core import ParameterSource
 
 from core.errors import BadInput
 from pipeline.options import Checkpoint, OneOf, ranged, seed_option
+from train.generic_model import CURVED_NAME, SHIPPED
 from train.generic_model import NAME as GENERIC_NAME
 from train.model.config import CGNNConfig, Offsets
 from train.training.recipes import PAPER, RECIPES, recipe
@@ -36,7 +37,9 @@ B = {**T.BOUNDS, **N.BOUNDS}       # and the options' bounds theirs
               help="Start from this checkpoint's weights (transfer learning from an MSM run; "
                    "the normaliser is fitted on this run's data), or "
                    f"'{GENERIC_NAME}': the generic model shipped with the package, pre-trained "
-                   "once on MSM data drawn from the prior, with --recipe ours (docs/model.md).")
+                   "once on MSM data drawn from the prior, with --recipe ours (docs/model.md); "
+                   f"'{CURVED_NAME}': that model pre-trained again on curved moulds' solids, "
+                   "where a curved lab starts.")
 @click.option("--no-cond", is_flag=True, help="The noCond ablation: no condition C.")
 @click.option("--point-fraction", type=ranged(B["point_fraction"]), default=T.point_fraction,
               help="The aug variant: this fraction of the points per sample in training.")
@@ -109,6 +112,7 @@ def train(ctx: click.Context, recipe_name: str, data: Path, splits: Path, out: P
     opts, config = _settings(recipe_name, _given(ctx, given))
     params = TrainParams(opts, config, device, recipe_name)
     rrd = None if no_rrd else out / "train.rrd"
+    _hint_curved(data, init)
     run = run_train(TrainInputs(data, splits, init), out, params, rrd)
     best = f"{run.best} (the last epoch: --no-val, no validation)" if opts.no_val \
         else str(run.best)
@@ -144,3 +148,15 @@ def _settings(recipe_name: str, given: dict[str, object]) -> tuple[TrainOptions,
             raise BadInput(None, f"{e.what} (the {recipe_name} recipe gives --offsets "
                                  f"{chosen.network['offsets']}: add --offsets none)") from None
         raise
+
+
+def _hint_curved(data: Path, init: Path | None) -> None:
+    """On a curved lab's states, a start from the flat generic model is named on stderr with
+    the model made for curved phantoms (it starts a curved lab better: docs/stages.md); not on
+    simulated ones (the model for curved labs is made so)."""
+    from data_schema.states import is_curved, states_source
+
+    if init is not None and init.resolve() == SHIPPED.resolve() and \
+            states_source(data) == "lab" and is_curved(data):
+        click.echo(f"note: {data} holds a curved phantom's states; --init {CURVED_NAME} starts "
+                   "from the generic model for curved phantoms", err=True)

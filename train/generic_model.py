@@ -2,6 +2,10 @@
 from the prior (:mod:`sim.msm.msm_prior`), where every fold of every lab starts
 (docs/model.md, "One pre-training for every lab").
 
+A second file, ``generic_curved_model.pt`` (``--init generic-curved``), is that model pre-trained
+again on the solids of curved moulds drawn from their prior (:mod:`sim.msm.mould_prior`): where a
+curved lab starts (the demo's, with ``--shape``).
+
 ``pipeline train --init generic`` and ``pipeline demo`` (its default pre-training) read it; no
 lab waits for a fit, a simulation or a pre-training before its first fine-tuning, and nothing
 is downloaded. ``python scripts/build_generic.py`` rebuilds it from the prior and its own
@@ -29,14 +33,16 @@ import torch
 
 NAME = "generic"                                  # what --init takes for the shipped file
 SHIPPED = Path(__file__).with_name("generic_model.pt")
+CURVED_NAME = "generic-curved"                    # ... and for the model for curved labs
+SHIPPED_CURVED = Path(__file__).with_name("generic_curved_model.pt")
 SCHEMA = ("phantom.generic_model", "1.0")         # its provenance record's name and version
 KEEP = ("model", "config", "norm", "meta", "intervals", "epoch", "best_val", "best_epoch")
 
 
 def resolve(init: str | Path) -> Path:
-    """The checkpoint an ``--init`` names: the shipped generic model for ``NAME``, the path
-    otherwise."""
-    return SHIPPED if str(init) == NAME else Path(init)
+    """The checkpoint an ``--init`` names: the shipped generic model for ``NAME``, the one for
+    curved labs for ``CURVED_NAME``, the path otherwise."""
+    return {NAME: SHIPPED, CURVED_NAME: SHIPPED_CURVED}.get(str(init), Path(init))
 
 
 def slim(state: dict[str, Any], provenance: dict[str, Any]) -> dict[str, Any]:

@@ -133,11 +133,11 @@ def _draw_once(prior: Prior, rng: np.random.Generator, locations: int, direction
     size = tuple(rng.uniform(*prior.side, size=2))
     spacing = max(PAPER_SPACING_M, max(size) / (prior.masses - 1))
     params = replace(grid_params(size, spacing),
-                     k_between=_log_uniform(rng, prior.k_between),
-                     k_fixed=_log_uniform(rng, prior.k_fixed))
+                     k_between=log_uniform(rng, prior.k_between),
+                     k_fixed=log_uniform(rng, prior.k_fixed))
     scattered = bool(rng.random() < prior.scattered)
     pitch = rng.uniform(*prior.pitch)
-    layout = (_scattered if scattered else _grid)(prior, rng, np.array(size), pitch)
+    layout = draw_layout(rng, np.array(size), pitch, scattered, prior.markers, prior.edge)
     if layout is None or len(layout) < prior.markers[0]:
         return None
     protocol = Protocol(locations=locations, directions=directions,
@@ -148,33 +148,41 @@ def _draw_once(prior: Prior, rng: np.random.Generator, locations: int, direction
     return PriorPhantom(params, layout, protocol, rng.uniform(*prior.missing), scattered, pitch)
 
 
-def _grid(prior: Prior, rng: np.random.Generator, size: np.ndarray, pitch: float
-          ) -> np.ndarray | None:
-    """A rows x columns grid of ``pitch`` with a count in the prior's range, placed at random
+def draw_layout(rng: np.random.Generator, size: np.ndarray, pitch: float, scattered: bool,
+                markers: tuple[int, int], edge: float) -> np.ndarray | None:
+    """Markers (n, 3) at z = 0 on a footprint of ``size`` (m), ``edge`` inside it, their count
+    in ``markers``: scattered at least ``pitch`` apart, or a grid of ``pitch`` (None: none
+    fits). The MSM's prior and the moulds' (:mod:`sim.msm.mould_prior`) draw them alike."""
+    return (_scattered if scattered else _grid)(rng, size, pitch, markers, edge)
+
+
+def _grid(rng: np.random.Generator, size: np.ndarray, pitch: float, markers: tuple[int, int],
+          edge: float) -> np.ndarray | None:
+    """A rows x columns grid of ``pitch`` with a count in ``markers``, placed at random
     inside the footprint (None: it does not fit)."""
-    room = size - 2 * prior.edge
+    room = size - 2 * edge
     most = np.floor(room / pitch + 1e-9).astype(int) + 1          # columns, rows that fit
-    lo, hi = prior.markers
+    lo, hi = markers
     shapes = [(c, r) for c in range(2, most[0] + 1) for r in range(2, most[1] + 1)
               if lo <= c * r <= hi]
     if not shapes:
         return None
     cols, rows = shapes[int(rng.integers(len(shapes)))]
     extent = np.array([cols - 1, rows - 1]) * pitch
-    corner = prior.edge + rng.uniform(0, 1, 2) * (room - extent)
+    corner = edge + rng.uniform(0, 1, 2) * (room - extent)
     x, y = np.meshgrid(np.arange(cols) * pitch, np.arange(rows) * pitch)
     xy = np.column_stack([x.ravel(), y.ravel()]) + corner
     return np.column_stack([xy, np.zeros(len(xy))])
 
 
-def _scattered(prior: Prior, rng: np.random.Generator, size: np.ndarray, pitch: float
-               ) -> np.ndarray | None:
-    """A count in the prior's range of points at least ``pitch`` apart, uniform inside the
+def _scattered(rng: np.random.Generator, size: np.ndarray, pitch: float,
+               markers: tuple[int, int], edge: float) -> np.ndarray | None:
+    """A count in ``markers`` of points at least ``pitch`` apart, uniform inside the
     footprint (as many as fit in a bounded number of tries)."""
-    want = int(rng.integers(prior.markers[0], prior.markers[1] + 1))
+    want = int(rng.integers(markers[0], markers[1] + 1))
     points: list[np.ndarray] = []
     for _ in range(40 * want):
-        p = prior.edge + rng.uniform(0, 1, 2) * (size - 2 * prior.edge)
+        p = edge + rng.uniform(0, 1, 2) * (size - 2 * edge)
         if all(np.hypot(*(p - q)) >= pitch for q in points):
             points.append(p)
             if len(points) == want:
@@ -197,7 +205,8 @@ def _depth_ok(prior: Prior, phantom: PriorPhantom) -> bool:
     return prior.depth_m[0] <= depth <= prior.depth_m[1]
 
 
-def _log_uniform(rng: np.random.Generator, span: tuple[float, float]) -> float:
+def log_uniform(rng: np.random.Generator, span: tuple[float, float]) -> float:
+    """A draw uniform in the logarithm between the ends of ``span``."""
     return float(np.exp(rng.uniform(np.log(span[0]), np.log(span[1]))))
 
 

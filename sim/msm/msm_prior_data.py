@@ -84,7 +84,7 @@ def simulate_prior(run: PriorRun, *, tol: float = DEFAULT_TOL, workers: int = 1,
         if pool:
             pool.terminate()
             pool.join()
-    arrays = _joined(parts)
+    arrays = joined(parts)
     sim = Simulated(blocks, arrays["states/points"], arrays["states/tip"], residual, stored,
                     0, 0, 0.0)
     return MSMData(sim, arrays, _attrs(run, tol, shard, residual, stored))
@@ -97,28 +97,30 @@ def _simulate_block(args: tuple[PriorRun, int, float]) -> tuple[dict[str, np.nda
     phantom = draw_phantom(run.prior, run.seed, block, run.locations, run.directions)
     occlusion = np.random.default_rng([run.seed, block, 1])
     data = simulate_data(phantom.protocol, phantom.params, tol=tol, layout=phantom.layout)
-    arrays = padded(data.arrays, phantom, block, run.prior.markers[1], occlusion)
+    p = phantom.protocol
+    arrays = padded(data.arrays, len(phantom.layout), phantom.missing,
+                    p.locations * p.directions, p.locations, block, run.prior.markers[1],
+                    occlusion)
     arrays.update({f"phantoms/{k}": np.asarray(v)[None] for k, v in phantom_row(phantom).items()})
     return arrays, data.sim.max_residual, data.sim.stored_residual
 
 
-def padded(a: dict[str, np.ndarray], phantom: PriorPhantom, block: int, width: int,
-           rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """A block's arrays with ``width`` marker slots then the tip (the slots it lacks, and the
-    markers ``rng`` occludes, ``valid`` False and NaN), its sequences and locations numbered
-    after the blocks before it."""
-    n = len(phantom.layout)
+def padded(a: dict[str, np.ndarray], n: int, missing: float, sequences: int, locations: int,
+           block: int, width: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """A block's arrays (its ``n`` markers then the tip) with ``width`` marker slots then the
+    tip (the slots it lacks, and the share ``missing`` of markers ``rng`` occludes, ``valid``
+    False and NaN), its ``sequences`` and ``locations`` numbered after the blocks before it
+    (each block has as many)."""
     states = len(a["states/step"])
     points = np.full((states, width + 1, 3), np.nan, np.float32)
     points[:, :n], points[:, -1] = a["states/points"][:, :n], a["states/points"][:, -1]
     valid = np.zeros((states, width + 1), bool)
-    valid[:, :n] = rng.random((states, n)) >= phantom.missing
+    valid[:, :n] = rng.random((states, n)) >= missing
     valid[:, -1] = True
     points[~valid] = np.nan
-    p = phantom.protocol
     return {**a, "states/points": points, "states/valid": valid,
-            "states/sequence": a["states/sequence"] + block * p.locations * p.directions,
-            "states/location": a["states/location"] + block * p.locations,
+            "states/sequence": a["states/sequence"] + block * sequences,
+            "states/location": a["states/location"] + block * locations,
             "states/phantom": np.full(states, block, np.int32)}
 
 
@@ -134,7 +136,7 @@ def phantom_row(phantom: PriorPhantom) -> dict[str, np.generic | np.ndarray]:
             "max_angle_deg": np.float64(q.max_angle_deg)}
 
 
-def _joined(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+def joined(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """The blocks' arrays one after the other, example indices shifted by the states before."""
     offsets = np.cumsum([0] + [len(p["states/step"]) for p in parts[:-1]])
     out = {}

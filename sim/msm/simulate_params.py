@@ -55,6 +55,8 @@ class SimulateParams:
     rrd_sequences: int = 4                          # sequences shown in the recording
     prior: int = 0                                  # phantoms drawn from the prior, one
     #                                                 block each (sim.msm.msm_prior); 0: one MSM
+    moulds: bool = False                            # the prior's phantoms curved moulds, their
+    #                                                 solids pressed (sim.msm.mould_prior)
 
     SPRING: ClassVar[Bound] = Bound(0, 1e6, min_open=True, unit="N/m")
     BOUNDS: ClassVar[Mapping[str, Bound]] = MappingProxyType({
@@ -74,6 +76,11 @@ class SimulateParams:
         check_bounds(self, self.BOUNDS)
         if self.shard is not None:
             parse_shard(self.shard)
+        if self.moulds and not self.prior:
+            raise BadInput(None, "--moulds draws the prior's phantoms as moulds: give --prior N")
+        if self.moulds and self.shard is not None:
+            raise BadInput(None, "--moulds runs whole: no --shard (each mould's solid is "
+                                 "factorised in its own worker; --workers spreads them)")
         if self.prior:
             drawn = [name for name in DRAWN if getattr(self, name) != getattr(DEFAULTS, name)]
             if drawn:

@@ -22,6 +22,8 @@ from core.protocol import FOOTPRINT_M, STEP_N, THICKNESS_M
 from core.provenance import make_provenance
 from data_schema.json_docs import MSM_PARAMS, validate_json_doc
 from data_schema.states import STATES
+from sim.msm.mould_prior import MOULDS
+from sim.msm.mould_prior_data import MouldRun, rest_surface, simulate_moulds
 from sim.msm.msm import MSM, MSMParams
 from sim.msm.msm_dataset import simulate_data, states_arrays, write_states
 from sim.msm.msm_depth import beyond
@@ -35,7 +37,7 @@ from sim.msm.msm_shards import merge_shards
 from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL
 from sim.msm.simulate_params import SimulateInputs, SimulateParams
-from sim.msm.simulate_view import write_simulate_recording
+from sim.msm.simulate_view import RestSurface, write_simulate_recording
 from sim.msm.workers import default_workers
 from sim.solid.solid_dataset import candidate_places, simulate_places
 from sim.solid.solid_file import read_solid
@@ -131,24 +133,29 @@ def generate(out: str | Path, protocol: Protocol, params: MSMParams, *,
 def _run_prior(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                rrd: str | Path | None) -> Simulation:
     """``simulate --prior``: blocks of phantoms drawn from the prior
-    (:mod:`sim.msm.msm_prior_data`), or one shard of them."""
+    (:mod:`sim.msm.msm_prior_data`), or one shard of them; with ``--moulds`` curved moulds'
+    solids (:mod:`sim.msm.mould_prior_data`)."""
     if inputs.layout is not None or inputs.params_file is not None:
         raise BadInput(inputs.layout or inputs.params_file,
                        "--prior draws the phantoms: no --layout or --params with it")
     locations, directions = p.places
-    run = PriorRun(PRIOR, p.prior, locations, directions, p.seed)
+    run = PriorRun(PRIOR, p.prior, locations, directions, p.seed)   # checks the counts
     shard = parse_shard(p.shard) if p.shard else None
     workers = p.workers or default_workers()
     used = replace(p, locations=locations, directions=directions)
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
-        data = simulate_prior(run, tol=p.tol, workers=workers, shard=shard)
+        if p.moulds:
+            data = simulate_moulds(MouldRun(MOULDS, p.prior, locations, directions, p.seed),
+                                   workers)
+        else:
+            data = simulate_prior(run, tol=p.tol, workers=workers, shard=shard)
         prov = make_provenance("simulate", asdict(used), inputs=[], schema=STATES.name,
                                schema_version=STATES.version)
         write_states(tmp_out, data.arrays, {"provenance": json.dumps(prov), **data.attrs})
         seconds = time.perf_counter() - started
         _record(tmp_rrd, data.arrays, None, STEP_N, p.rrd_sequences,
-                (PRIOR.side[1], PRIOR.side[1]))
+                (PRIOR.side[1], PRIOR.side[1]), rest_surface(data.arrays) if p.moulds else None)
     return Simulation(data.arrays, seconds, data.sim, p.thickness, workers)
 
 
@@ -293,15 +300,17 @@ def _stiffness_map(record: dict, path: str | Path) -> tuple | None:
 
 
 def _record(path: Path | None, arrays: dict[str, np.ndarray], params: MSMParams | None,
-            step_n: float, sequences: int, footprint: tuple[float, float] = FOOTPRINT_M
-            ) -> None:
+            step_n: float, sequences: int, footprint: tuple[float, float] = FOOTPRINT_M,
+            surface: RestSurface | None = None) -> None:
     """The recording: the surface as triangles when the states are every mass of one MSM
     (``params``; None: phantoms drawn from the prior, each on its ``footprint``'s largest,
-    or the solid's or merged shards' points on theirs)."""
+    or the solid's or merged shards' points on theirs); a mould's cap at rest under its
+    points (``surface``)."""
     if path is None:
         return
     model = None if params is None else MSM(params)
     triangles = model.triangles() if model is not None and \
         arrays["states/points"].shape[1] == model.N else None
     write_simulate_recording(path, arrays, step_n, triangles,
-                             footprint if params is None else params.footprint, sequences)
+                             footprint if params is None else params.footprint, sequences,
+                             surface)

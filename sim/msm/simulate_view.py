@@ -13,7 +13,9 @@ sequence ``s``:
 - ``msm/seq_<s>/loaded``: Points3D, the loaded mass; ``msm/seq_<s>/force``: Arrows3D ending at
   it, along the force, 3 mm per N;
 - ``plots/seq_<s>``: the loaded mass's displacement (mm) over the force steps, one colour per
-  sequence, the same colour as the sequence's arrow.
+  sequence, the same colour as the sequence's arrow;
+- ``msm/seq_<s>/mould`` (a prior's moulds only): the cap at rest, a translucent grey Mesh3D
+  under the markers, so a curved phantom reads as one.
 
 Only a few sequences are logged (not all 1100): the view is for checking, the file is the data.
 Everything is sent as columns, so the recording has no log_time timeline to choose by mistake.
@@ -21,6 +23,7 @@ Everything is sent as columns, so the recording has no log_time timeline to choo
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +32,9 @@ import rerun.blueprint as rrb
 
 from core.recording import colormap, declare_up, phantom_view, plot, recording
 
+RestSurface = Callable[[int], tuple[np.ndarray, np.ndarray]]
 APP_ID = "phantom-simulate"
+MOULD_RGBA = (200, 200, 200, 90)       # a mould's cap at rest: translucent grey
 TIMELINE = "force_step"
 ARROW_M_PER_N = 0.003
 # one colour per logged sequence (tab10), for its arrow, its loaded mass and its curve
@@ -64,10 +69,12 @@ def pick_sequences(n_sequences: int, count: int) -> list[int]:
 
 def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], step_n: float,
                              triangles: np.ndarray | None, footprint: tuple[float, float],
-                             count: int = 4) -> list[int]:
+                             count: int = 4, rest_surface: RestSurface | None = None
+                             ) -> list[int]:
     """Save the recording of ``count`` sequences of a states file's arrays (its force step
     ``step_n``, N) on the MSM's surface ``footprint`` (L, W) m; returns them. ``triangles``
-    None: the states are points sampled at a lab's layout, drawn as points."""
+    None: the states are points sampled at a lab's layout, drawn as points. ``rest_surface``:
+    a sequence's surface at rest (vertices, triangles), drawn under its points."""
     seq_of_state = arrays["states/sequence"]
     present = np.unique(seq_of_state)
     chosen = [int(present[i]) for i in pick_sequences(len(present), count)]
@@ -75,7 +82,8 @@ def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], st
     largest = max((np.nanmax(_displacement(arrays, r), initial=0.0) for r in rows.values()),
                   default=0.0)
     empty = len(arrays["states/step"]) == 0
-    first = np.array([[0.0, 0.0], footprint]) if empty else arrays["states/points"][0, :, :2]
+    first = np.array([[0.0, 0.0], footprint]) if empty else \
+        arrays["states/points"][[rows[s][0] for s in chosen]].reshape(-1, 3)[:, :2]
     first = first[np.isfinite(first).all(axis=1)]          # a prior's padding: no point
     size = float(np.ptp(first, axis=0).max())
     middle = (first.min(axis=0) + first.max(axis=0)) / 2
@@ -85,6 +93,11 @@ def write_simulate_recording(path: str | Path, arrays: dict[str, np.ndarray], st
         for i, s in enumerate(chosen):
             log_sequence(rec, s, arrays, rows[s], triangles, largest,
                          SEQUENCE_COLORS[i % len(SEQUENCE_COLORS)])
+            if rest_surface is not None:
+                vertices, faces = rest_surface(s)
+                rec.log(f"msm/seq_{s:04d}/mould", rr.Mesh3D(
+                    vertex_positions=vertices, triangle_indices=faces,
+                    albedo_factor=MOULD_RGBA), static=True)
     return chosen
 
 

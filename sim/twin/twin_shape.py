@@ -17,10 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from core.errors import BadInput
-from data_schema.shape import Shape, read_shape, shape_from_mesh
+from data_schema.shape import Shape, heightfield_solid, read_shape, shape_from_mesh
 
 DOME = "dome:"
 DOME_MM = (1.0, 60.0)       # a dome's height: a bump to a half sphere on the default block
@@ -96,26 +95,3 @@ def dome(size: tuple[float, float, float], height: float, text: str) -> TwinShap
                              -thickness)
     return TwinShape(shape_from_mesh(mesh, text), np.array([length / 2, width / 2, -thickness]),
                      text)
-
-
-def heightfield_solid(xs: np.ndarray, ys: np.ndarray, top, base: float) -> trimesh.Trimesh:
-    """A closed surface in mm: the top ``top((P, 2) m) -> (P,) m`` sampled on the grid
-    ``xs`` x ``ys`` (m), a flat bottom at ``base`` (m), and the side walls between them."""
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    xy = np.c_[gx.ravel(), gy.ravel()]
-    n = len(xy)
-    verts = np.r_[np.c_[xy, top(xy)], np.c_[xy, np.full(n, base)]] * 1e3
-    idx = np.arange(n).reshape(len(xs), len(ys))
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    quads = np.stack([a, b, c, d], -1).reshape(-1, 4)
-    ring = np.r_[idx[:, 0], idx[-1, 1:], idx[-2::-1, -1], idx[0, -2:0:-1]]
-    walls = np.stack([ring, np.roll(ring, -1), np.roll(ring, -1) + n, ring + n], -1)
-    faces = np.r_[_split(quads), _split(quads[:, ::-1] + n), _split(walls[:, ::-1])]
-    mesh = trimesh.Trimesh(verts, faces, process=True)
-    trimesh.repair.fix_normals(mesh)
-    return mesh
-
-
-def _split(quads: np.ndarray) -> np.ndarray:
-    """Each quad (a, b, c, d) as two triangles (a, b, c) and (a, c, d)."""
-    return np.r_[quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]

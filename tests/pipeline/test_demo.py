@@ -19,7 +19,7 @@ from data_schema.synced import SYNCED
 from ingest.mcap_io import read_raw_mcap
 from pipeline.cli import cli
 from pipeline.demo_plan import NETWORKS, QUICK, RECIPE, SMOKE, Lab, Pretraining, demo_steps
-from train.generic_model import SHIPPED
+from train.generic_model import SHIPPED, SHIPPED_CURVED
 
 
 def test_demo_runs_every_stage_and_skips_unchanged_ones(tmp_path):
@@ -284,7 +284,8 @@ def test_the_solid_pretraining_runs_beside_the_shipped_models(tmp_path):
 
 def test_a_curved_lab_is_not_given_a_flat_simulator(tmp_path) -> None:
     """--shape with a pre-training that fits the flat MSM to the lab is refused before any
-    step runs; the shipped model's plan synthesises the curved lab."""
+    step runs; the shipped model's plan synthesises the curved lab, and its TL runs and its
+    solid's pre-training start from the generic model for curved labs."""
     from core.errors import BadInput
 
     lab = Lab(shape="dome:30")
@@ -293,3 +294,8 @@ def test_a_curved_lab_is_not_given_a_flat_simulator(tmp_path) -> None:
     synth = demo_steps(tmp_path, 0, SMOKE, lab=lab)[0].args
     at = synth.index("--shape")
     assert synth[0] == "synth" and synth[at + 1] == "dome:30"
+    steps = demo_steps(tmp_path, 0, SMOKE, lab=lab, pretraining=Pretraining.SOLID)
+    starts = {s.outputs[0].parent.name: s.args[s.args.index("--init") + 1] for s in steps
+              if s.args[0] == "train" and "--init" in s.args}
+    assert {starts[f"exp_tl_fold{k}"] for k in range(SMOKE.folds)} == {str(SHIPPED_CURVED)}
+    assert {starts[f"solid_fold{k}"] for k in range(SMOKE.folds)} == {str(SHIPPED_CURVED)}

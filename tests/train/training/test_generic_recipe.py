@@ -21,10 +21,10 @@ from pipeline.demo_plan import (
     demo_steps,
 )
 from pipeline.generic_build import build_steps, changes
-from train.generic_model import SHIPPED
+from train.generic_model import SHIPPED, SHIPPED_CURVED
 from train.model.config import CGNNConfig, Offsets
 from train.training.checkpoint import load_checkpoint
-from train.training.generic_recipe import SHIPPED_RECIPE
+from train.training.generic_recipe import CURVED_RECIPE, SHIPPED_RECIPE
 from train.training.recipes import RECIPES
 from train.training.train_params import TrainOptions
 
@@ -134,3 +134,14 @@ def test_a_record_another_build_would_not_write_asks_for_a_rebuild(shipped, part
     record = shipped["provenance"]
     assert changes(edit(record)) == [part]
     assert changes({**record, "torch": "0.0"}) == []
+
+
+def test_the_curved_model_starts_from_the_shipped_one_and_is_rebuilt_with_it() -> None:
+    """The model for curved labs records the shipped model's weights it was pre-trained from
+    (``--init generic``, the moulds' prior): another shipped model asks for its rebuild."""
+    record = load_checkpoint(SHIPPED_CURVED)["provenance"]
+    assert record["start"] == load_checkpoint(SHIPPED)["provenance"]["weights_sha256"]
+    simulate, _, train = record["steps"]
+    assert "--moulds" in simulate and _value(train, "--init") == CURVED_RECIPE.start
+    assert changes(record, CURVED_RECIPE) == []
+    assert changes({**record, "start": "0" * 64}, CURVED_RECIPE) == ["start"]
