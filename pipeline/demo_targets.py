@@ -136,8 +136,9 @@ def _fit(out: Path) -> list[tuple[str, bool, str]]:
 
 
 def variant_of(row: Row) -> str:
-    """'tl' (fine-tuned), 'solid' (fine-tuned from a pre-training on the fitted solid), 'msm'
-    (the MSM model) or 'notl' (lab data from scratch), from the variant the run's checkpoint
+    """'tl' (fine-tuned from a generic model: the MSM prior's, or the moulds' for a curved
+    lab), 'solid' (fine-tuned from a pre-training on the lab's fitted solid), 'msm' (the MSM
+    model) or 'notl' (lab data from scratch), from the variant the run's checkpoint
     records."""
     v = Variant.from_dict(row.variant)
     if v.pretrained:

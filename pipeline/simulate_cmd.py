@@ -53,7 +53,7 @@ def _mm(span: tuple[float, float]) -> str:
                    "on the cap, each press about the place's normal) and press each one's "
                    "solid (linear elasticity with the stiffening law, its modulus set by how deep "
                    "its centre press at 7.5 N goes): what the generic model for curved labs "
-                   "learns from. source=\"solid\"; no --shard.")
+                   "learns from. source=\"moulds\"; no --shard.")
 @click.option("--steps", type=ranged(B["steps"]), default=D.steps, show_default=True,
               help="Equal force steps up to --fmax.")
 @click.option("--fmax", type=ranged(B["fmax"]), default=D.fmax,

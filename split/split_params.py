@@ -15,10 +15,10 @@ from core.errors import BadInput
 
 GROUPINGS = ("sequence", "location")    # whole presses, or whole places, in one role
 # by the states file's source: the grouping and the train:val:test ratio (the paper's for
-# lab presses; by place for the simulators, MSM and solid, whose locations are their presses'
-# places)
+# lab presses; by place for the simulators, MSM, a lab's solid and a prior's moulds, whose
+# locations are their presses' places)
 DEFAULTS = {"lab": ("sequence", (12, 3, 5)), "msm": ("location", (7, 2, 1)),
-            "solid": ("location", (7, 2, 1))}
+            "solid": ("location", (7, 2, 1)), "moulds": ("location", (7, 2, 1))}
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@ Each block is one mould's solid: factorised once, its modulus set so that its ce
 .simulate_places`) and laid out as the MSM prior's blocks are (padded to the prior's largest
 marker count with the tip last, numbered after the blocks before it, each block's draw in
 ``phantoms/*``: :mod:`sim.msm.msm_prior_data`), so the trainer reads one kind of file. The run
-(the prior's ranges, blocks, locations, directions, seed) is the root attribute ``protocol``.
+(the prior's ranges, blocks, locations, directions, seed) is the root attribute ``protocol``,
+and its ``source`` is ``moulds``: a model pre-trained on it is told from one pre-trained on a
+lab's own solid (``source = "solid"``) wherever runs are named (Table 2's "Moulds").
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from sim.solid.elasticity import Solver
 from sim.solid.fit_solid_params import FitSolidParams
 from sim.solid.solid_dataset import simulate_places
 from sim.solid.solid_model import Attachments
+
+SOURCE = "moulds"     # the states' source: a prior's moulds (their solids), not a lab's solid
 
 
 @dataclass(frozen=True)
@@ -139,7 +143,7 @@ def rest_surface(arrays: dict[str, np.ndarray]) -> Callable[[int], tuple[np.ndar
 
 def _attrs(run: MouldRun) -> dict:
     """Root attributes of a moulds states file but the provenance."""
-    return {"source": "solid", "units_length": "m", "units_force": "N", "step_n": STEP_N,
+    return {"source": SOURCE, "units_length": "m", "units_force": "N", "step_n": STEP_N,
             "frame": "phantom", "session_names": json.dumps(["solid prior over moulds"]),
             "footprint_m": np.array([run.prior.side[1]] * 2, np.float64),
             "protocol": json.dumps(run.as_json())}

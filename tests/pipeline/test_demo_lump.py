@@ -95,3 +95,13 @@ def test_tl_from_the_solid_is_held_to_15_percent_below_the_shipped_models_over_t
     assert not _solid_over_lump(_scores(runs))[0][1]
     assert _solid_over_lump(_scores(runs[:2])) == []            # no solid runs: no target
     assert {variant_of(r) for r in runs} == {"tl", "solid"}
+
+
+def test_a_curved_labs_tl_runs_are_told_from_its_solids() -> None:
+    """On a curved lab TL starts from the model for curved labs (pre-trained on the moulds'
+    solids, itself from the MSM prior's): a TL run, not one from the lab's own solid."""
+    moulds = variant("Moulds", pretrained=variant("MSM"))
+    tl = run_row(run="runs/exp_tl_fold0", fold=0, variant=variant(pretrained=moulds))
+    solid = run_row(run="runs/exp_solid_fold0", fold=0,
+                    variant=variant(pretrained=variant("Solid", pretrained=moulds)))
+    assert (variant_of(tl), variant_of(solid)) == ("tl", "solid")

@@ -4,8 +4,8 @@
 is the same. What Table 2 calls a run ("cGNN/aug MSM (TL)", :attr:`Variant.label`) is built
 from these fields for display only; nothing parses a label back, and nothing groups by it (a
 fine-tuned run's label leaves out its own rotation and aug). The fields: ``model`` ("cGNN", or
-"noCond" without the condition), ``train_data`` ("MSM" or "Exp", from the states file's
-``source``), ``rotate`` and ``aug`` (rotation augmentation; a point fraction),
+"noCond" without the condition), ``train_data`` ("MSM", "Solid", "Moulds" or "Exp", from the
+states file's ``source``), ``rotate`` and ``aug`` (rotation augmentation; a point fraction),
 ``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning),
 and ``offsets``: where the network reads the tip's offsets
 (:class:`train.model.config.Offsets`).
@@ -90,11 +90,12 @@ class Variant:
                f"{self.train_data}"
 
 
-SOURCE_NAMES = {"msm": "MSM", "solid": "Solid", "lab": "Exp"}
+SOURCE_NAMES = {"msm": "MSM", "solid": "Solid", "moulds": "Moulds", "lab": "Exp"}
 
 
 def source_name(data: str | Path) -> str:
-    """'MSM', 'Solid' or 'Exp' for a states file; '?' where it cannot be read (a moved file)."""
+    """'MSM', 'Solid', 'Moulds' or 'Exp' for a states file; '?' where it cannot be read (a moved
+    file)."""
     try:
         with h5py.File(data, "r") as f:
             source = attr_text(f.attrs["source"])

@@ -4,6 +4,8 @@ deep as drawn, and a states file a trainer reads (``simulate --prior --moulds``)
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -105,7 +107,7 @@ def test_simulate_moulds_writes_a_prior_states_file(tmp_path) -> None:
     largest marker count with the tip last, every normal press moving its tip inward; its
     recording draws each shown sequence's cap under its markers."""
     out = tmp_path / "moulds.h5"
-    res = CliRunner().invoke(cli, ["simulate", "--prior", "2", "--moulds", "--locations", "2",
+    res = CliRunner().invoke(cli, ["simulate", "--prior", "2", "--moulds", "--locations", "5",
                                    "--directions", "1", "--workers", "1", "--out", str(out)])
     assert res.exit_code == 0, res.output
     validate_states(out)
@@ -118,11 +120,16 @@ def test_simulate_moulds_writes_a_prior_states_file(tmp_path) -> None:
         step, seq = f["states/step"][()], f["states/sequence"][()]
         assert points.shape[1] == PRIOR.markers[1] + 1 and valid[:, -1].all()
         assert len(f["phantoms/modulus"]) == 2 and set(f["phantoms/cap"][()]) <= {0, 1, 2}
-        assert f.attrs["source"] == "solid"
+        assert f.attrs["source"] == "moulds"
     for s in np.unique(seq):
         rest, last = points[(seq == s) & (step == 0)][0], points[(seq == s) & (step == 15)][0]
         assert np.linalg.norm(last[-1] - rest[-1]) > 5e-3      # the tip goes mm deep
         assert last[-1, 2] < rest[-1, 2]
+    splits = tmp_path / "splits.json"                  # split as a simulator's: by place
+    res = CliRunner().invoke(cli, ["-q", "split", str(out), "--out", str(splits), "--folds",
+                                   "1", "--no-rrd"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(splits.read_text())["group_by"] == "location"
 
 
 @pytest.mark.parametrize("args, word", [(["--moulds"], "--prior N"),
