@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from enum import Enum
 from typing import Any, TypeVar
 
@@ -84,6 +84,18 @@ def check_bounds(settings: object, bounds: Mapping[str, Bound]) -> None:
         for x in value if isinstance(value, tuple) else (value,):
             if x is not None:
                 bound.check(name, x)
+
+
+def check_ranges(settings: Any, bounds: Mapping[str, Bound]) -> None:
+    """Refuse (BadInput naming the field) a field of the dataclass ``settings`` outside its
+    bound (:func:`check_bounds`), or a (low, high) field whose ends are the wrong way round: a
+    prior's ranges."""
+    check_bounds(settings, bounds)
+    for f in fields(settings):
+        span = getattr(settings, f.name)
+        if isinstance(span, tuple) and span[0] > span[1]:
+            raise BadInput(None, f"{f.name} ({span[0]:g}, {span[1]:g}): not a range "
+                                 "(low, high)")
 
 
 def one_of(kind: type[E], value: Any, name: str) -> E:

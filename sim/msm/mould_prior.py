@@ -27,14 +27,14 @@ Block ``b`` is drawn from ``(seed, b)`` alone, as the MSM prior's are.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from enum import StrEnum
 from types import MappingProxyType
 from typing import ClassVar
 
 import numpy as np
 
-from core.bounds import Bound, check_bounds
+from core.bounds import Bound, check_ranges
 from core.errors import BadInput
 from core.protocol import STEP_N
 from data_schema.shape import Shape, heightfield_solid, shape_from_mesh
@@ -93,13 +93,9 @@ class MouldPrior:
     })
 
     def __post_init__(self) -> None:
-        """Refuse a value out of its bound, or a range the wrong way round, naming it."""
-        check_bounds(self, self.BOUNDS)
-        for f in fields(self):
-            span = getattr(self, f.name)
-            if isinstance(span, tuple) and span[0] > span[1]:
-                raise BadInput(None, f"{f.name} ({span[0]:g}, {span[1]:g}): not a range "
-                                     "(low, high)")
+        """Refuse, in one line naming the field, a value out of its bound or a range whose
+        ends are the wrong way round."""
+        check_ranges(self, self.BOUNDS)
 
 
 MOULDS = MouldPrior()

@@ -24,13 +24,13 @@ same bytes.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from types import MappingProxyType
 from typing import ClassVar
 
 import numpy as np
 
-from core.bounds import Bound, check_bounds
+from core.bounds import Bound, check_ranges
 from core.errors import BadInput
 from core.protocol import FOOTPRINT_SIDE, STEP_N
 from sim.msm import paper
@@ -91,12 +91,7 @@ class Prior:
     def __post_init__(self) -> None:
         """Refuse, in one line naming the field, a value out of its bound or a range whose
         ends are the wrong way round."""
-        check_bounds(self, self.BOUNDS)
-        for f in fields(self):
-            span = getattr(self, f.name)
-            if isinstance(span, tuple) and span[0] > span[1]:
-                raise BadInput(None, f"{f.name} ({span[0]:g}, {span[1]:g}): not a range "
-                                     "(low, high)")
+        check_ranges(self, self.BOUNDS)
 
 
 PRIOR = Prior()

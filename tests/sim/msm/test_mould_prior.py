@@ -139,3 +139,14 @@ def test_moulds_are_refused_without_a_prior_or_sharded(tmp_path, args, word) -> 
     out = tmp_path / "m.h5"
     res = CliRunner().invoke(cli, ["simulate", *args, "--out", str(out), "--no-rrd"])
     assert res.exit_code == 2 and word in res.output and not out.exists()
+
+
+@pytest.mark.parametrize("field, value", [("height", (0.02, 0.01)), ("ridge_share", 1.5),
+                                          ("contact_radius", (0.0, 0.004))])
+def test_a_prior_out_of_its_bounds_is_refused_by_name(field, value) -> None:
+    """A range the wrong way round, a share beyond 1, a patch below the solid's least."""
+    from core.errors import BadInput
+    from sim.msm.mould_prior import MouldPrior
+
+    with pytest.raises(BadInput, match=field):
+        MouldPrior(**{field: value})
