@@ -12,7 +12,7 @@ prior, about 14 min to train: docs/results.md).
 
 ``--curved`` builds the model for curved labs (``train/generic_curved_model.pt``) by its recipe
 (:data:`train.training.generic_recipe.CURVED_RECIPE`): the shipped model pre-trained on the
-solids of moulds drawn from their prior (``simulate --prior --moulds``); about 4 minutes.
+solids of moulds drawn from their prior (``simulate --prior --moulds``); about 5 minutes.
 """
 
 from __future__ import annotations
