@@ -220,12 +220,13 @@ def heightfield_solid(xs: np.ndarray, ys: np.ndarray, top, base: float) -> trime
     quads = np.stack([a, b, c, d], -1).reshape(-1, 4)
     ring = np.r_[idx[:, 0], idx[-1, 1:], idx[-2::-1, -1], idx[0, -2:0:-1]]
     walls = np.stack([ring, np.roll(ring, -1), np.roll(ring, -1) + n, ring + n], -1)
-    faces = np.r_[_split(quads), _split(quads[:, ::-1] + n), _split(walls[:, ::-1])]
+    faces = np.r_[quad_triangles(quads), quad_triangles(quads[:, ::-1] + n),
+                  quad_triangles(walls[:, ::-1])]
     mesh = trimesh.Trimesh(verts, faces, process=True)
     trimesh.repair.fix_normals(mesh)
     return mesh
 
 
-def _split(quads: np.ndarray) -> np.ndarray:
+def quad_triangles(quads: np.ndarray) -> np.ndarray:
     """Each quad (a, b, c, d) as two triangles (a, b, c) and (a, c, d)."""
     return np.r_[quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]

@@ -194,7 +194,8 @@ def rest_off_flat(rest: np.ndarray) -> float:
 
 
 def states_source(path: str | Path) -> str:
-    """Who made a states file: ``lab`` (extract), ``msm`` or ``solid`` (simulate)."""
+    """Who made a states file: ``lab`` (extract), ``msm``, ``solid`` or ``moulds``
+    (simulate: the MSM, a lab's solid, a prior's moulds)."""
     with h5_reading(path), h5py.File(path, "r") as f:
         return attr_text(f.attrs["source"])
 

@@ -91,10 +91,10 @@ from train.training.train_params import DEVICES, TrainParams
 @click.option("--layer", type=LAYER, default=Lab.layer,
               help="A top layer in the twin lab's phantom, THICKNESS,RATIO (synth).")
 @click.option("--shape", default=Lab.shape,
-              help="A curved twin lab: dome:HEIGHT (mm) or a mould's STL/OBJ/PLY (synth); its "
-                   "folds start from the generic model for curved labs "
-                   "(train/generic_curved_model.pt) where a flat lab's start from the shipped "
-                   "generic model.")
+              help="A curved twin lab: dome:HEIGHT (mm) or a mould's STL/OBJ/PLY (synth); with "
+                   "--pretraining shipped or solid its folds start from the generic model for "
+                   "curved labs (train/generic_curved_model.pt), where a flat lab's start from "
+                   "the shipped generic model.")
 @seed_option(SynthParams.seed)
 @click.pass_context
 def demo(ctx: click.Context, out: Path, quick: bool, smoke: bool, force: bool, strict: bool,

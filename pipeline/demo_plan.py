@@ -47,7 +47,7 @@ from core.errors import BadInput
 from sim.msm import paper
 from sim.twin.synth_params import SynthParams
 from train import paper as cgnn_paper
-from train.generic_model import SHIPPED, SHIPPED_CURVED
+from train.generic_model import SHIPPED, SHIPPED_CURVED, resolve
 from train.model.config import Offsets
 from train.training.generic_recipe import SHIPPED_RECIPE, GenericRecipe
 
@@ -309,7 +309,8 @@ def generic_steps(out: Path, g: GenericRecipe, device: str = "auto",
         Step(("split", str(prior), "--out", str(splits), "--folds", "1", *sd), (prior,),
              (splits,), parallel=True, batch=FOLDS),
         Step(("train", "--data", str(prior), "--splits", str(splits), "--out", str(run),
-              "--epochs", str(g.epochs), *train, *sd), (prior, splits),
+              "--epochs", str(g.epochs), *train, *sd),
+             (prior, splits, *(() if g.start is None else (resolve(g.start),))),
              (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
              stage="train (pre-training)"),
     ]

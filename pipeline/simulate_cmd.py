@@ -183,7 +183,7 @@ def simulate(out: Path, locations: int | None, directions: int | None, prior: in
     a = run.arrays
     click.echo(f"{out}: {len(a['states/step'])} states, {len(a['single/start'])} single-step and "
                f"{len(a['multi/start'])} multi-step examples; {what} in {run.seconds:.1f} s; "
-               + _depths(run, thickness, bool(prior))
+               + _depths(run, thickness, bool(prior), moulds)
                + (f"; recording {rrd_path}" if rrd_path else ""))
 
 
@@ -201,10 +201,14 @@ def _what(run: Simulation, prior: int, moulds: bool) -> str:
             "float32)")
 
 
-def _depths(run: Simulation, thickness: float, prior: bool) -> str:
+def _depths(run: Simulation, thickness: float, prior: bool, moulds: bool = False) -> str:
     """The closing line's words on how deep the states go: against the phantom's thickness,
-    or, for a prior's phantoms, against the depth range their centre presses were drawn in."""
+    or, for a prior's phantoms, against the depth range their centre presses were drawn in
+    (a mould's measured from its cap, not from z = 0: its range alone)."""
     deep, deepest = run.beyond_thickness
+    if moulds:
+        return (f"each mould's centre press at 7.5 N drawn {_mm(MOULDS.depth_m)} mm deep, at "
+                f"most {MOULDS.column_share:g} of the column under it (phantoms/depth)")
     if prior:
         return (f"deepest {deepest * 1e3:.1f} mm (each phantom's centre press at 7.5 N drawn "
                 f"{_mm(PRIOR.depth_m)} mm deep)")

@@ -55,6 +55,8 @@ def slim(state: dict[str, Any], provenance: dict[str, Any]) -> dict[str, Any]:
     data = {k: v for k, v in meta["data"].items() if k != "sha256"}
     meta["data"] = {**data, "file": Path(data["file"]).name}
     meta["splits"] = Path(meta["splits"]).name
+    if meta.get("init"):                   # the shipped model it started from: its name
+        meta["init"] = Path(meta["init"]).name
     meta.pop("notes", None)
     out["meta"] = meta
     out["provenance"] = {"schema": SCHEMA[0], "schema_version": SCHEMA[1], **provenance}

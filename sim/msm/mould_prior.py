@@ -7,11 +7,12 @@ and along its normal (docs/results.md, "Curved phantoms"). A spring surface cann
 cap's height changes what it gives; the solid model (:mod:`sim.solid`) can, so the curved
 prior draws moulds and presses their solids. Each block is one phantom:
 
-- its mould: a block ``thickness`` deep below its rim (the footprint's edge, at z = 0) under
-  a cap ``height`` high, a *dome* (the sphere through the footprint's corners, as the twin's
-  ``dome:HEIGHT``) or a *ridge* (the cylinder through two opposite edges, along x or y: a
-  limb, an abdomen's curved slab; :class:`Cap`), meshed as the solid meshes any mould (5 mm
-  across, 8 layers);
+- its mould: a block ``thickness`` deep below its rim (z = 0: the footprint's corners under a
+  dome, the two edges a ridge meets) under a cap ``height`` high (no higher than a
+  half-sphere or a half-cylinder over the footprint), a *dome* (the sphere through the
+  footprint's corners, as the twin's ``dome:HEIGHT``) or a *ridge* (the cylinder through two
+  opposite edges, along x or y: a limb, an abdomen's curved slab; :class:`Cap`), meshed as
+  the solid meshes any mould (5 mm across, 8 layers);
 - its material: how deep the centre press at 7.5 N goes (the MSM prior's range), which sets
   the modulus once the stiffening, its reach and the tip's patch are drawn (the fits on the
   twins' flat and domed blocks lie inside each range);
@@ -37,7 +38,7 @@ import numpy as np
 from core.bounds import Bound, check_ranges
 from core.errors import BadInput
 from core.protocol import STEP_N
-from data_schema.shape import Shape, heightfield_solid, shape_from_mesh
+from data_schema.shape import Shape, heightfield_solid, quad_triangles, shape_from_mesh
 from sim.msm import paper
 from sim.msm.msm_prior import ATTEMPTS, PRIOR, draw_layout, log_uniform
 from sim.msm.msm_protocol import MAX_ANGLE, Plan, Protocol, draw_plan
@@ -87,7 +88,7 @@ class MouldPrior:
         "thickness": Bound(0, 0.2, min_open=True, unit="m"),
         "ridge_share": Bound(0, 1), "side": PRIOR.BOUNDS["side"],
         "depth_m": Bound(0, unit="m", min_open=True), "column_share": Bound(0, 1, min_open=True),
-        "stiffening": Bound(0, 1e6, unit="1/m^2"), "reach": REACH,
+        "stiffening": Bound(0, 1e6, min_open=True, unit="1/m^2"), "reach": REACH,
         "contact_radius": CONTACT_RADIUS, "marker_height": Bound(0, 0.01, unit="m"),
         "max_angle_deg": MAX_ANGLE,
     })
@@ -133,18 +134,25 @@ class MouldPhantom:
         return Attachments.riding(self.layout, self.model.block.top(self.layout[:, :2]))
 
 
+def cap_span(cap: Cap, size: tuple[float, float]) -> tuple[float, list[int]]:
+    """Half the cap's span over the footprint ``size`` (m) (from the middle to the corners, or
+    to the two edges a ridge meets) and the axes it curves along."""
+    length, width = size
+    if cap is Cap.DOME:
+        return float(np.hypot(length, width)) / 2, [0, 1]
+    return (width / 2, [1]) if cap is Cap.RIDGE_X else (length / 2, [0])
+
+
 def cap_top(cap: Cap, size: tuple[float, float], height: float
             ) -> Callable[[np.ndarray], np.ndarray]:
     """The cap's height above the rim over (P, 2) points of the footprint ``size`` (m): a
     sphere through its corners, or a cylinder (along x or y) through two opposite edges,
-    ``height`` above the rim at the middle."""
-    length, width = size
-    centre = np.array([length / 2, width / 2])
-    if cap is Cap.DOME:
-        half, axes = float(np.hypot(length, width)) / 2, [0, 1]
-    else:
-        along_x = cap is Cap.RIDGE_X
-        half, axes = (width if along_x else length) / 2, [1 if along_x else 0]
+    ``height`` above the rim at the middle; no higher than its half-span (a half-sphere or a
+    half-cylinder: higher, the surface through those edges would rise as walls)."""
+    half, axes = cap_span(cap, size)
+    if height > half:
+        raise ValueError(f"a cap {height} m high over a half-span of {half} m is no cap")
+    centre = np.array([size[0] / 2, size[1] / 2])
     radius = (half ** 2 + height ** 2) / (2 * height)
 
     def top(xy: np.ndarray) -> np.ndarray:
@@ -161,9 +169,8 @@ def cap_surface(cap: Cap, size: tuple[float, float], height: float, n: int = 21
     gx, gy = np.meshgrid(np.linspace(0, size[0], n), np.linspace(0, size[1], n), indexing="ij")
     xy = np.c_[gx.ravel(), gy.ravel()]
     idx = np.arange(n * n).reshape(n, n)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), \
-        idx[:-1, 1:].ravel()
-    return np.c_[xy, cap_top(cap, size, height)(xy)], np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1)
+    return np.c_[xy, cap_top(cap, size, height)(xy)], quad_triangles(quads.reshape(-1, 4))
 
 
 def mould_shape(top: Callable[[np.ndarray], np.ndarray], size: tuple[float, float],
@@ -188,12 +195,15 @@ def draw_mould(prior: MouldPrior, seed: int, block: int, locations: int, directi
 
 def _draw_once(prior: MouldPrior, rng: np.random.Generator, locations: int, directions: int
                ) -> MouldPhantom | None:
-    """One draw (None: its markers do not fit, or it has fewer places than ``locations``)."""
+    """One draw (None: a cap higher than its half-span, markers that do not fit, or fewer
+    places than ``locations``)."""
     size = (float(rng.uniform(*prior.side)), float(rng.uniform(*prior.side)))
     ridge = bool(rng.random() < prior.ridge_share)
     height, thickness = float(rng.uniform(*prior.height)), float(rng.uniform(*prior.thickness))
     along_x = bool(rng.random() < 0.5)                  # a ridge's axis (drawn for a dome too)
     cap = (Cap.RIDGE_X if along_x else Cap.RIDGE_Y) if ridge else Cap.DOME
+    if height > cap_span(cap, size)[0]:
+        return None                                     # higher than a half-cylinder
     top = cap_top(cap, size, height)
     scattered, pitch = bool(rng.random() < PRIOR.scattered), float(rng.uniform(*PRIOR.pitch))
     flat = draw_layout(rng, np.array(size), pitch, scattered, PRIOR.markers, PRIOR.edge)
@@ -209,7 +219,10 @@ def _draw_once(prior: MouldPrior, rng: np.random.Generator, locations: int, dire
     depth, missing = float(rng.uniform(*prior.depth_m)), float(rng.uniform(*PRIOR.missing))
     block = BlockGeometry(size, thickness, 0.0, mould_shape(top, size, thickness))
     model = SolidModel(block, SPACING_M, LAYERS)
-    candidates = candidate_places(model, layout, contact)
+    try:
+        candidates = candidate_places(model, layout, contact)
+    except BadInput:                                    # no node clear of the markers
+        return None
     if len(candidates) < locations:
         return None
     plan = draw_plan(protocol, len(candidates), np.arange(len(candidates)))

@@ -2,8 +2,8 @@
 prior over moulds (:mod:`sim.msm.mould_prior`), side by side.
 
 Each block is one mould's solid: factorised once, its modulus set so that its centre press at
-7.5 N goes as deep as drawn, pressed at its places (:func:`sim.solid.solid_dataset
-.simulate_places`) and laid out as the MSM prior's blocks are (padded to the prior's largest
+7.5 N goes as deep as drawn, pressed at its places (:func:`sim.msm.solid_states.solid_arrays`)
+and laid out as the MSM prior's blocks are (padded to the prior's largest
 marker count with the tip last, numbered after the blocks before it, each block's draw in
 ``phantoms/*``: :mod:`sim.msm.msm_prior_data`), so the trainer reads one kind of file. The run
 (the prior's ranges, blocks, locations, directions, seed) is the root attribute ``protocol``,
@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.progress import progress
 from core.protocol import STEP_N
 from sim.msm.mould_prior import (
     Cap,
@@ -30,14 +29,14 @@ from sim.msm.mould_prior import (
     modulus_for_depth,
     mould_record,
 )
-from sim.msm.msm_dataset import MSMData, states_arrays
+from sim.msm.msm_dataset import MSMData
 from sim.msm.msm_prior import PRIOR
 from sim.msm.msm_prior_data import joined, padded
 from sim.msm.msm_simulate import Simulated
-from sim.msm.workers import worker_pool
+from sim.msm.solid_states import solid_arrays
+from sim.msm.workers import run_blocks
 from sim.solid.elasticity import Solver
 from sim.solid.fit_solid_params import FitSolidParams
-from sim.solid.solid_dataset import simulate_places
 from sim.solid.solid_model import Attachments
 
 SOURCE = "moulds"     # the states' source: a prior's moulds (their solids), not a lab's solid
@@ -63,17 +62,8 @@ class MouldRun:
 def simulate_moulds(run: MouldRun, workers: int = 1) -> MSMData:
     """The blocks of ``run``: the states file's arrays and root attributes (but the
     provenance); the blocks run in ``workers`` processes and do not depend on how many."""
-    jobs = [(run, b) for b in range(run.blocks)]
-    workers = max(1, min(workers, len(jobs)))
-    pool = worker_pool(workers) if workers > 1 else None
-    try:
-        done = pool.imap(_simulate_block, jobs) if pool else map(_simulate_block, jobs)
-        with progress(done, "simulating moulds of the prior", length=len(jobs)) as bar:
-            parts = list(bar)
-    finally:
-        if pool:
-            pool.terminate()
-            pool.join()
+    parts = run_blocks(_simulate_block, [(run, b) for b in range(run.blocks)], workers,
+                       "simulating moulds of the prior")
     arrays = joined(parts)
     sim = Simulated(np.arange(run.blocks), arrays["states/points"], arrays["states/tip"],
                     0.0, 0.0, 0, 0, 0.0)
@@ -88,11 +78,7 @@ def _simulate_block(args: tuple[MouldRun, int]) -> dict[str, np.ndarray]:
     solver = model.factorise(np.ones(model.elasticity.n_elements), FitSolidParams.poisson)
     at = phantom.at()
     modulus = centre_modulus(phantom, solver, at)
-    forces = np.arange(plan.protocol.steps + 1) * plan.protocol.step_n
-    states = simulate_places(model, solver, phantom.material(modulus), phantom.places,
-                             plan.directions, forces, at)
-    sim = Simulated(np.arange(run.locations), states.points, states.tips, 0.0, 0.0, 0, 1, 0.0)
-    arrays = {k: v for k, v in states_arrays(plan, sim).items() if k != "states/mass"}
+    arrays = solid_arrays(model, solver, phantom.material(modulus), phantom.places, plan, at)
     out = padded(arrays, len(phantom.layout), phantom.missing, run.locations * run.directions,
                  run.locations, block, PRIOR.markers[1],
                  np.random.default_rng([run.seed, block, 1]))

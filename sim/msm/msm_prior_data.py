@@ -21,14 +21,13 @@ from typing import ClassVar
 import numpy as np
 
 from core.bounds import Bound
-from core.progress import progress
 from core.protocol import STEP_N
 from sim.msm.msm_dataset import MSMData, simulate_data
 from sim.msm.msm_prior import Prior, PriorPhantom, draw_phantom, prior_record
 from sim.msm.msm_protocol import shard_locations
 from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL, check_tol
-from sim.msm.workers import worker_pool
+from sim.msm.workers import run_blocks
 
 PHANTOM_FIELDS = ("k_between", "k_fixed", "contact_radius", "footprint", "markers", "pitch",
                   "scattered", "missing", "max_angle_deg")
@@ -70,20 +69,10 @@ def simulate_prior(run: PriorRun, *, tol: float = DEFAULT_TOL, workers: int = 1,
     check_tol(tol)
     blocks = shard_locations(run.blocks, shard)
     jobs = [(run, int(b), tol) for b in blocks]
-    workers = max(1, min(workers, len(jobs)))
-    pool = worker_pool(workers) if workers > 1 else None
-    parts: list[dict[str, np.ndarray]] = []
-    residual = stored = 0.0
-    try:
-        done = pool.imap(_simulate_block, jobs) if pool else map(_simulate_block, jobs)
-        with progress(done, "simulating phantoms of the prior", length=len(jobs)) as bar:
-            for arrays, worst, kept in bar:
-                parts.append(arrays)
-                residual, stored = max(residual, worst), max(stored, kept)
-    finally:
-        if pool:
-            pool.terminate()
-            pool.join()
+    done = run_blocks(_simulate_block, jobs, workers, "simulating phantoms of the prior")
+    parts = [arrays for arrays, _, _ in done]
+    residual = max((worst for _, worst, _ in done), default=0.0)
+    stored = max((kept for _, _, kept in done), default=0.0)
     arrays = joined(parts)
     sim = Simulated(blocks, arrays["states/points"], arrays["states/tip"], residual, stored,
                     0, 0, 0.0)

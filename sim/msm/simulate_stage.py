@@ -25,7 +25,7 @@ from data_schema.states import STATES
 from sim.msm.mould_prior import MOULDS
 from sim.msm.mould_prior_data import MouldRun, rest_surface, simulate_moulds
 from sim.msm.msm import MSM, MSMParams
-from sim.msm.msm_dataset import simulate_data, states_arrays, write_states
+from sim.msm.msm_dataset import simulate_data, write_states
 from sim.msm.msm_depth import beyond
 from sim.msm.msm_grid import GRID_KEYS, check_same_grid, grid_params, recorded_grid
 from sim.msm.msm_layout import LabLayout, check_inside, read_layout
@@ -38,8 +38,9 @@ from sim.msm.msm_simulate import Simulated
 from sim.msm.msm_static import DEFAULT_TOL
 from sim.msm.simulate_params import SimulateInputs, SimulateParams
 from sim.msm.simulate_view import RestSurface, write_simulate_recording
+from sim.msm.solid_states import solid_arrays
 from sim.msm.workers import default_workers
-from sim.solid.solid_dataset import candidate_places, simulate_places
+from sim.solid.solid_dataset import candidate_places
 from sim.solid.solid_file import read_solid
 from sim.solid.solid_fit import SolidMaterial
 from sim.solid.solid_model import Attachments
@@ -182,11 +183,8 @@ def _run_solid(inputs: SimulateInputs, out: str | Path, p: SimulateParams,
                    thickness=solid.model.block.thickness)
     with atomic_outputs(out, rrd) as (tmp_out, tmp_rrd):
         started = time.perf_counter()
-        states = simulate_places(solid.model, solid.factorise(), solid.material,
-                                 candidates[plan.nodes[locs]], plan.directions[locs],
-                                 np.arange(protocol.steps + 1) * protocol.step_n, at)
-        sim = Simulated(locs, states.points, states.tips, 0.0, 0.0, 0, 1, 0.0)
-        arrays = {k: v for k, v in states_arrays(plan, sim).items() if k != "states/mass"}
+        arrays = solid_arrays(solid.model, solid.factorise(), solid.material,
+                              candidates[plan.nodes], plan, at, locs)
         prov = make_provenance("simulate", asdict(used),
                                inputs=[Path(solid_file), Path(layout)],
                                schema=STATES.name, schema_version=STATES.version)

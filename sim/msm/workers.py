@@ -5,6 +5,12 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.pool
 import os
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
+
+from core.progress import progress
+
+R = TypeVar("R")
 
 
 def worker_pool(workers: int) -> multiprocessing.pool.Pool:
@@ -21,3 +27,20 @@ def default_workers() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:
         return os.cpu_count() or 1
+
+
+def run_blocks(work: Callable[[Any], R], jobs: Sequence[Any], workers: int, label: str
+               ) -> list[R]:
+    """``work`` on each of ``jobs`` in order, in up to ``workers`` processes (here when one),
+    with a progress bar named ``label``: a prior's blocks, each drawn from its own seed, so
+    the result does not depend on how many."""
+    workers = max(1, min(workers, len(jobs)))
+    pool = worker_pool(workers) if workers > 1 else None
+    try:
+        done = pool.imap(work, jobs) if pool else map(work, jobs)
+        with progress(done, label, length=len(jobs)) as bar:
+            return list(bar)
+    finally:
+        if pool:
+            pool.terminate()
+            pool.join()

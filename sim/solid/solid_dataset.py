@@ -7,7 +7,8 @@ here are the top face's nodes inside the markers' bounding box, where the lab pr
 place is three back-substitutions on one factorisation (:meth:`SolidModel.respond`), each
 direction and level a weighted sum of them (:func:`sim.solid.solid_model.predict`). The points
 are the lab's markers then the tip, as the lab's states are. On a curved block the directions
-are drawn about each place's inward normal, as the twin's hand presses.
+are drawn about each place's inward normal, as the twin's hand presses
+(:func:`square_to_surface`, which the caller applies: it records what it applied).
 """
 
 from __future__ import annotations
@@ -71,12 +72,12 @@ def square_to_surface(model: SolidModel, places: np.ndarray, directions: np.ndar
 def simulate_places(model: SolidModel, solver: Solver, material: SolidMaterial,
                     places: np.ndarray, directions: np.ndarray, forces: np.ndarray,
                     at: Attachments) -> SolidStates:
-    """The states at ``places`` (L, 3) along ``directions`` (L, D, 3) at ``forces`` (T,) N
+    """The states at ``places`` (L, 3) along ``directions`` (L, D, 3: as applied, turned to
+    a curved surface by the caller, :func:`square_to_surface`) at ``forces`` (T,) N
     (ascending from 0)."""
     responses = model.respond(solver, places, material.contact_radius, model.probes(at))
     points, tips = [], []
-    for resp, dirs in zip(responses, square_to_surface(model, places, directions),
-                          strict=True):
+    for resp, dirs in zip(responses, directions, strict=True):
         for d in dirs:
             loads = forces[:, None] * d[None]
             pts, tip = predict(resp, loads, material.modulus, material.stiffening,

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from core.recording import rrd_entities
 from data_schema.states import validate_states
 from pipeline.cli import cli
-from sim.msm.mould_prior import MOULDS, Cap, cap_top, draw_mould, modulus_for_depth
+from sim.msm.mould_prior import MOULDS, Cap, cap_span, cap_top, draw_mould, modulus_for_depth
 from sim.msm.mould_prior_data import centre_modulus
 from sim.msm.msm_prior import PRIOR
 from sim.solid.elasticity import Solver
@@ -41,6 +41,16 @@ def test_a_dome_is_the_sphere_through_the_footprints_corners() -> None:
     r = (0.06 ** 2 + 0.04 ** 2 + h ** 2) / (2 * h)                 # the sphere's radius
     dist = np.linalg.norm(np.c_[xy - [0.06, 0.04], top(xy) - (h - r)], axis=1)
     np.testing.assert_allclose(dist, r, rtol=1e-12)
+
+
+def test_a_cap_is_never_higher_than_its_half_span(phantoms) -> None:
+    """Higher than a half-cylinder the surface through the edges would rise as walls: refused
+    to the geometry, and never drawn."""
+    with pytest.raises(ValueError):
+        cap_top(Cap.RIDGE_X, (0.10, 0.06), 0.031)
+    cap_top(Cap.RIDGE_X, (0.10, 0.06), 0.030)           # a half-cylinder: the edges at 0
+    for ph in phantoms:
+        assert ph.height <= cap_span(ph.cap, ph.model.block.footprint)[0]
 
 
 def test_a_ridge_is_a_cylinder_along_its_axis() -> None:
@@ -118,6 +128,7 @@ def test_simulate_moulds_writes_a_prior_states_file(tmp_path) -> None:
     with h5py.File(out) as f:
         points, valid = f["states/points"][()], f["states/valid"][()]
         step, seq = f["states/step"][()], f["states/sequence"][()]
+        pushed = f["states/force_vector"][()]
         assert points.shape[1] == PRIOR.markers[1] + 1 and valid[:, -1].all()
         assert len(f["phantoms/modulus"]) == 2 and set(f["phantoms/cap"][()]) <= {0, 1, 2}
         assert f.attrs["source"] == "moulds"
@@ -125,6 +136,15 @@ def test_simulate_moulds_writes_a_prior_states_file(tmp_path) -> None:
         rest, last = points[(seq == s) & (step == 0)][0], points[(seq == s) & (step == 15)][0]
         assert np.linalg.norm(last[-1] - rest[-1]) > 5e-3      # the tip goes mm deep
         assert last[-1, 2] < rest[-1, 2]
+    first = draw_mould(MOULDS, 0, 0, 5, 1)              # block 0, as the run drew it
+    shape = first.model.block.shape
+    for k, place in enumerate(first.places):            # each press recorded as applied:
+        vector = pushed[(seq == k) & (step == 15)][0]   # along the inward normal (1 direction)
+        np.testing.assert_allclose(vector / np.linalg.norm(vector),
+                                   -shape.closest(place[None])[1][0], atol=1e-6)
+    res = CliRunner().invoke(cli, ["-q", "fit-msm", str(out), "--out", str(tmp_path / "f.json"),
+                                   "--no-rrd"])               # the MSM is flat: refused
+    assert res.exit_code == 2 and "curved" in res.output and not (tmp_path / "f.json").exists()
     splits = tmp_path / "splits.json"                  # split as a simulator's: by place
     res = CliRunner().invoke(cli, ["-q", "split", str(out), "--out", str(splits), "--folds",
                                    "1", "--no-rrd"])
