@@ -195,9 +195,9 @@ def rest_off_flat(rest: np.ndarray) -> float:
 
 def states_source(path: str | Path) -> str:
     """Who made a states file: ``lab`` (extract), ``msm``, ``solid`` or ``moulds``
-    (simulate: the MSM, a lab's solid, a prior's moulds)."""
+    (simulate: the MSM, a lab's solid, a prior's moulds); empty where it says nothing."""
     with h5_reading(path), h5py.File(path, "r") as f:
-        return attr_text(f.attrs["source"])
+        return attr_text(f.attrs.get("source", ""))
 
 
 def is_curved(path: str | Path) -> bool:

@@ -17,9 +17,9 @@ import numpy as np
 from core.atomic import atomic_output, atomic_outputs
 from core.errors import BadInput
 from core.provenance import make_provenance, sha256_file
-from data_schema.hdf5 import attr_text, h5_reading
+from data_schema.hdf5 import h5_reading
 from data_schema.json_docs import FOLDS, validate_folds
-from data_schema.states import example_groups, validate_states
+from data_schema.states import example_groups, states_source, validate_states
 from split.split import examples_by_role, make_folds
 from split.split_params import DEFAULTS, SplitParams, filled_in
 from split.split_view import write_split_recording
@@ -40,17 +40,11 @@ def run_split(inputs: str | Path, out: str | Path, params: SplitParams | None = 
     return doc
 
 
-def source_of(states: str | Path) -> str:
-    """``lab`` or ``msm``: what the states file holds (its defaults follow; the file is
-    checked by :func:`build_manifest`)."""
-    with h5_reading(states), h5py.File(states, "r") as f:
-        return attr_text(f.attrs.get("source", ""))
-
-
 def default_plan(states: str | Path, group_by: str | None, ratio: tuple[int, int, int] | None,
                  folds: int, seed: int) -> SplitParams:
     """The settings for ``states``: what the user gave, the data's defaults for the rest."""
-    d_group, d_ratio = DEFAULTS.get(source_of(states), DEFAULTS["lab"])
+    d_group, d_ratio = DEFAULTS.get(states_source(states), DEFAULTS["lab"])   # the file is
+    #                                                   checked by build_manifest
     return SplitParams(group_by or d_group, ratio or d_ratio, folds, seed)
 
 

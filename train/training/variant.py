@@ -20,10 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import h5py
-
-from data_schema.hdf5 import attr_text
+from core.errors import BadInput
 from data_schema.metrics_doc import VariantRow
+from data_schema.states import states_source
 from train.model.config import CGNNConfig, Offsets
 from train.training.train_params import TrainOptions
 
@@ -95,13 +94,12 @@ SOURCE_NAMES = {"msm": "MSM", "solid": "Solid", "moulds": "Moulds", "lab": "Exp"
 
 def source_name(data: str | Path) -> str:
     """'MSM', 'Solid', 'Moulds' or 'Exp' for a states file; '?' where it cannot be read (a moved
-    file)."""
+    file) or names no source."""
     try:
-        with h5py.File(data, "r") as f:
-            source = attr_text(f.attrs["source"])
-    except (OSError, KeyError):
+        source = states_source(data)
+    except BadInput:                # not readable (h5_reading names the file)
         return "?"
-    return SOURCE_NAMES.get(source, source)
+    return SOURCE_NAMES.get(source, source or "?")
 
 
 def make_variant(config: CGNNConfig, opts: TrainOptions, data: str | Path,

@@ -20,6 +20,7 @@ from sim.msm.msm_prior import PRIOR
 from sim.solid.elasticity import Solver
 from sim.solid.fit_solid_params import FitSolidParams
 from sim.solid.solid_model import predict, stiffened
+from train.training.variant import source_name
 
 BLOCKS = range(6)
 
@@ -132,6 +133,7 @@ def test_simulate_moulds_writes_a_prior_states_file(tmp_path) -> None:
         assert points.shape[1] == PRIOR.markers[1] + 1 and valid[:, -1].all()
         assert len(f["phantoms/modulus"]) == 2 and set(f["phantoms/cap"][()]) <= {0, 1, 2}
         assert f.attrs["source"] == "moulds"
+    assert source_name(out) == "Moulds"                 # Table 2's name: not a lab's "Solid"
     for s in np.unique(seq):
         rest, last = points[(seq == s) & (step == 0)][0], points[(seq == s) & (step == 15)][0]
         assert np.linalg.norm(last[-1] - rest[-1]) > 5e-3      # the tip goes mm deep
