@@ -43,6 +43,7 @@ regenerate them.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import h5py
@@ -188,9 +189,16 @@ FLAT_REST_M = 5e-3    # a flat phantom's markers rest within this of z = 0 in it
 
 
 def rest_off_flat(rest: np.ndarray) -> float:
-    """How far (m) rest markers (..., 3) lie off z = 0 at most: beyond :data:`FLAT_REST_M`,
-    a curved phantom's states (its shape's frame)."""
-    return float(np.nanmax(np.abs(rest[..., 2]))) if np.isfinite(rest[..., 2]).any() else 0.0
+    """How far (m) rest markers lie off z = 0 at most, each marker at its median height over
+    the presses' rest states (``rest``: (R, P, 3), or (P, 3) one layout), so that one press's
+    mislabelled marker does not make a flat phantom curved: beyond :data:`FLAT_REST_M`, a
+    curved phantom's states (its shape's frame)."""
+    z = rest[..., 2].reshape(-1, rest.shape[-2])
+    if not np.isfinite(z).any():
+        return 0.0
+    with warnings.catch_warnings():          # a marker never seen at rest: no height
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return float(np.nanmax(np.abs(np.nanmedian(z, axis=0))))
 
 
 def states_source(path: str | Path) -> str:
@@ -210,7 +218,8 @@ def is_curved(path: str | Path) -> bool:
 
 def check_flat_rest(rest: np.ndarray, path: str | Path) -> None:
     """Refuse the states of a curved phantom where a flat block is simulated (the MSM, the
-    solid model): rest markers (..., 3) lying farther than :data:`FLAT_REST_M` off z = 0."""
+    solid model): rest markers ((R, P, 3) or (P, 3), as :func:`rest_off_flat`) lying
+    farther than :data:`FLAT_REST_M` off z = 0."""
     off = rest_off_flat(rest)
     if off > FLAT_REST_M:
         raise BadInput(path, f"its markers rest up to {off * 1e3:.1f} mm off z = 0: a curved "

@@ -16,6 +16,7 @@ is the model's condition); a press with no loading phase is excluded. Both are c
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -84,10 +85,19 @@ def contact_start(force: np.ndarray, onset: int) -> int:
 def line_at(t: np.ndarray, values: np.ndarray, at: float, min_samples: int
             ) -> tuple[np.ndarray, np.ndarray]:
     """Value and slope at ``at`` of a straight line fitted to ``values`` (T, ...) over ``t``,
-    per column, ignoring NaN; NaN where fewer than ``min_samples`` frames are finite."""
+    per column, ignoring NaN; NaN where fewer than ``min_samples`` frames are finite, or where
+    ``at`` lies farther beyond them than half their span: a line through a few noisy frames at
+    one end of the window, carried to its middle, multiplies their noise (a marker seen only in
+    the rest window's last 3 frames came out 18 mm off); within half the span a line's value
+    errs at most sqrt(13 / n) times a frame's noise."""
     v = values.reshape(len(t), -1)
     ok = np.isfinite(v)
     n = ok.sum(axis=0)
+    seen = np.where(ok, t[:, None], np.nan)
+    with warnings.catch_warnings():           # a column never seen: no span, NaN below anyway
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanmin(seen, axis=0), np.nanmax(seen, axis=0)
+    near = (at >= lo - (hi - lo) / 2) & (at <= hi + (hi - lo) / 2)
     dt = (t - at)[:, None] * ok
     y = np.where(ok, v, 0.0)
     mean_t, mean_y = dt.sum(0) / np.maximum(n, 1), y.sum(0) / np.maximum(n, 1)
@@ -95,7 +105,7 @@ def line_at(t: np.ndarray, values: np.ndarray, at: float, min_samples: int
     cov = ((dt - mean_t) * (y - mean_y) * ok).sum(0)
     slope = np.where(var > 0, cov / np.where(var > 0, var, 1.0), 0.0)
     value = mean_y - slope * mean_t
-    enough = n >= min_samples
+    enough = (n >= min_samples) & near
     shape = values.shape[1:]
     return (np.where(enough, value, np.nan).reshape(shape),
             np.where(enough, slope, np.nan).reshape(shape))

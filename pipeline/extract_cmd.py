@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 @click.argument("synced", nargs=-1, required=True,
                 type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="States file to write (schema phantom.states 2.2).")
+              help="States file to write (schema phantom.states 2.3).")
 @click.option("--step", "step_n", type=ranged(D.BOUNDS["step_n"]), default=D.step_n,
               show_default=True,
               help="Force level spacing, N: at least 3 x the force noise sync measured (and "

@@ -85,10 +85,10 @@ def read_measured(path: str | Path, params: MSMParams | None = None,
     if params is None:
         params = _file_grid(path, source, file_params, spacing)
     if source != "msm":              # a lab's, a solid's or a prior's moulds: flat, or refused
-        rests = np.vstack([points[int(r[0])][:-1] for r in rows.values()])
+        rests = np.stack([points[int(r[0])][:-1] for r in rows.values()])
         check_flat_rest(rests, path)
         if source == "lab":          # a marker beyond the surface would be fitted at its edge
-            check_inside(rests, params, path)
+            check_inside(rests.reshape(-1, 3), params, path)
     if contact_radius is None:
         contact_radius = float(protocol.get("contact_radius", 0.0)) if source == "msm" else 0.0
     model = MSM(params)

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 from helpers.cgnn_data import write_dent_states
 
 from core.errors import BadInput
-from data_schema.states import validate_states
+from data_schema.states import FLAT_REST_M, check_flat_rest, rest_off_flat, validate_states
 from pipeline.cli import cli
 
 
@@ -101,3 +101,19 @@ def test_msm_states_are_in_the_phantom_frame(tmp_path) -> None:
     assert (loaded_mass_z[normal] < -1e-3).all()           # the normal load pushes into -z
     for s in set(seq):                                     # deeper at every level
         assert (np.diff(loaded_mass_z[seq == s][np.argsort(step[seq == s])]) < 0).all()
+
+
+def test_one_presss_stray_marker_does_not_make_a_flat_phantom_curved() -> None:
+    """Each marker's rest height is its median over the presses: a marker read 5.3 mm up in
+    one press of 32 (a mislabelled frame) leaves the phantom flat; markers that every press
+    finds 10 mm up are a curved phantom's, refused where a flat block is simulated."""
+    rng = np.random.default_rng(0)
+    rest = np.zeros((32, 25, 3))
+    rest[..., 2] = rng.normal(0.0, 2e-5, (32, 25))
+    rest[5, 20, 2] = 5.3e-3
+    assert rest_off_flat(rest) < 1e-4
+    check_flat_rest(rest, "flat.h5")
+    rest[:, 12, 2] += 10e-3                       # the middle marker on a dome's top
+    assert abs(rest_off_flat(rest) - 10e-3) < 1e-4 and rest_off_flat(rest[0]) > FLAT_REST_M
+    with pytest.raises(BadInput, match="curved"):
+        check_flat_rest(rest, "dome.h5")

@@ -52,3 +52,25 @@ def test_every_step_reads_a_level_reached_to_within_rounding() -> None:
             states = press_states(ramp_press(float(peak)), ExtractParams(step_n=step))
             assert states.step[-1] in (k - 1, k)
             assert list(states.step) == list(range(states.step[-1] + 1))
+
+
+def test_a_point_seen_only_at_one_end_of_its_window_is_missing_not_extrapolated() -> None:
+    """The rest state is read at the middle of the 0.1 s before contact. A marker seen in only
+    the window's last frames, noisy, was carried to the middle along the line through them
+    (18 mm off on a twin session); it is missing there instead, and read where its frames
+    bracket the instant, or nearly (the tip seen from 3.4 ms after a level's instant on)."""
+    press = ramp_press(1.0)
+    rest = (press.time_s > 0.905) & (press.time_s < 1.005)   # the rest window: 0.91-1.00 s
+    hidden = rest & (press.time_s < 0.975)                    # seen in its last 3 frames only
+    press.points[hidden, 0] = np.nan
+    noise = np.random.default_rng(0).normal(0.0, 1e-4, (len(press.time_s), 3))
+    press.points[~hidden & rest, 0] += noise[~hidden & rest]
+    states = press_states(press, ExtractParams())
+    assert not states.valid[0, 0] and np.isnan(states.points[0, 0]).all()
+    assert states.valid[0, 1]                                 # the tip, seen throughout
+    press.points[hidden & (press.time_s < 0.92), 0] = 0.0     # seen early as well: bracketed
+    states = press_states(press, ExtractParams())
+    assert states.valid[0, 0] and np.abs(states.points[0, 0]).max() < 1e-3
+    press.points[(press.time_s > 1.45) & (press.time_s < 1.505), 1] = np.nan   # the tip seen
+    states = press_states(press, ExtractParams(half_window_s=0.04))  # 5 ms after 0.5 N's instant
+    assert states.valid[1, 1] and abs(states.points[1, 1, 2] + 1.5e-3) < 1e-9
