@@ -1,7 +1,8 @@
 """The solid's press: the stiffening law, where it reaches, and what symmetry demands.
 
 Known truth: the cubic ``d + s d^3 = d_lin`` solved in closed form (Cardano), a block pressed at
-its centre (its mirror images must move alike), and a press of no force (the rest, exactly).
+its centre (its mirror images must move alike), a press of no force (the rest, exactly), and
+the patch's load, whose resultant acts at the place and whose total is the patch's integral.
 """
 
 from __future__ import annotations
@@ -85,3 +86,25 @@ def test_label_shares_follow_the_volume() -> None:
     np.testing.assert_allclose(shares.sum(axis=1), 1.0)
     assert np.all(shares[centres_z < -0.020, 1] == 1.0)
     assert np.all(shares[centres_z > -0.012, 1] == 0.0)
+
+
+@pytest.mark.parametrize("radius", [0.0065, 0.012])
+def test_the_patch_load_acts_at_the_place_wherever_it_falls_between_nodes(radius) -> None:
+    """The bump's traction integrated against trilinear shape functions: as those reproduce
+    x and y exactly, the shares' first moment is the bump's centroid, the place, wherever it
+    falls between the nodes (sharing by the bump's value at the nodes put it up to 0.2 mm off
+    at 5 mm, and made the markers' displacements depend on the mesh)."""
+    model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, TOP), 0.005, 4)
+    xy = model.elasticity.mesh.p[:2]
+    for place in ([0.0507, 0.0483], [0.0312, 0.0726], [0.05, 0.05]):
+        nodes, share = model.patch(np.array([*place, TOP]), radius)
+        assert share.sum() == pytest.approx(1.0) and (share > 0).all()
+        np.testing.assert_allclose(xy[:, nodes] @ share, place, atol=2e-6)
+        assert np.linalg.norm(xy[:, nodes].T - place, axis=1).max() < radius + 0.005 * 1.5
+
+
+def test_a_patch_no_quadrature_point_falls_in_is_the_nearest_node() -> None:
+    model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, TOP), 0.01, 2)
+    nodes, share = model.patch(np.array([0.0498, 0.0501, TOP]), 1e-5)
+    np.testing.assert_allclose(model.elasticity.mesh.p[:2, nodes[0]], [0.05, 0.05])
+    assert share.tolist() == [1.0]
