@@ -143,8 +143,9 @@ class Coordinates:
             + (["poisson"] if self.poisson else []) + [f"ratio_{k}" for k in self.labels]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(low, high): below the mesh's spacing the patch is one node whatever the radius
-        (a flat objective), so the contact radius stays within :data:`PATCH_SPACINGS`."""
+        """(low, high): below the mesh's spacing the patch's shares are its facet's shape
+        functions at the place, whatever the radius (a flat objective), so the contact radius
+        stays within :data:`PATCH_SPACINGS`."""
         radius_min, radius_max = _limits(CONTACT_RADIUS)
         reach_min, reach_max = _limits(REACH)
         radius = (max(radius_min, PATCH_SPACINGS[0] * self.spacing),
