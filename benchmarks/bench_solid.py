@@ -13,10 +13,11 @@ Prints, beside the host's figure (``core.host_speed``):
    the ratios solid / MSM;
 2. ``simulate --solid`` of 16 places x 3 directions at the lab's markers: its time, and the fit
    and it together in host figures (issue 58's target: <= 30);
-3. with ``--convergence``: each marker's displacement under unit loads at three places (the
-   centre, two off-centre) on the mesh ladder 5 mm / 8 layers -> 3.33 / 12 -> 2.5 / 16 (1.5x
-   the elements along each axis a step), the change from one step to the next (every marker,
-   the markers beyond 15 mm of the press, the tip), with a 10 mm contact patch on every mesh;
+3. with ``--convergence``: each marker's displacement under unit loads at three places, on
+   markers (the centre, two off-centre) and between them (where a lab presses), on the mesh
+   ladder 5 mm / 8 layers -> 3.33 / 12 -> 2.5 / 16 (1.5x the elements along each axis a step),
+   the change from one step to the next (every marker, the markers beyond 15 mm of the press,
+   the tip), with a 10 mm contact patch and with the fits' 4 mm;
    and the Hertz check's force against Hertz's at 0.9 and 1.2 mm on three meshes.
 4. with ``--hyperelastic SOLID.json`` (fit-solid's, on these states): the trade between the
    candidates on ``--presses`` presses of the states (each at another place): the linear
@@ -43,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 LADDER = ((5.0, 8), (10 / 3, 12), (2.5, 16))       # mm across, layers through
-LADDER_RADIUS = 0.010                             # m: a patch every mesh resolves
+LADDER_RADII = (0.010, 0.004)    # m: a patch every mesh resolves; the fits' (3.8-4.0 mm)
 
 
 def _timed(fn, repeats: int):  # noqa: ANN001, ANN202
@@ -117,25 +118,31 @@ def convergence() -> None:
     grid = 0.010 + 0.020 * np.arange(5)
     markers = np.array([[x, y, 0.0] for y in grid for x in grid])
     at = Attachments.riding(markers, top)
-    places = np.array([[0.05, 0.05, top], [0.03, 0.07, top], [0.07, 0.03, top]])
-    far = np.linalg.norm(places[:, None, :2] - markers[None, :, :2], axis=-1) > 0.015
-    found = []
+    cases = {"on markers": np.array([[0.05, 0.05, top], [0.03, 0.07, top], [0.07, 0.03, top]]),
+             "between markers": np.array([[0.04, 0.04, top], [0.02, 0.06, top],
+                                          [0.06, 0.02, top]])}       # where a lab presses
+    found: dict = {(c, r): [] for c in cases for r in LADDER_RADII}
     for spacing, layers in LADDER:
         started = time.perf_counter()
         model = SolidModel(BlockGeometry((0.1, 0.1), 0.032, top), spacing * 1e-3, layers)
-        solver = model.factorise(np.ones(model.elasticity.n_elements), 0.3)
-        resp = model.respond(solver, places, LADDER_RADIUS, model.probes(at))
-        found.append((np.array([r.points for r in resp]), np.array([r.tip for r in resp])))
+        solver, probes = model.factorise(np.ones(model.elasticity.n_elements), 0.3), \
+            model.probes(at)
+        for (case, radius), out in found.items():
+            resp = model.respond(solver, cases[case], radius, probes)
+            out.append((np.array([r.points for r in resp]), np.array([r.tip for r in resp])))
         print(f"mesh {spacing:.2f} mm / {layers} layers: {model.elasticity.basis.N} unknowns, "
               f"{time.perf_counter() - started:.1f} s")
-    for (a, ta), (b, tb), (lo, hi) in zip(found, found[1:], zip(LADDER, LADDER[1:],
-                                                                 strict=False), strict=False):
-        change = np.linalg.norm(a - b, axis=-1)                  # (places, 3 loads, P)
-        size = np.linalg.norm(b, axis=-1)
-        mask = np.broadcast_to(far[:, None, :], change.shape)
-        print(f"{lo[0]:.2f} -> {hi[0]:.2f} mm: markers {change.sum() / size.sum():.1%}, beyond "
-              f"15 mm {change[mask].sum() / size[mask].sum():.1%}, tip "
-              f"{np.linalg.norm(ta - tb) / np.linalg.norm(tb):.1%}")
+    for (case, radius), out in found.items():
+        far = np.linalg.norm(cases[case][:, None, :2] - markers[None, :, :2], axis=-1) > 0.015
+        for (a, ta), (b, tb), (lo, hi) in zip(out, out[1:], zip(LADDER, LADDER[1:],
+                                                               strict=False), strict=False):
+            change = np.linalg.norm(a - b, axis=-1)                  # (places, 3 loads, P)
+            size = np.linalg.norm(b, axis=-1)
+            mask = np.broadcast_to(far[:, None, :], change.shape)
+            print(f"pressed {case}, patch {radius * 1e3:.0f} mm, {lo[0]:.2f} -> {hi[0]:.2f} mm: "
+                  f"markers {change.sum() / size.sum():.1%}, beyond 15 mm "
+                  f"{change[mask].sum() / size[mask].sum():.1%}, tip "
+                  f"{np.linalg.norm(ta - tb) / np.linalg.norm(tb):.1%}")
     hertz()
 
 

@@ -76,7 +76,8 @@ class MouldPrior:
     depth_m: tuple[float, float] = PRIOR.depth_m
     column_share: float = 0.8                          # of the column under the centre
     # the solid's stiffening and its reach (fits: 300-1000 1/m^2, 1-8 mm), and the tip's
-    # patch (fits: 6.6-8.5 mm; a rounded tip 3 mm across to a finger's pad)
+    # patch (fits: 6.6-8.5 mm with the nodal shares, 3.8-4.0 with the integrated load; a
+    # rounded tip 3 mm across to a finger's pad)
     stiffening: tuple[float, float] = (100.0, 1000.0)  # 1/m^2, log-uniform
     reach: tuple[float, float] = (0.001, 0.010)        # m
     contact_radius: tuple[float, float] = (0.003, 0.009)  # m

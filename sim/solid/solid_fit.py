@@ -37,7 +37,7 @@ from sim.solid.solid_model import (
 
 STIFFENING_FIT = (1e-2, 1e6)   # 1/m^2: from linear to a wall at 1 mm
 RATIO_FIT = (0.1, 20.0)     # a fitted label's ratio stays in the interior's accepted range
-PATCH_SPACINGS = (1.01, 4.0)   # the contact radius is fitted within these mesh spacings
+PATCH_SPACINGS = (0.4, 4.0)    # the contact radius is fitted within these mesh spacings
 
 
 @dataclass(frozen=True)
@@ -143,9 +143,12 @@ class Coordinates:
             + (["poisson"] if self.poisson else []) + [f"ratio_{k}" for k in self.labels]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(low, high): below the mesh's spacing the patch's shares are its facet's shape
-        functions at the place, whatever the radius (a flat objective), so the contact radius
-        stays within :data:`PATCH_SPACINGS`."""
+        """(low, high): the contact radius stays within :data:`PATCH_SPACINGS` mesh spacings,
+        at least 2 mm at the default 5 mm: the top facets' quadrature points lie 1 mm apart, and
+        a patch that holds only a few of them loads the mesh as a point would, whatever its
+        radius (a flat objective). The integrated load needs no more: the bound of the nodal
+        shares (1.01 spacings) held the fits at 5.05 mm, 0.36 mm from a lump twin's markers
+        against 0.31 at 3.8 mm."""
         radius_min, radius_max = _limits(CONTACT_RADIUS)
         reach_min, reach_max = _limits(REACH)
         radius = (max(radius_min, PATCH_SPACINGS[0] * self.spacing),

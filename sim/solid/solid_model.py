@@ -8,8 +8,9 @@ an infinite slope: the fit's radius then caught on the mesh's node distances). E
 carries the traction integrated against its shape function over the top's facets (scikit-fem's
 linear form): the load the elements see, whatever the mesh. Sharing it out by the bump's value
 at the nodes instead made the markers' displacements depend on the mesh (4 % from 5 to 3.33
-mm; 0.9 % so integrated), and the tip's (the patch's load-weighted displacement, the work
-conjugate of these shares) 14 %. Linear elasticity makes every press at a
+mm; 0.8-1.1 % so integrated, pressed between markers), and the tip's (the patch's
+load-weighted displacement, the work conjugate of these shares) 14 %. Linear elasticity makes
+every press at a
 place a sum of three unit responses (one per axis), each one back-substitution on the
 factorised stiffness, computed at unit modulus and scaled by ``1 / E``.
 
