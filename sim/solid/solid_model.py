@@ -10,9 +10,8 @@ linear form): the load the elements see, whatever the mesh. Sharing it out by th
 at the nodes instead made the markers' displacements depend on the mesh (4 % from 5 to 3.33
 mm; 0.8-1.1 % so integrated, pressed between markers), and the tip's (the patch's
 load-weighted displacement, the work conjugate of these shares) 14 %. Linear elasticity makes
-every press at a
-place a sum of three unit responses (one per axis), each one back-substitution on the
-factorised stiffness, computed at unit modulus and scaled by ``1 / E``.
+every press at a place a sum of three unit responses (one per axis), each one
+back-substitution on the factorised stiffness, computed at unit modulus and scaled by ``1 / E``.
 
 Silicone stiffens as it is pressed deep, most where it is strained most: under the tip. The
 solid keeps the linear field's shape and maps its size there: a linear tip displacement
