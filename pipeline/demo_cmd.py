@@ -87,7 +87,9 @@ from train.training.train_params import DEVICES, TrainParams
               default=Lab.mocap_rate_hz, show_default=True, help="The twin lab's mocap rate.")
 @click.option("--inclusion", "inclusions", type=INCLUSION, multiple=True,
               help="A lump in the twin lab's phantom, X,Y,DEPTH,RADIUS,RATIO (synth; repeat "
-                   "for more); eval then reports the errors over the first and away from it.")
+                   "for more); every run on the lab learns the force from unturned presses "
+                   "(train --no-rotate-force), and eval reports the errors over the first "
+                   "and away from it.")
 @click.option("--layer", type=LAYER, default=Lab.layer,
               help="A top layer in the twin lab's phantom, THICKNESS,RATIO (synth).")
 @click.option("--shape", default=Lab.shape,

@@ -165,6 +165,13 @@ class Lab:
             tuple(a for inclusion in self.inclusions for a in ("--inclusion", inclusion))
 
     @property
+    def training_flags(self) -> tuple[str, ...]:
+        """What this lab's phantom asks of every run trained on it: with an inclusion its
+        stiffness, and so the force, depends on where it is pressed, so the force is learnt
+        from unturned presses only (``--no-rotate-force``; docs/model.md)."""
+        return ("--no-rotate-force",) if self.inclusions else ()
+
+    @property
     def shipped(self) -> Path:
         """The shipped generic model this lab starts from: the one for curved labs on a curved
         phantom."""
@@ -239,7 +246,8 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     session = session_steps(out, "session", seed, s.places, s.repeats, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
-    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
+    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe,
+             *lab.training_flags)
     tags = VARIANTS
     if pretraining.from_shipped:
         inits = [lab.shipped] * s.folds

@@ -60,6 +60,7 @@ FOLD_GAIN = 0.30        # every fold: mean L_d this far below the best reference
 TL_CUT = 0.10           # pooled: TL this far below scratch at equal epochs
 SCARCITY_CUT = 0.30     # scarcity study: TL this far below scratch at each size
 FORCE_VS_LINEAR = 0.5   # force error at most this fraction of the linear reference's
+FORCE_OVER_AWAY = 1.3   # pooled: the force's error over a lump at most this times away (58)
 SOLID_OVER_LUMP = 0.15  # TL from the solid: pooled L_d over a lump this far below the shipped
 #                         model's TL on the same examples (issue 58)
 MSM_VS_STILL = 0.5      # MSM model (and the fit) at most this fraction of a still surface's
@@ -80,6 +81,7 @@ def summary(out: Path, seconds: float, quick: bool, host_s: float | None = None)
     checks += _fine_tuned(scores)
     checks += _over_lump(scores)
     checks += _solid_over_lump(scores)
+    checks += _force_over_lump(scores)
     checks += _intervals(scores)
     checks += _scarcity(out)
     if quick:
@@ -208,6 +210,29 @@ def _over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
     return checks
 
 
+def pooled(rows: list[Metrics], value: Callable[[Metrics], float]) -> float:
+    """``value`` over the examples of every row (each weighted by its count)."""
+    return sum(value(m) * m.n for m in rows) / sum(m.n for m in rows)
+
+
+def _force_over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
+    """Each fine-tuned variant's force error over a lump against away from it, pooled over
+    the folds: a haptic trainer's hand feels the lump's error most."""
+    checks = []
+    for variant, name in FINE_TUNED:
+        rows = [r.lump for r in scores.runs if variant_of(r) == variant and r.lump]
+        over = [p.over.metrics for p in rows if p.over]
+        away = [p.away.metrics for p in rows if p.away]
+        if not over or not away:
+            continue
+        f_over, f_away = (pooled(m, lambda m: m.force_abs_n) for m in (over, away))
+        checks.append((f"{name}: the force's error over the lump against away from it",
+                       f_over <= FORCE_OVER_AWAY * f_away,
+                       f"{f_over:.3f} against {f_away:.3f} N ({f_over / f_away:.2f} x; target "
+                       f"<= {FORCE_OVER_AWAY:g} x)"))
+    return checks
+
+
 def _solid_over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
     """With --pretraining solid and a lump: TL from the solid against TL from the shipped
     model over the lump, pooled over the folds with test presses there (the same examples)."""
@@ -215,9 +240,6 @@ def _solid_over_lump(scores: Scores) -> list[tuple[str, bool, str]]:
                 and r.lump and r.lump.over] for v in ("tl", "solid")}
     if not over["tl"] or not over["solid"]:
         return []
-
-    def pooled(rows: list[Metrics], value: Callable[[Metrics], float]) -> float:
-        return sum(value(m) * m.n for m in rows) / sum(m.n for m in rows)
 
     ld = {v: pooled(rows, _ld_mm) for v, rows in over.items()}
     force = {v: pooled(rows, lambda m: m.force_abs_n) for v, rows in over.items()}

@@ -46,6 +46,12 @@ B = {**T.BOUNDS, **N.BOUNDS}       # and the options' bounds theirs
 @click.option("--rotate/--no-rotate", default=T.rotate,
               help="Rotation augmentation: turn each training example about the surface "
                    "normal by a random angle.")
+@click.option("--rotate-force/--no-rotate-force", default=T.rotate_force,
+              help="With --rotate: the force learnt from turned examples too [default]. "
+                   "--no-rotate-force: half the examples stay unturned and only they teach "
+                   "the force, for a phantom whose stiffness changes across its footprint "
+                   "(an inclusion): turned, a press over the lump teaches its force "
+                   "elsewhere (docs/model.md).")
 @click.option("--offsets", type=OneOf(Offsets), default=N.offsets.value, show_default=True,
               help="Where the network reads each point's offsets from the tip's start and end "
                    "(ours, not the paper's): none (the paper's network), graph (the first "

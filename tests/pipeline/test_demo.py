@@ -218,6 +218,20 @@ def test_a_lab_with_a_lump_and_a_layer_is_evaluated_over_the_lump(tmp_path):
     assert not any("--truth" in s.args or "--inclusion" in s.args for s in uniform)
 
 
+def test_a_lab_with_a_lump_learns_the_force_from_unturned_presses_only(tmp_path):
+    """An inclusion makes the force depend on where the phantom is pressed: every run trained
+    on the lab or its solid keeps --rotate (the recipe's) and adds --no-rotate-force; a
+    uniform lab or one with a top layer (the same across the footprint) does not."""
+    lump = demo_steps(tmp_path, 0, QUICK, lab=Lab(inclusions=("72,23,10,12,3",)),
+                      pretraining=Pretraining.SOLID)
+    trains = [s.args for s in lump if s.args[0] == "train"]
+    assert len(trains) == 4 * QUICK.folds          # TL, scratch, the solid's and its TL
+    assert all("--no-rotate-force" in a for a in trains)
+    for lab in (Lab(), Lab(layer="3,4")):
+        steps = demo_steps(tmp_path, 0, QUICK, lab=lab, pretraining=Pretraining.SOLID)
+        assert not any("--no-rotate-force" in s.args for s in steps)
+
+
 @pytest.mark.parametrize("args, words", [
     (["--inclusion", "150,50,10,12,3"], "outside"), (["--layer", "40,3"], "thinner")])
 def test_a_lump_or_layer_synth_would_refuse_stops_the_demo_before_it_starts(tmp_path, args,

@@ -8,7 +8,13 @@ from dataclasses import replace
 from helpers.metrics_rows import gain, metrics, run_row, variant
 
 from data_schema.metrics_doc import LumpPart, LumpRow, RunRow, Scores
-from pipeline.demo_targets import LUMP_WORDS, _over_lump, _solid_over_lump, variant_of
+from pipeline.demo_targets import (
+    LUMP_WORDS,
+    _force_over_lump,
+    _over_lump,
+    _solid_over_lump,
+    variant_of,
+)
 
 
 def _part(ld_gain: float | None, n: int = 12) -> LumpPart:
@@ -95,6 +101,19 @@ def test_tl_from_the_solid_is_held_to_15_percent_below_the_shipped_models_over_t
     assert not _solid_over_lump(_scores(runs))[0][1]
     assert _solid_over_lump(_scores(runs[:2])) == []            # no solid runs: no target
     assert {variant_of(r) for r in runs} == {"tl", "solid"}
+
+
+def test_the_force_over_the_lump_is_held_to_1_3_times_the_force_away() -> None:
+    """Pooled over the folds: TL over (0.3 x 10 + 0.1 x 30) / 40 = 0.15 N against 0.1 away
+    (1.5 x: missed); the solid's (0.12 x 10 + 0.13 x 30) / 40 = 0.1275 N (1.27 x: met)."""
+    runs = [_from(0, "MSM", _over(0.2, 0.3, 10)), _from(1, "MSM", _over(0.1, 0.1, 30)),
+            _from(0, "Solid", _over(0.2, 0.12, 10)), _from(1, "Solid", _over(0.1, 0.13, 30))]
+    got = {name: (ok, text) for name, ok, text in _force_over_lump(_scores(runs))}
+    tl = got["TL: the force's error over the lump against away from it"]
+    solid = got["TL from the solid: the force's error over the lump against away from it"]
+    assert not tl[0] and "0.150 against 0.100 N (1.50 x" in tl[1]
+    assert solid[0] and "0.128 against 0.100 N (1.27 x" in solid[1]
+    assert _force_over_lump(_scores([replace(runs[0], lump=None)])) == []
 
 
 def test_a_curved_labs_tl_runs_are_told_from_its_solids() -> None:

@@ -109,17 +109,22 @@ def mean_distance(p: BatchPrediction, b: Batch) -> torch.Tensor:
     return distances(p, b).sum(1) / b.mask.sum(1).clamp(min=1)
 
 
-def loss_sum(p: BatchPrediction, b: Batch, alpha: float, norm: Normaliser | None = None
-             ) -> torch.Tensor:
+def loss_sum(p: BatchPrediction, b: Batch, alpha: float, norm: Normaliser | None = None,
+             force_weight: torch.Tensor | None = None) -> torch.Tensor:
     """Sum over the batch of ``alpha * L_d + (dF error)^2`` (divide by the count for the mean).
 
     With ``norm`` (the "balanced" loss) each term is in its training scale instead:
     ``L_d / disp_scale + (dF error / force_scale)^2``, so neither swamps the other whatever
     the units and data (on the MSM the paper's weights make the force term ~800x the other).
+    ``force_weight`` (B,) weighs each example's force term (training's examples that may not
+    teach the force: 0).
     """
+    err = p.dforce - b.dforce
+    force = err ** 2 if norm is None else (err / norm.force_scale) ** 2
+    if force_weight is not None:
+        force = force * force_weight
     if norm is None:
-        return (alpha * mean_distance(p, b) + (p.dforce - b.dforce) ** 2).sum()
-    return (mean_distance(p, b) / norm.disp_scale
-            + ((p.dforce - b.dforce) / norm.force_scale) ** 2).sum()
+        return (alpha * mean_distance(p, b) + force).sum()
+    return (mean_distance(p, b) / norm.disp_scale + force).sum()
 
 

@@ -8,9 +8,11 @@ fraction of the points per sample in training, all in validation and test) come 
 generator seeded by (seed, epoch), so a run killed after epoch e and resumed from ``last.pt``
 draws exactly what the uninterrupted run drew: same weights. ``best.pt`` is the epoch with the
 lowest validation loss; with ``no_val`` (no validation set, said explicitly) it is the last
-epoch. ``rotate`` turns each training example about the surface normal by
-a random angle (drawn from the same generator), so the model cannot lean on where on the
-phantom a press was. A non-finite or exploding loss stops the run naming epoch and batch.
+epoch. ``rotate`` turns each training example about the surface normal by a random angle
+(drawn from the same generator), so the model cannot lean on where on the phantom a press was;
+without ``rotate_force`` half of them stay unturned and only those teach the force, which a
+lump makes depend on where the phantom is pressed. A non-finite or exploding loss stops the
+run naming epoch and batch.
 
 Training that cannot learn says so: the fold's examples are refused where they cannot teach
 (:mod:`train.training.fold_data`); a training loss that does not move over the first epochs is
@@ -63,6 +65,7 @@ EXPLODE = 1e4          # a loss this many times the first epoch's stops the run
 STALL_EPOCHS = 3
 STALL_REL = 1e-4
 STALL_PROBE = 64       # training examples in the probe
+STILL_SHARE = 0.5      # without rotate_force: the examples left unturned to teach the force
 
 
 def learning_rate(opts: TrainOptions, epoch: int) -> float:
@@ -224,6 +227,23 @@ def balance(run: Run, opts: TrainOptions) -> Normaliser | None:
     return run.norm if opts.loss is Loss.BALANCED else None
 
 
+def turned(count: int, opts: TrainOptions, g: torch.Generator
+           ) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """The batch's turns about the normal (``rotate``; None: none) and each example's weight
+    on the force term (None: 1 each). Without ``rotate_force`` a share :data:`STILL_SHARE` of
+    the examples stays unturned and only these teach the force, weighted up to keep the
+    term's scale: where the stiffness changes across the footprint (a lump), a turned press
+    carries the force of one place to another; the dent's shape does not depend on the
+    place, so every example still teaches it."""
+    if not opts.rotate:
+        return None, None
+    angles = torch.rand(count, generator=g) * 2 * math.pi
+    if opts.rotate_force:
+        return about_normal(angles), None
+    still = torch.rand(count, generator=g) < STILL_SHARE
+    return about_normal(torch.where(still, 0.0, angles)), still.float() / STILL_SHARE
+
+
 def stopped_early(run: Run, opts: TrainOptions, epoch: int) -> bool:
     """True once ``patience`` epochs have passed without a better validation loss."""
     return opts.patience is not None and run.best_epoch >= 0 \
@@ -256,14 +276,14 @@ def train_epoch(run: Run, net: torch.nn.Module, opts: TrainOptions, epoch: int,
         idx = None
         if keep is not None:
             idx = torch.rand(len(rows), width, generator=g).argsort(1)[:, :keep].to(device)
-        turns = about_normal(torch.rand(len(rows), generator=g) * 2 * math.pi) \
-            if opts.rotate else None
+        turns, force_weight = turned(len(rows), opts, g)
         mine = ctx.my_slice(torch.arange(len(rows), device=device))
         batch = make_batch(run.states, pairs[mine], None if idx is None else idx[mine],
                            chosen.cols)
         if turns is not None:
             batch = move_batch(batch, turns[mine.cpu()], torch.tensor(run.norm.centre))
-        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha, balance(run, opts))
+        loss = loss_sum(predict(net, run.norm, batch), batch, opts.alpha, balance(run, opts),
+                        None if force_weight is None else force_weight[mine.cpu()].to(device))
         value = float(loss.detach()) / max(len(mine), 1)
         first_loss = first_loss or value
         if not math.isfinite(value) or value > EXPLODE * first_loss:

@@ -53,6 +53,7 @@ class TrainOptions:
     train_groups: int | None = None
     seed: int = 0
     rotate: bool = False
+    rotate_force: bool = True        # with rotate: the force learnt from turned examples too
     loss: Loss = Loss.PAPER
     schedule: Schedule = Schedule.CONSTANT
     patience: int | None = None      # stop after this many epochs without a better validation

@@ -151,6 +151,15 @@ def test_the_paper_loss_sums_alpha_ld_and_the_squared_force_error() -> None:
     assert float(loss_sum(p, b, 1.0)) == pytest.approx(3.5e-3 + 0.25 + 1e-3 + 4.0, rel=1e-12)
 
 
+def test_a_force_weight_scales_each_example_s_force_term_only() -> None:
+    """Weights (0, 2): example 0's force term (0.25) drops out, example 1's (4) doubles; the
+    distance terms (0.308, 0.088) stay; balanced, 2.75 - 1 and 0.5 + 2 x 16."""
+    p, b = _batch()
+    w = torch.tensor([0.0, 2.0], dtype=torch.float64)
+    assert float(loss_sum(p, b, 88.0, None, w)) == pytest.approx(0.308 + 0.088 + 8.0, rel=1e-12)
+    assert float(loss_sum(p, b, 88.0, NORM, w)) == pytest.approx(1.75 + 0.5 + 32.0, rel=1e-12)
+
+
 def test_the_balanced_loss_puts_each_term_in_its_training_scale() -> None:
     """disp_scale 2 mm and force_scale 0.5 N: 3.5 / 2 + (0.5 / 0.5)^2 = 2.75 and
     1 / 2 + (2 / 0.5)^2 = 16.5, summed 19.25; alpha is not read."""

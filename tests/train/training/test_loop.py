@@ -40,6 +40,7 @@ from train.training.loop import (
     seeded,
     stalled,
     stopped_early,
+    turned,
     update_average,
 )
 from train.training.run_files import RunFiles
@@ -130,6 +131,22 @@ def test_another_epoch_or_seed_draws_otherwise(seed: int, epoch: int) -> None:
     other, _ = _draws(seeded(seed, epoch))
     assert not torch.equal(perm, other)
     assert sorted(other.tolist()) == list(range(50))       # still a shuffle
+
+
+def test_without_rotate_force_only_unturned_examples_teach_the_force() -> None:
+    """About half the examples stay unturned (the identity), each weighing 2 on the force so
+    the term keeps its scale; every turned one weighs 0. With the force turned too, or no
+    rotation, nothing is weighed."""
+    turns, weight = turned(4000, TrainOptions(rotate=True, rotate_force=False), seeded(0, 0))
+    assert turns is not None and weight is not None
+    still = torch.linalg.matrix_norm(turns - torch.eye(3)) < 1e-12
+    assert torch.equal(weight > 0, still)
+    assert set(weight.tolist()) == {0.0, 2.0}
+    assert float(weight.mean()) == pytest.approx(1.0, abs=0.1)     # sd of the mean 0.016
+    every, none = turned(10, TrainOptions(rotate=True), seeded(0, 0))
+    assert none is None and every is not None and bool(
+        (torch.linalg.matrix_norm(every - torch.eye(3)) > 1e-6).all())
+    assert turned(10, TrainOptions(), seeded(0, 0)) == (None, None)
 
 
 # --- a loss that does not move ---------------------------------------------------------------
