@@ -50,11 +50,13 @@ def test_turns_and_tilts_are_rotations() -> None:
 def test_rotation_augmented_training_is_seeded_and_differs(tmp_path) -> None:
     data, splits = dent_fold(tmp_path)
     runs = {}
-    for name, rotate in (("a", True), ("b", True), ("plain", False)):
-        opts = TrainOptions(epochs=2, batch=8, lr=3e-3, rotate=rotate)
+    for name, rotate, force in (("a", True, True), ("b", True, True), ("plain", False, True),
+                                ("still", True, False)):
+        opts = TrainOptions(epochs=2, batch=8, lr=3e-3, rotate=rotate, rotate_force=force)
         best = run_train(TrainInputs(data, splits), tmp_path / name,
                          TrainParams(opts, SMALL, "cpu")).best
         runs[name] = torch.load(best, weights_only=True)["model"]
     key = next(iter(runs["a"]))
     assert torch.equal(runs["a"][key], runs["b"][key])
     assert not torch.equal(runs["a"][key], runs["plain"][key])
+    assert not torch.equal(runs["a"][key], runs["still"][key])   # half unturned, force apart
