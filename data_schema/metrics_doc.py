@@ -1,4 +1,4 @@
-"""``phantom.metrics`` 1.5 (``pipeline eval --out``): its rows as types, and one validator.
+"""``phantom.metrics`` 1.6 (``pipeline eval --out``): its rows as types, and one validator.
 
 The document holds ``runs`` (one :class:`RunRow` per run: run, label, variant, fold, test_set,
 metrics, references, gain) and ``overall`` (one :class:`PooledRow` per variant and test set:
@@ -13,8 +13,9 @@ and ``all`` to the count ``n`` and the Table-2 numbers in mm, N and N^2 (:class:
 moves no point); ``gain`` (:class:`Gain`) names the best reference of L_d and of force with
 its value and the model's relative gain over it; ``variant`` the run's model, training data,
 rotation, aug, the variant it was fine-tuned from (or null) and where its network reads the
-tip's offsets (1.1: ``offsets``, one of :data:`OFFSETS`; a 1.0 document has none; the
-variant's own type is the trainer's, train/training/variant.py); ``intervals`` (1.2,
+tip's offsets (1.1: ``offsets``, one of :data:`OFFSETS`; a 1.0 document has none; 1.6:
+``rotate_force`` false where the force was learnt from unturned examples only, absent
+otherwise; the variant's own type is the trainer's, train/training/variant.py); ``intervals`` (1.2,
 :mod:`data_schema.intervals_doc`; 1.0 and 1.1 documents have none and are read as they are);
 ``lump`` (1.4, :class:`LumpRow`, with ``eval --lump`` or ``--truth``) the lump's centre and
 radius (mm) and reach, and ``over`` and ``away`` (:class:`LumpPart`: the test examples whose
@@ -56,8 +57,9 @@ REFERENCES = (NOTHING_MOVES, NEAREST_PRESS, FORCE_LINEAR)
 class VariantRow(JsonRow):
     """A run's variant as written in ``metrics.json`` and a checkpoint's meta (the trainer's
     :class:`~train.training.variant.Variant` reads and writes it): model, training data,
-    rotation, aug, the variant it was fine-tuned from, and where its network reads the tip's
-    offsets (1.1; one of :data:`OFFSETS`)."""
+    rotation, aug, the variant it was fine-tuned from, where its network reads the tip's
+    offsets (1.1; one of :data:`OFFSETS`) and, only where the rotation left the force's
+    examples unturned, ``rotate_force`` false (1.6)."""
 
     model: str
     train_data: str
@@ -65,6 +67,7 @@ class VariantRow(JsonRow):
     aug: bool
     pretrained: VariantRow | None
     offsets: str | None = since_version()
+    rotate_force: bool | None = written_if_set()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -233,7 +236,7 @@ class Scores(JsonRow):
 
 _TABLES = Scores.kinds()
 ROW_TABLES = tuple(k for k in _TABLES if k not in Scores.optional())   # runs, overall
-METRICS = JsonSchema("phantom.metrics", "1.5", {
+METRICS = JsonSchema("phantom.metrics", "1.6", {
     "schema": str, "schema_version": str, **{k: _TABLES[k] for k in ROW_TABLES},
     "provenance": dict,
 })

@@ -62,7 +62,7 @@ def eval_(ctx: click.Context, runs: tuple[Path, ...], out: Path, scarcity: bool,
     re-drawn among its held-out presses, per run and pooled), and the recording colours
     the points by error over their 90 % radius; a run without them is said in one line.
     The recording also shows each test place on the footprint by its mean L_d; with --lump
-    or --truth, the lump, and metrics.json (phantom.metrics 1.5) and the table carry the rows
+    or --truth, the lump, and metrics.json (phantom.metrics 1.6) and the table carry the rows
     over the lump and away from it.
     """
     from train.evaluation.eval_stage import run_eval

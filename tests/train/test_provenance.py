@@ -63,7 +63,7 @@ def test_the_log_keeps_its_provenance_beside_it(made) -> None:
 def test_metrics_carry_their_schema_and_provenance(made) -> None:
     doc = validate_metrics(made / "metrics.json")
     assert (doc["schema"], doc["schema_version"]) == (METRICS.name, METRICS.version) == \
-        ("phantom.metrics", "1.5")
+        ("phantom.metrics", "1.6")
     prov = doc["provenance"]
     assert (prov["schema"], prov["stage"]) == ("phantom.metrics", "eval")
     best = made / "tl" / "best.pt"

@@ -7,8 +7,9 @@ fine-tuned run's label leaves out its own rotation and aug). The fields: ``model
 "noCond" without the condition), ``train_data`` ("MSM", "Solid", "Moulds" or "Exp", from the
 states file's ``source``), ``rotate`` and ``aug`` (rotation augmentation; a point fraction),
 ``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning),
-and ``offsets``: where the network reads the tip's offsets
-(:class:`train.model.config.Offsets`).
+``offsets``: where the network reads the tip's offsets
+(:class:`train.model.config.Offsets`), and ``rotate_force``: False where the rotation left the
+force's examples unturned (``train --no-rotate-force``; True without rotation).
 A checkpoint's meta and ``metrics.json`` keep it as a plain dict of the same fields
 (:meth:`Variant.to_dict`); a checkpoint's older forms are read through
 :mod:`train.training.migrate`.
@@ -39,6 +40,7 @@ class Variant:
     aug: bool
     pretrained: Variant | None = None
     offsets: Offsets = Offsets.NONE
+    rotate_force: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """The plain form kept in a checkpoint's meta and in ``metrics.json`` (its keys are
@@ -49,7 +51,7 @@ class Variant:
         """As the documents write it."""
         return VariantRow(self.model, self.train_data, self.rotate, self.aug,
                           None if self.pretrained is None else self.pretrained.row(),
-                          self.offsets.value)
+                          self.offsets.value, None if self.rotate_force else False)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Variant:
@@ -64,7 +66,7 @@ class Variant:
             raise KeyError("offsets")
         return cls(str(row.model), str(row.train_data), bool(row.rotate), bool(row.aug),
                    cls.from_row(row.pretrained) if row.pretrained else None,
-                   Offsets(row.offsets))
+                   Offsets(row.offsets), row.rotate_force is not False)
 
     @property
     def label(self) -> str:
@@ -85,8 +87,8 @@ class Variant:
 
     @property
     def _own(self) -> str:
-        return f"{self.model}/{'rot ' if self.rotate else ''}{'aug ' if self.aug else ''}" \
-               f"{self.train_data}"
+        rot = ("rot " if self.rotate_force else "rot (force unturned) ") if self.rotate else ""
+        return f"{self.model}/{rot}{'aug ' if self.aug else ''}{self.train_data}"
 
 
 SOURCE_NAMES = {"msm": "MSM", "solid": "Solid", "moulds": "Moulds", "lab": "Exp"}
@@ -108,7 +110,8 @@ def make_variant(config: CGNNConfig, opts: TrainOptions, data: str | Path,
     run whose checkpoint meta is ``init_meta`` (or trained from scratch)."""
     return Variant("cGNN" if config.use_condition else "noCond", source_name(data),
                    opts.rotate, bool(opts.point_fraction),
-                   None if init_meta is None else recorded_variant(init_meta), config.offsets)
+                   None if init_meta is None else recorded_variant(init_meta), config.offsets,
+                   opts.rotate_force or not opts.rotate)
 
 
 def recorded_variant(meta: dict) -> Variant:

@@ -51,6 +51,22 @@ def test_networks_that_differ_only_in_their_offsets_are_told_apart() -> None:
     assert "head offsets" in b.full_name and "tip offsets" in a.full_name
 
 
+def test_runs_whose_force_was_learnt_unturned_are_told_apart_and_read_back() -> None:
+    """``--no-rotate-force`` is its own variant (never pooled with the recipe's), written as
+    ``rotate_force: false`` (1.6) and read back; every other variant's row is as before."""
+    still = Variant("cGNN", "Exp", True, False, None, Offsets.HEADS, rotate_force=False)
+    turned = Variant("cGNN", "Exp", True, False, None, Offsets.HEADS)
+    assert still != turned and hash(still) != hash(turned)
+    assert still.to_dict()["rotate_force"] is False and "rotate_force" not in turned.to_dict()
+    assert Variant.from_dict(still.to_dict()) == still
+    assert "force unturned" in still.full_name and "force unturned" not in turned.full_name
+    net = CGNNConfig()
+    made = {rotate: make_variant(net, TrainOptions(rotate=rotate, rotate_force=False), "x.h5",
+                                 None) for rotate in (True, False)}
+    assert not made[True].rotate_force
+    assert made[False] == make_variant(net, TrainOptions(), "x.h5", None)   # nothing turned
+
+
 def test_a_variant_is_written_as_the_documents_row_and_read_back() -> None:
     """A variant's plain form is ``metrics.json``'s row (the keys and order every document
     has kept), reads back equal, and the document's offsets are :class:`Offsets`' values."""
