@@ -25,106 +25,104 @@ references. Each command runs single-threaded, ``--jobs`` at a time.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-FOLDS = 5
-TRAIN = ("--recipe", "ours", "--epochs", "100", "--lr", "0.002", "--batch", "32", "--seed",
-         "0", "--no-rrd")
+from data_schema.metrics_doc import LumpPart, Scores, validate_metrics  # noqa: E402
+from pipeline.demo_plan import QUICK, solid_steps  # noqa: E402
+from train.generic_model import SHIPPED  # noqa: E402
+
+FOLDS = QUICK.folds
+RECIPE = ("--recipe", "ours", "--lr", "0.002", "--batch", "32", "--seed", "0", "--no-rrd")
+FINE_TUNE = ("--epochs", str(QUICK.finetune_epochs), *RECIPE)
 WAYS = {"rotate": (), "rotate-force": ("--no-rotate-force",), "no-rotate": ("--no-rotate",),
         "solid": ("--no-rotate-force",)}
 
 
 def pipeline(*args: str) -> None:
     """One ``pipeline`` command, single-threaded, its output kept quiet."""
-    env = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    subprocess.run([sys.executable, "-m", "pipeline", "-q", *args], check=True,
-                   env={**os.environ, **env}, stdout=subprocess.DEVNULL)
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    subprocess.run([sys.executable, "-m", "pipeline", "-q", *args], check=True, env=env,
+                   stdout=subprocess.DEVNULL)
 
 
 def session(folder: Path, seed: int, lump: str) -> None:
     """The lab's session, states and manifest (made unless already there)."""
     if (folder / "splits.json").is_file():
         return
-    pipeline("synth", str(folder / "session"), "--seed", str(seed), "--locations", "4x4",
-             "--repeats", "2", "--inclusion", f"{lump},10,12,3", "--no-rrd")
-    pipeline("ingest", str(folder / "session"), "--out", str(folder / "session.mcap"),
-             "--no-rrd")
-    pipeline("sync", str(folder / "session.mcap"), "--out", str(folder / "synced.h5"),
-             "--no-rrd")
-    pipeline("extract", str(folder / "synced.h5"), "--out", str(folder / "states.h5"),
-             "--no-rrd")
+    ses, mcap, synced = folder / "session", folder / "session.mcap", folder / "synced.h5"
+    pipeline("synth", str(ses), "--seed", str(seed), "--locations", "4x4", "--repeats", "2",
+             "--inclusion", f"{lump},10,12,3", "--no-rrd")
+    pipeline("ingest", str(ses), "--out", str(mcap), "--no-rrd")
+    pipeline("sync", str(mcap), "--out", str(synced), "--no-rrd")
+    pipeline("extract", str(synced), "--out", str(folder / "states.h5"), "--no-rrd")
     pipeline("split", str(folder / "states.h5"), "--out", str(folder / "splits.json"),
              "--no-rrd")
 
 
 def fold_run(folder: Path, way: str, fold: int) -> None:
-    """One fold of one way: its pre-training on the solid (``solid``), then its fine-tuning."""
+    """One fold of one way: for ``solid`` the demo's steps (the fold's solid fitted, pressed
+    and pre-trained on: ``pipeline demo --pretraining solid``'s), then its fine-tuning."""
     run = folder / "runs" / f"{way}_{fold}"
     if (run / "best.pt").is_file():
         return
     init = "generic"
     if way == "solid":
-        d = folder / "solid" / f"fold{fold}"
-        pipeline("fit-solid", str(folder / "states.h5"), "--splits", str(folder / "splits.json"),
-                 "--fold", str(fold), "--session", str(folder / "session"), "--out",
-                 str(d / "solid.json"), "--no-rrd")
-        pipeline("simulate", "--solid", str(d / "solid.json"), "--layout",
-                 str(folder / "states.h5"), "--locations", "32", "--directions", "3",
-                 "--max-angle", "20", "--out", str(d / "states.h5"), "--no-rrd")
-        pipeline("split", str(d / "states.h5"), "--out", str(d / "splits.json"), "--folds", "1",
-                 "--no-rrd")
-        pipeline("train", "--data", str(d / "states.h5"), "--splits", str(d / "splits.json"),
-                 "--out", str(d / "pre"), "--init", "generic", *TRAIN[:2], "--epochs", "40",
-                 *TRAIN[4:], *WAYS[way])
-        init = str(d / "pre" / "best.pt")
+        states, splits = folder / "states.h5", folder / "splits.json"
+        steps = solid_steps(folder, QUICK, states, splits, (*RECIPE, *WAYS[way]), SHIPPED)
+        mine = steps[4 * fold:4 * fold + 4]         # fit-solid, simulate, split, pre-training
+        for step in mine:
+            if not all(Path(o).exists() for o in step.outputs):
+                pipeline(*step.args)
+        init = str(mine[-1].outputs[0])
     pipeline("train", "--data", str(folder / "states.h5"), "--splits",
              str(folder / "splits.json"), "--fold", str(fold), "--out", str(run), "--init",
-             init, *TRAIN, *WAYS[way])
+             init, *FINE_TUNE, *WAYS[way])
 
 
-def scored(folder: Path, way: str) -> dict:
-    """``eval --truth`` of the way's five runs: the metrics document."""
+def scored(folder: Path, way: str) -> Scores:
+    """``eval --truth`` of the way's five runs."""
     out = folder / f"metrics_{way}.json"
     if not out.is_file():
         pipeline("eval", *(str(folder / "runs" / f"{way}_{k}") for k in range(FOLDS)),
                  "--truth", str(folder / "session" / "truth.h5"), "--out", str(out), "--no-rrd")
-    return json.loads(out.read_text())
+    return Scores.from_json(validate_metrics(out))
 
 
-def pooled(rows: list[dict], value) -> float:  # noqa: ANN001 (a row's number)
-    """``value`` over the examples of every part's row (each weighted by its count)."""
-    return sum(value(p) * p["metrics"]["n"] for p in rows) / sum(p["metrics"]["n"]
-                                                                 for p in rows)
+def force_cover(part: LumpPart) -> float:
+    """The share of the part's changes of force inside their 90 % interval (NaN: none)."""
+    level = part.intervals.at(0.9) if part.intervals else None
+    return float("nan") if level is None or level.force_coverage is None \
+        else level.force_coverage
 
 
-def force_cover(part: dict) -> float:
-    """The share of the part's changes of force inside their 90 % interval."""
-    return next(v["force_coverage"] for v in part["intervals"]["levels"]
-                if abs(v["level"] - 0.9) < 1e-9)
+def weighted(parts: list[LumpPart], value: Callable[[LumpPart], float | None]) -> float:
+    """``value`` over the parts' examples (each part weighted by its count)."""
+    return sum((value(p) or 0.0) * p.metrics.n for p in parts) / sum(p.metrics.n for p in parts)
 
 
-def parts(doc: dict) -> dict[str, dict]:
-    """Per part of the lump (over, away), pooled over the folds: L_d, force, the force's
-    90 % coverage, the best references, and the folds' gains."""
-    found = {}
-    for part in ("over", "away"):
-        rows = [r["lump"][part] for r in doc["runs"] if r["lump"][part]]
-        found[part] = {
-            "n": sum(p["metrics"]["n"] for p in rows),
-            "ld": pooled(rows, lambda p: p["metrics"]["ld_mean_mm"]),
-            "force": pooled(rows, lambda p: p["metrics"]["force_abs_n"]),
-            "cover": pooled(rows, force_cover),
-            "ref_ld": pooled(rows, lambda p: p["gain"]["ld_reference_mm"]),
-            "ref_force": pooled(rows, lambda p: p["gain"]["force_reference_n"]),
-            "gains": [p["gain"]["ld_gain"] for p in rows]}
-    return found
+def cells(parts: list[LumpPart]) -> dict[str, float | str]:
+    """One part of the lump (over or away), pooled over the folds."""
+    gains = [p.gain.ld_gain or 0.0 for p in parts]
+    return {"ld": weighted(parts, lambda p: p.metrics.ld_mean_mm),
+            "force": weighted(parts, lambda p: p.metrics.force_abs_n),
+            "cover": weighted(parts, force_cover), "gains": f"{min(gains):.0%}-{max(gains):.0%}",
+            "ref_ld": weighted(parts, lambda p: p.gain.ld_reference_mm),
+            "ref_force": weighted(parts, lambda p: p.gain.force_reference_n),
+            "n": sum(p.metrics.n for p in parts)}
+
+
+def table(scores: Scores) -> tuple[dict, dict]:
+    """Over the lump and away from it: :func:`cells` of every fold's part."""
+    over, away = ([p for r in scores.runs if r.lump and (p := r.lump.parts()[name])]
+                  for name in ("over", "away"))
+    return cells(over), cells(away)
 
 
 def main() -> None:
@@ -147,12 +145,10 @@ def main() -> None:
     print("| way | over: L_d, force | away: L_d, force | force over / away | force in 90 %, "
           "over / away | folds' gain, over / away |\n|---|---|---|---|---|---|")
     for way in a.ways:
-        p = parts(scored(folder, way))
-        o, w = p["over"], p["away"]
-        gains = " / ".join(f"{min(x['gains']):.0%}-{max(x['gains']):.0%}" for x in (o, w))
+        o, w = table(scored(folder, way))
         print(f"| {way} | {o['ld']:.3f} mm, {o['force']:.3f} N | {w['ld']:.3f} mm, "
               f"{w['force']:.3f} N | {o['force'] / w['force']:.2f} x | {o['cover']:.1%} / "
-              f"{w['cover']:.1%} | {gains} |")
+              f"{w['cover']:.1%} | {o['gains']} / {w['gains']} |")
     print(f"| best reference | {o['ref_ld']:.3f} mm, {o['ref_force']:.3f} N | {w['ref_ld']:.3f} "
           f"mm, {w['ref_force']:.3f} N | | | |  ({o['n']} / {w['n']} test examples)")
 

@@ -246,14 +246,14 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
     session = session_steps(out, "session", seed, s.places, s.repeats, lab) + [
         Step(("split", str(states), "--out", str(splits), "--folds", str(s.folds), *sd),
              (states,), (splits,))]
-    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe,
-             *lab.training_flags)
+    train = ("--device", device, "--lr", str(s.lr), "--batch", str(s.batch), *recipe)
+    on_lab = (*train, *lab.training_flags)      # the runs on the lab and on its solid
     tags = VARIANTS
     if pretraining.from_shipped:
         inits = [lab.shipped] * s.folds
         steps = [replace(step, parallel=True, batch=FOLDS) for step in session]
         if pretraining == Pretraining.SOLID:
-            steps += solid_steps(out, s, states, splits, (*train, *sd), lab.shipped)
+            steps += solid_steps(out, s, states, splits, (*on_lab, *sd), lab.shipped)
             tags = (*VARIANTS, SOLID_TAG)
     elif pretraining == Pretraining.GENERIC:
         pre = generic_steps(out, s.generic, device, recipe)
@@ -274,7 +274,7 @@ def demo_steps(out: Path, seed: int, s: Settings, device: str = "auto",
         init = ("--init", str(start)) if start is not None else ()
         steps.append(Step(("train", "--data", str(states), "--splits", str(splits),
                            "--fold", str(fold), "--out", str(run), "--epochs",
-                           str(s.finetune_epochs), *init, *train, *sd),
+                           str(s.finetune_epochs), *init, *on_lab, *sd),
                           (states, splits) + ((start,) if start is not None else ()),
                           (run / "best.pt",), (run,), parallel=True, batch=FOLDS,
                           stage="train (fine-tuning)"))

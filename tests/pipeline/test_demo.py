@@ -221,7 +221,8 @@ def test_a_lab_with_a_lump_and_a_layer_is_evaluated_over_the_lump(tmp_path):
 def test_a_lab_with_a_lump_learns_the_force_from_unturned_presses_only(tmp_path):
     """An inclusion makes the force depend on where the phantom is pressed: every run trained
     on the lab or its solid keeps --rotate (the recipe's) and adds --no-rotate-force; a
-    uniform lab or one with a top layer (the same across the footprint) does not."""
+    uniform lab or one with a top layer (the same across the footprint) does not, nor does
+    the pre-training on a fitted MSM (uniform)."""
     lump = demo_steps(tmp_path, 0, QUICK, lab=Lab(inclusions=("72,23,10,12,3",)),
                       pretraining=Pretraining.SOLID)
     trains = [s.args for s in lump if s.args[0] == "train"]
@@ -230,6 +231,12 @@ def test_a_lab_with_a_lump_learns_the_force_from_unturned_presses_only(tmp_path)
     for lab in (Lab(), Lab(layer="3,4")):
         steps = demo_steps(tmp_path, 0, QUICK, lab=lab, pretraining=Pretraining.SOLID)
         assert not any("--no-rotate-force" in s.args for s in steps)
+    per_fold = demo_steps(tmp_path, 0, QUICK, lab=Lab(inclusions=("72,23,10,12,3",)),
+                          pretraining=Pretraining.PER_FOLD)      # the fitted MSM is uniform
+    on_msm = [s.args for s in per_fold if s.stage == "train (pre-training)"]
+    assert on_msm and not any("--no-rotate-force" in a for a in on_msm)
+    assert all("--no-rotate-force" in s.args for s in per_fold
+               if s.stage == "train (fine-tuning)")
 
 
 @pytest.mark.parametrize("args, words", [

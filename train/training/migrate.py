@@ -18,10 +18,11 @@ checked, case by case:
 6. ``meta`` without a ``variant`` at all (before variants were recorded) gets the one its
    config, options, states file and ``--init`` checkpoint describe.
 
-Metrics documents need none: ``phantom.metrics`` 1.0, 1.1 and 1.2 differ only by the optional
-``offsets`` (1.1) and ``intervals`` (1.2), which :mod:`data_schema.json_docs` checks where
-present. A checkpoint from before intervals needs none either: it has no ``intervals`` and is
-used without them (:class:`train.Predictor` refuses a ``level`` for it in one line).
+Metrics documents need none: ``phantom.metrics`` 1.0 to 1.6 differ only by optional fields
+(1.1 ``offsets``, 1.2 ``intervals``, ..., 1.6 a variant's ``rotate_force``), which
+:mod:`data_schema.json_docs` checks where present. A checkpoint from before intervals needs
+none either: it has no ``intervals`` and is used without them (:class:`train.Predictor`
+refuses a ``level`` for it in one line).
 """
 
 from __future__ import annotations

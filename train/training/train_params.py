@@ -81,6 +81,9 @@ class TrainOptions:
         if self.no_val and self.patience is not None:
             raise BadInput(None, "patience counts epochs without a better validation loss: "
                                  "not with no_val")
+        if not (self.rotate or self.rotate_force):
+            raise BadInput(None, "--no-rotate-force leaves the force's examples unturned by "
+                                 "the rotation: it needs --rotate (with --recipe ours)")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for a checkpoint loaded with ``weights_only``."""

@@ -9,7 +9,7 @@ states file's ``source``), ``rotate`` and ``aug`` (rotation augmentation; a poin
 ``pretrained``: None, or the variant of the run it was fine-tuned from (transfer learning),
 ``offsets``: where the network reads the tip's offsets
 (:class:`train.model.config.Offsets`), and ``rotate_force``: False where the rotation left the
-force's examples unturned (``train --no-rotate-force``; True without rotation).
+force's examples unturned (``train --no-rotate-force``, which needs the rotation).
 A checkpoint's meta and ``metrics.json`` keep it as a plain dict of the same fields
 (:meth:`Variant.to_dict`); a checkpoint's older forms are read through
 :mod:`train.training.migrate`.
@@ -111,7 +111,7 @@ def make_variant(config: CGNNConfig, opts: TrainOptions, data: str | Path,
     return Variant("cGNN" if config.use_condition else "noCond", source_name(data),
                    opts.rotate, bool(opts.point_fraction),
                    None if init_meta is None else recorded_variant(init_meta), config.offsets,
-                   opts.rotate_force or not opts.rotate)
+                   opts.rotate_force)
 
 
 def recorded_variant(meta: dict) -> Variant:

@@ -53,6 +53,9 @@ def test_the_recipe_gives_members() -> None:
                                               "cosine"),
     (lambda: TrainOptions(no_val=True, patience=3), "patience counts epochs without a "
                                                     "better validation loss: not with no_val"),
+    (lambda: TrainOptions(rotate_force=False), "--no-rotate-force leaves the force's "
+                                               "examples unturned by the rotation: it needs "
+                                               "--rotate"),
     (lambda: TrainOptions(epochs=0), "epochs 0: must be >= 1"),
     (lambda: TrainOptions(batch=2.5), "batch 2.5: not a whole number"),
     (lambda: CGNNConfig(k=1), "k 1: must be >= 2"),
