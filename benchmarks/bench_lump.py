@@ -35,10 +35,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from data_schema.metrics_doc import LumpPart, Scores, validate_metrics  # noqa: E402
-from pipeline.demo_plan import QUICK, solid_steps  # noqa: E402
+from pipeline.demo_plan import QUICK, Lab, session_steps, solid_steps  # noqa: E402
 from train.generic_model import SHIPPED  # noqa: E402
 
 FOLDS = QUICK.folds
+STATES = "session_states.h5"      # session_steps' states file, in the lab's folder
 RECIPE = ("--recipe", "ours", "--lr", "0.002", "--batch", "32", "--seed", "0", "--no-rrd")
 FINE_TUNE = ("--epochs", str(QUICK.finetune_epochs), *RECIPE)
 WAYS = {"rotate": (), "rotate-force": ("--no-rotate-force",), "no-rotate": ("--no-rotate",),
@@ -53,17 +54,13 @@ def pipeline(*args: str) -> None:
 
 
 def session(folder: Path, seed: int, lump: str) -> None:
-    """The lab's session, states and manifest (made unless already there)."""
+    """The lab's session, states and manifest, as the demo makes them (unless already there)."""
     if (folder / "splits.json").is_file():
         return
-    ses, mcap, synced = folder / "session", folder / "session.mcap", folder / "synced.h5"
-    pipeline("synth", str(ses), "--seed", str(seed), "--locations", "4x4", "--repeats", "2",
-             "--inclusion", f"{lump},10,12,3", "--no-rrd")
-    pipeline("ingest", str(ses), "--out", str(mcap), "--no-rrd")
-    pipeline("sync", str(mcap), "--out", str(synced), "--no-rrd")
-    pipeline("extract", str(synced), "--out", str(folder / "states.h5"), "--no-rrd")
-    pipeline("split", str(folder / "states.h5"), "--out", str(folder / "splits.json"),
-             "--no-rrd")
+    lab = Lab(inclusions=(f"{lump},10,12,3",))
+    for step in session_steps(folder, "session", seed, "4x4", 2, lab):
+        pipeline(*step.args, "--no-rrd")
+    pipeline("split", str(folder / STATES), "--out", str(folder / "splits.json"), "--no-rrd")
 
 
 def fold_run(folder: Path, way: str, fold: int) -> None:
@@ -74,14 +71,14 @@ def fold_run(folder: Path, way: str, fold: int) -> None:
         return
     init = "generic"
     if way == "solid":
-        states, splits = folder / "states.h5", folder / "splits.json"
+        states, splits = folder / STATES, folder / "splits.json"
         steps = solid_steps(folder, QUICK, states, splits, (*RECIPE, *WAYS[way]), SHIPPED)
         mine = steps[4 * fold:4 * fold + 4]         # fit-solid, simulate, split, pre-training
         for step in mine:
             if not all(Path(o).exists() for o in step.outputs):
                 pipeline(*step.args)
         init = str(mine[-1].outputs[0])
-    pipeline("train", "--data", str(folder / "states.h5"), "--splits",
+    pipeline("train", "--data", str(folder / STATES), "--splits",
              str(folder / "splits.json"), "--fold", str(fold), "--out", str(run), "--init",
              init, *FINE_TUNE, *WAYS[way])
 

@@ -186,10 +186,11 @@ OUT = Path("out/demo")   # where the demo writes unless told
 VARIANTS: tuple[str, ...] = ("tl", "notl")
 
 
-def session_steps(out: Path, name: str, seed: int, places: int, repeats: int,
+def session_steps(out: Path, name: str, seed: int, places: int | str, repeats: int,
                   lab: Lab = Lab()) -> list[Step]:
     """synth -> ingest -> sync -> extract of one twin session: ``out/NAME/`` (the lab files),
-    NAME.mcap, NAME_synced.h5 and NAME_states.h5 beside it."""
+    NAME.mcap, NAME_synced.h5 and NAME_states.h5 beside it (``places``: a count, or a grid
+    ``RxC``, as synth's ``--locations``)."""
     sd = ("--seed", str(seed))
     ses, mcap = out / name, out / f"{name}.mcap"
     synced, states = out / f"{name}_synced.h5", out / f"{name}_states.h5"
